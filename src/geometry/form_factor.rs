@@ -1,0 +1,134 @@
+//! Radiometric kernels: the point-to-point form factor `F(x, y) = cos θx cos θy / (π r²)` (the unoccluded
+//! kernel `G` of Feixas et al. eq. (2) and the K of Bekaert–Willems eq. (1) without ρ and vis) and the
+//! exact point-to-polygon form factor (Lambert's contour formula), used for the power oracle's cheap
+//! estimate (Feixas et al. eq. (1)) and for the unoccluded part of link form factors.
+
+use super::{DVec3, Shape};
+use std::f64::consts::PI;
+
+/// Point-to-point (differential) form factor kernel between `x` with normal `nx` and `y` with normal `ny`,
+/// per unit area of `y`; zero when either point faces away.
+pub fn point_to_point(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
+    let d = y - x;
+    let r2 = d.length_squared();
+    if r2 <= 0.0 {
+        return 0.0;
+    }
+    let cos_x = nx.dot(d);
+    let cos_y = -ny.dot(d);
+    if cos_x <= 0.0 || cos_y <= 0.0 {
+        return 0.0;
+    }
+    cos_x * cos_y / (PI * r2 * r2)
+}
+
+/// Exact unoccluded form factor from a differential area at `x` (normal `nx`) to the front side of a
+/// polygon, by Lambert's contour integral over the part of the polygon above the tangent plane of `x`.
+pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
+    let n_src = polygon.normal();
+    let verts = polygon.vertices();
+    // The source emits from its front side only.
+    if n_src.dot(x - verts[0]) <= 0.0 {
+        return 0.0;
+    }
+    // Clip the polygon to the half-space in front of x (Sutherland–Hodgman against one plane).
+    let mut clipped: [DVec3; 5] = [DVec3::ZERO; 5];
+    let mut count = 0;
+    let height = |p: DVec3| nx.dot(p - x);
+    for k in 0..verts.len() {
+        let (a, b) = (verts[k], verts[(k + 1) % verts.len()]);
+        let (ha, hb) = (height(a), height(b));
+        if ha >= 0.0 {
+            clipped[count] = a;
+            count += 1;
+        }
+        if (ha >= 0.0) != (hb >= 0.0) {
+            let t = ha / (ha - hb);
+            clipped[count] = a + t * (b - a);
+            count += 1;
+        }
+    }
+    if count < 3 {
+        return 0.0;
+    }
+    let mut sum = 0.0;
+    for k in 0..count {
+        let a = (clipped[k] - x).normalize_or_zero();
+        let b = (clipped[(k + 1) % count] - x).normalize_or_zero();
+        let cross = a.cross(b);
+        let sin = cross.length();
+        if sin <= 1e-15 {
+            continue;
+        }
+        let angle = sin.atan2(a.dot(b));
+        sum += angle * nx.dot(cross / sin);
+    }
+    (sum / (2.0 * PI)).abs()
+}
+
+/// Closed-form form factor between two coaxial parallel rectangles a x b at distance c (Howell's catalogue,
+/// C-11): the analytic reference for tests.
+pub fn parallel_rectangles(a: f64, b: f64, c: f64) -> f64 {
+    let (x, y) = (a / c, b / c);
+    let (x2, y2) = (x * x, y * y);
+    let t1 = (((1.0 + x2) * (1.0 + y2)) / (1.0 + x2 + y2)).sqrt().ln();
+    let t2 = x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan();
+    let t3 = y * (1.0 + x2).sqrt() * (y / (1.0 + x2).sqrt()).atan();
+    let t4 = x * x.atan() + y * y.atan();
+    2.0 / (PI * x * y) * (t1 + t2 + t3 - t4)
+}
+
+/// Closed-form form factor from a rectangle (width `w` along the common edge, depth `h`) to a perpendicular
+/// rectangle (same width, height `l`) sharing that edge (Howell's catalogue, C-14).
+pub fn perpendicular_rectangles(w: f64, h: f64, l: f64) -> f64 {
+    let (hh, ww) = (l / w, h / w);
+    let (h2, w2) = (hh * hh, ww * ww);
+    let term1 = ww * (1.0 / ww).atan() + hh * (1.0 / hh).atan() - (h2 + w2).sqrt() * (1.0 / (h2 + w2).sqrt()).atan();
+    let a = (1.0 + w2) * (1.0 + h2) / (1.0 + w2 + h2);
+    let b = (w2 * (1.0 + w2 + h2) / ((1.0 + w2) * (w2 + h2))).powf(w2);
+    let c = (h2 * (1.0 + h2 + w2) / ((1.0 + h2) * (h2 + w2))).powf(h2);
+    (term1 + 0.25 * (a * b * c).ln()) / (PI * ww)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::cubature::gauss_nodes;
+
+    #[test]
+    fn analytic_references_match_published_values() {
+        assert!((parallel_rectangles(1.0, 1.0, 1.0) - 0.1998).abs() < 1e-4);
+        assert!((perpendicular_rectangles(1.0, 1.0, 1.0) - 0.2000).abs() < 1e-4);
+    }
+
+    #[test]
+    fn point_to_polygon_integrates_to_the_area_form_factor() {
+        // Receiver: unit square at z = 0 facing +z. Source: unit square at z = 1 facing -z.
+        let receiver = Shape::Quad([DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y]);
+        let source = Shape::Quad([
+            DVec3::new(0.0, 0.0, 1.0),
+            DVec3::new(0.0, 1.0, 1.0),
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(1.0, 0.0, 1.0),
+        ]);
+        let f: f64 = gauss_nodes(&receiver, 5)
+            .iter()
+            .map(|q| q.weight * point_to_polygon(q.point, DVec3::Z, &source))
+            .sum();
+        assert!((f - parallel_rectangles(1.0, 1.0, 1.0)).abs() < 1e-6, "{f}");
+        // A source facing away contributes nothing.
+        assert_eq!(point_to_polygon(DVec3::new(0.5, 0.5, 0.0), DVec3::Z, &source.flipped()), 0.0);
+    }
+
+    #[test]
+    fn point_to_polygon_of_a_whole_hemisphere_cap_is_bounded_by_one() {
+        let big = Shape::Quad([
+            DVec3::new(-1e4, -1e4, 1.0),
+            DVec3::new(-1e4, 1e4, 1.0),
+            DVec3::new(1e4, 1e4, 1.0),
+            DVec3::new(1e4, -1e4, 1.0),
+        ]);
+        let f = point_to_polygon(DVec3::ZERO, DVec3::Z, &big);
+        assert!((f - 1.0).abs() < 1e-3, "{f}");
+    }
+}

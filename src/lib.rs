@@ -1,0 +1,20 @@
+//! radiosity: hierarchical radiosity with refinement oracles (Feixas et al.), Galerkin error control
+//! (Bekaert–Willems) and feature-based multi-resolution visibility (Sillion–Drettakis).
+//!
+//! Data flow: [`scene`] (files → polygons and materials) → [`visibility`] (BVH over the polygons) →
+//! [`hierarchy`] (patches, element quadtrees, links) refined by an [`oracles`] criterion and solved by
+//! [`solvers`] → [`output`] (images, illuminated models) and [`measures`] (statistics, error metrics).
+//! See ARCHITECTURE.md.
+
+pub mod bases;
+pub mod cli;
+pub mod color;
+pub mod geometry;
+pub mod hierarchy;
+pub mod measures;
+pub mod oracles;
+pub mod output;
+pub mod progress;
+pub mod scene;
+pub mod solvers;
+pub mod visibility;

@@ -1,0 +1,1 @@
+//! Measures: run statistics, and later error metrics and information-theoretic scene measures.

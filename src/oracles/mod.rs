@@ -1,0 +1,1 @@
+//! Refinement oracles: decide whether a link is admissible or which of its two elements to subdivide.

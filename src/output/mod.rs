@@ -1,0 +1,2 @@
+//! Output: pinhole camera, ray-cast rendering of the solution (flat, smooth, mesh overlay), PNG and
+//! OpenEXR images, illuminated models (PLY, glTF).

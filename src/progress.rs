@@ -1,0 +1,1 @@
+//! Progress bars for long phases (indicatif), silenced by `--quiet`.

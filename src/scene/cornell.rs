@@ -1,0 +1,2 @@
+//! The built-in Cornell box: the published Cornell University geometry (millimetres), used when no scene
+//! file is given.

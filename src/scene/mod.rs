@@ -1,0 +1,173 @@
+//! Scene model: planar convex polygons with Lambertian materials, grouped into named objects, and the
+//! loaders that build it (MGF, OBJ/MTL, the built-in Cornell box).
+//!
+//! Units: reflectance is a fraction per channel (< 1); emission is the emitted *radiance*
+//! L_e in W/(m² sr) (radiant exitance is π L_e). Radiosity is solved as exitant radiance throughout, so
+//! a closed box of reflectance ρ emitting L_e everywhere converges to L_e / (1 - ρ).
+
+pub mod cornell;
+pub mod mgf;
+pub mod obj;
+
+use crate::color::Rgb;
+use crate::geometry::{Aabb, DVec3, Shape};
+use std::f64::consts::PI;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A Lambertian material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Diffuse reflectance ρ per channel, each in [0, 1).
+    pub reflectance: Rgb,
+    /// Emitted radiance L_e per channel, W/(m² sr).
+    pub emission: Rgb,
+    /// Whether surfaces made of it reflect and emit on both sides (MGF `sides 2`).
+    pub two_sided: bool,
+}
+
+impl Material {
+    pub fn diffuse(name: &str, reflectance: Rgb) -> Self {
+        Material { name: name.to_string(), reflectance, emission: Rgb::BLACK, two_sided: false }
+    }
+
+    pub fn emitter(name: &str, reflectance: Rgb, emission: Rgb) -> Self {
+        Material { name: name.to_string(), reflectance, emission, two_sided: false }
+    }
+}
+
+/// A planar convex input polygon: the root of an element quadtree (two roots when two-sided).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Polygon {
+    pub shape: Shape,
+    pub material: usize,
+    pub object: usize,
+    /// Both sides are surfaces: the radiosity mesh of a two-sided polygon is two meshes.
+    pub two_sided: bool,
+}
+
+/// A named group of polygons (MGF `o`, OBJ object or group).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    pub name: String,
+}
+
+/// A camera stored with a scene (the built-in Cornell box has the published one; MGF has none).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraSpec {
+    pub eye: DVec3,
+    pub look_at: DVec3,
+    pub up: DVec3,
+    /// Vertical field of view in degrees.
+    pub fov_degrees: f64,
+}
+
+/// A problem found while reading input: file, line and reason.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Diagnostic {
+    pub file: PathBuf,
+    pub line: usize,
+    pub message: String,
+}
+
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}: {}", self.file.display(), self.line, self.message)
+    }
+}
+
+/// A fatal error reading a scene, with file, line and reason.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct SceneError(pub Diagnostic);
+
+impl SceneError {
+    pub fn new(file: impl Into<PathBuf>, line: usize, message: impl Into<String>) -> Self {
+        SceneError(Diagnostic { file: file.into(), line, message: message.into() })
+    }
+}
+
+/// How a scene is read.
+#[derive(Clone, Debug)]
+pub struct LoadOptions {
+    /// Make every surface two-sided, whatever the file says.
+    pub force_two_sided: bool,
+    /// Segments per full circle when tessellating MGF solids (sph, cyl, cone, ring, torus).
+    pub tessellation: usize,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions { force_two_sided: false, tessellation: 16 }
+    }
+}
+
+/// A scene ready for lighting simulation.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    pub polygons: Vec<Polygon>,
+    pub materials: Vec<Material>,
+    pub objects: Vec<Object>,
+    pub camera: Option<CameraSpec>,
+    /// Warnings collected while loading (ignored entities, dropped degenerate polygons, ...).
+    pub warnings: Vec<Diagnostic>,
+}
+
+impl Scene {
+    pub fn material_of(&self, polygon: &Polygon) -> &Material {
+        &self.materials[polygon.material]
+    }
+
+    /// Total surface area of the input polygons (each polygon counted once, whatever its sidedness).
+    pub fn total_area(&self) -> f64 {
+        self.polygons.iter().map(|p| p.shape.area()).sum()
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        self.polygons.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()))
+    }
+
+    /// Total emitted power Φ = Σ π L_e A over emitting sides (W per channel).
+    pub fn emitted_power(&self) -> Rgb {
+        self.polygons
+            .iter()
+            .map(|p| {
+                let sides = if p.two_sided { 2.0 } else { 1.0 };
+                self.material_of(p).emission * (PI * p.shape.area() * sides)
+            })
+            .sum()
+    }
+
+    /// Polygons whose material emits.
+    pub fn emitter_count(&self) -> usize {
+        self.polygons.iter().filter(|p| !self.material_of(p).emission.is_black()).count()
+    }
+
+    /// Makes every polygon two-sided (the `--two-sided` override).
+    pub fn make_two_sided(&mut self) {
+        for p in &mut self.polygons {
+            p.two_sided = true;
+        }
+    }
+}
+
+/// Reads a scene, choosing the reader by extension (`.mgf`, `.obj`).
+pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
+    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let mut scene = match extension.as_str() {
+        "mgf" => mgf::load(path, options)?,
+        "obj" => obj::load(path, options)?,
+        other => {
+            return Err(SceneError::new(
+                path,
+                0,
+                format!("unknown scene format '.{other}' (expected .mgf or .obj)"),
+            ))
+        }
+    };
+    if options.force_two_sided {
+        scene.make_two_sided();
+    }
+    Ok(scene)
+}

@@ -1,0 +1,1 @@
+//! Solvers: hierarchical refinement plus gathering (Jacobi, Gauss–Seidel) with push-pull.

@@ -1,0 +1,46 @@
+//! Visibility: ray casting against the scene's polygons. The [`Visibility`] trait is the extension point:
+//! our own SAH BVH ([`bvh::Bvh`]), an exhaustive reference ([`brute_force::BruteForce`]) for testing and,
+//! behind the `embree` cargo feature, Embree 3. Later the cluster hierarchy's extinction-based visibility
+//! (Sillion–Drettakis §3.1) and multi-resolution visibility (§3.2) become further implementations.
+
+pub mod brute_force;
+pub mod bvh;
+
+use crate::geometry::{DVec2, DVec3, Ray};
+
+/// The first surface hit by a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit (`ray.origin + t * ray.direction`).
+    pub t: f64,
+    /// Index of the polygon in `Scene::polygons`.
+    pub polygon: usize,
+    /// Parameters of the hit point on the polygon's shape (see `Shape::point_at`).
+    pub uv: DVec2,
+    /// Whether the ray arrives on the polygon's front side (against its normal).
+    pub front: bool,
+}
+
+/// Ray queries against a fixed set of polygons. Implementations are shared between threads.
+pub trait Visibility: Sync + Send {
+    /// Closest hit with `t` in `(t_min, t_max)`.
+    fn intersect(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit>;
+
+    /// Whether any polygon blocks the ray for `t` in `(t_min, t_max)`; may stop at the first blocker.
+    fn occluded(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
+        self.intersect(ray, t_min, t_max).is_some()
+    }
+
+    /// Whether the open segment between two surface points is blocked. The ends are trimmed by a small
+    /// relative margin so that the surfaces the points lie on do not block it.
+    fn segment_occluded(&self, from: DVec3, to: DVec3) -> bool {
+        let ray = Ray::new(from, to - from);
+        self.occluded(&ray, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON)
+    }
+
+    /// Short name for reports ("bvh", "embree", "brute-force").
+    fn name(&self) -> &'static str;
+}
+
+/// Relative trim of a segment's ends in [`Visibility::segment_occluded`].
+pub const SEGMENT_EPSILON: f64 = 1e-5;
