@@ -83,7 +83,8 @@ pub fn parallel_rectangles(a: f64, b: f64, c: f64) -> f64 {
 pub fn perpendicular_rectangles(w: f64, h: f64, l: f64) -> f64 {
     let (hh, ww) = (l / w, h / w);
     let (h2, w2) = (hh * hh, ww * ww);
-    let term1 = ww * (1.0 / ww).atan() + hh * (1.0 / hh).atan() - (h2 + w2).sqrt() * (1.0 / (h2 + w2).sqrt()).atan();
+    let term1 = ww * (1.0 / ww).atan() + hh * (1.0 / hh).atan()
+        - (h2 + w2).sqrt() * (1.0 / (h2 + w2).sqrt()).atan();
     let a = (1.0 + w2) * (1.0 + h2) / (1.0 + w2 + h2);
     let b = (w2 * (1.0 + w2 + h2) / ((1.0 + w2) * (w2 + h2))).powf(w2);
     let c = (h2 * (1.0 + h2 + w2) / ((1.0 + h2) * (h2 + w2))).powf(h2);
@@ -117,7 +118,10 @@ mod tests {
             .sum();
         assert!((f - parallel_rectangles(1.0, 1.0, 1.0)).abs() < 1e-6, "{f}");
         // A source facing away contributes nothing.
-        assert_eq!(point_to_polygon(DVec3::new(0.5, 0.5, 0.0), DVec3::Z, &source.flipped()), 0.0);
+        assert_eq!(
+            point_to_polygon(DVec3::new(0.5, 0.5, 0.0), DVec3::Z, &source.flipped()),
+            0.0
+        );
     }
 
     #[test]

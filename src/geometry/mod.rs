@@ -72,7 +72,10 @@ impl Shape {
         match self {
             Shape::Triangle(p) => p[0] + u * (p[1] - p[0]) + v * (p[2] - p[0]),
             Shape::Quad(p) => {
-                (1.0 - u) * (1.0 - v) * p[0] + u * (1.0 - v) * p[1] + u * v * p[2] + (1.0 - u) * v * p[3]
+                (1.0 - u) * (1.0 - v) * p[0]
+                    + u * (1.0 - v) * p[1]
+                    + u * v * p[2]
+                    + (1.0 - u) * v * p[3]
             }
         }
     }
@@ -92,9 +95,17 @@ impl Shape {
 
     /// Corners of the parameter domain, in the order of the vertices.
     pub fn parameter_corners(&self) -> &'static [DVec2] {
-        const TRI: [DVec2; 3] = [DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(0.0, 1.0)];
-        const QUAD: [DVec2; 4] =
-            [DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(1.0, 1.0), DVec2::new(0.0, 1.0)];
+        const TRI: [DVec2; 3] = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        const QUAD: [DVec2; 4] = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
         match self {
             Shape::Triangle(_) => &TRI,
             Shape::Quad(_) => &QUAD,
@@ -212,14 +223,32 @@ pub fn subdivide_parameters(corners: &[DVec2]) -> Vec<Vec<DVec2>> {
     match corners {
         [a, b, c] => {
             let (ab, bc, ca) = ((*a + *b) * 0.5, (*b + *c) * 0.5, (*c + *a) * 0.5);
-            vec![vec![*a, ab, ca], vec![ab, *b, bc], vec![ca, bc, *c], vec![bc, ca, ab]]
+            vec![
+                vec![*a, ab, ca],
+                vec![ab, *b, bc],
+                vec![ca, bc, *c],
+                vec![bc, ca, ab],
+            ]
         }
         [a, b, c, d] => {
             let mid = (*a + *b + *c + *d) * 0.25;
-            let (ab, bc, cd, da) = ((*a + *b) * 0.5, (*b + *c) * 0.5, (*c + *d) * 0.5, (*d + *a) * 0.5);
-            vec![vec![*a, ab, mid, da], vec![ab, *b, bc, mid], vec![mid, bc, *c, cd], vec![da, mid, cd, *d]]
+            let (ab, bc, cd, da) = (
+                (*a + *b) * 0.5,
+                (*b + *c) * 0.5,
+                (*c + *d) * 0.5,
+                (*d + *a) * 0.5,
+            );
+            vec![
+                vec![*a, ab, mid, da],
+                vec![ab, *b, bc, mid],
+                vec![mid, bc, *c, cd],
+                vec![da, mid, cd, *d],
+            ]
         }
-        _ => panic!("a parameter domain has 3 or 4 corners, not {}", corners.len()),
+        _ => panic!(
+            "a parameter domain has 3 or 4 corners, not {}",
+            corners.len()
+        ),
     }
 }
 
@@ -275,7 +304,10 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb { min: DVec3::splat(f64::INFINITY), max: DVec3::splat(f64::NEG_INFINITY) };
+    pub const EMPTY: Aabb = Aabb {
+        min: DVec3::splat(f64::INFINITY),
+        max: DVec3::splat(f64::NEG_INFINITY),
+    };
 
     pub fn grow(&mut self, p: DVec3) {
         self.min = self.min.min(p);
@@ -283,7 +315,10 @@ impl Aabb {
     }
 
     pub fn union(&self, o: &Aabb) -> Aabb {
-        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -351,14 +386,21 @@ mod tests {
             let uv = DVec2::new(u, v);
             assert!((q.parameters_of(q.point_at(uv)) - uv).length() < 1e-9);
         }
-        let t = Shape::Triangle([DVec3::ZERO, DVec3::new(2.0, 0.0, 1.0), DVec3::new(0.0, 1.0, 0.0)]);
+        let t = Shape::Triangle([
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 1.0),
+            DVec3::new(0.0, 1.0, 0.0),
+        ]);
         let uv = DVec2::new(0.3, 0.4);
         assert!((t.parameters_of(t.point_at(uv)) - uv).length() < 1e-12);
     }
 
     #[test]
     fn child_parameter_domains_match_child_shapes() {
-        for shape in [unit_quad(), Shape::Triangle([DVec3::ZERO, DVec3::X, DVec3::Y])] {
+        for shape in [
+            unit_quad(),
+            Shape::Triangle([DVec3::ZERO, DVec3::X, DVec3::Y]),
+        ] {
             let domains = subdivide_parameters(shape.parameter_corners());
             for (child, domain) in shape.subdivide().iter().zip(&domains) {
                 for (p, uv) in child.vertices().iter().zip(domain) {

@@ -86,9 +86,17 @@ impl Hierarchy {
         };
         for (index, polygon) in scene.polygons.iter().enumerate() {
             let material = scene.material_of(polygon);
-            let sides: &[bool] = if polygon.two_sided { &[true, false] } else { &[true] };
+            let sides: &[bool] = if polygon.two_sided {
+                &[true, false]
+            } else {
+                &[true]
+            };
             for &front in sides {
-                let shape = if front { polygon.shape } else { polygon.shape.flipped() };
+                let shape = if front {
+                    polygon.shape
+                } else {
+                    polygon.shape.flipped()
+                };
                 let patch = h.patches.len() as u32;
                 let root = h.elements.len() as ElementId;
                 let mut radiance = vec![Rgb::BLACK; h.basis_size];

@@ -1,2 +1,5 @@
 //! Output: pinhole camera, ray-cast rendering of the solution (flat, smooth, mesh overlay), PNG and
 //! OpenEXR images, illuminated models (PLY, glTF).
+
+pub mod camera;
+pub mod image;

@@ -5,5 +5,9 @@ use std::path::Path;
 
 /// Reads an MGF file and its includes.
 pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
-    Err(SceneError::new(path, 0, "the MGF reader is not written yet"))
+    Err(SceneError::new(
+        path,
+        0,
+        "the MGF reader is not written yet",
+    ))
 }

@@ -29,11 +29,21 @@ pub struct Material {
 
 impl Material {
     pub fn diffuse(name: &str, reflectance: Rgb) -> Self {
-        Material { name: name.to_string(), reflectance, emission: Rgb::BLACK, two_sided: false }
+        Material {
+            name: name.to_string(),
+            reflectance,
+            emission: Rgb::BLACK,
+            two_sided: false,
+        }
     }
 
     pub fn emitter(name: &str, reflectance: Rgb, emission: Rgb) -> Self {
-        Material { name: name.to_string(), reflectance, emission, two_sided: false }
+        Material {
+            name: name.to_string(),
+            reflectance,
+            emission,
+            two_sided: false,
+        }
     }
 }
 
@@ -84,7 +94,11 @@ pub struct SceneError(pub Diagnostic);
 
 impl SceneError {
     pub fn new(file: impl Into<PathBuf>, line: usize, message: impl Into<String>) -> Self {
-        SceneError(Diagnostic { file: file.into(), line, message: message.into() })
+        SceneError(Diagnostic {
+            file: file.into(),
+            line,
+            message: message.into(),
+        })
     }
 }
 
@@ -99,7 +113,10 @@ pub struct LoadOptions {
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions { force_two_sided: false, tessellation: 16 }
+        LoadOptions {
+            force_two_sided: false,
+            tessellation: 16,
+        }
     }
 }
 
@@ -125,7 +142,9 @@ impl Scene {
     }
 
     pub fn bounds(&self) -> Aabb {
-        self.polygons.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()))
+        self.polygons
+            .iter()
+            .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()))
     }
 
     /// Total emitted power Φ = Σ π L_e A over emitting sides (W per channel).
@@ -141,7 +160,10 @@ impl Scene {
 
     /// Polygons whose material emits.
     pub fn emitter_count(&self) -> usize {
-        self.polygons.iter().filter(|p| !self.material_of(p).emission.is_black()).count()
+        self.polygons
+            .iter()
+            .filter(|p| !self.material_of(p).emission.is_black())
+            .count()
     }
 
     /// Makes every polygon two-sided (the `--two-sided` override).
@@ -154,7 +176,11 @@ impl Scene {
 
 /// Reads a scene, choosing the reader by extension (`.mgf`, `.obj`).
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
-    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     let mut scene = match extension.as_str() {
         "mgf" => mgf::load(path, options)?,
         "obj" => obj::load(path, options)?,

@@ -6,5 +6,9 @@ use std::path::Path;
 
 /// Reads an OBJ file and its MTL libraries.
 pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
-    Err(SceneError::new(path, 0, "the OBJ reader is not written yet"))
+    Err(SceneError::new(
+        path,
+        0,
+        "the OBJ reader is not written yet",
+    ))
 }
