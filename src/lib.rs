@@ -14,6 +14,7 @@ pub mod hierarchy;
 pub mod measures;
 pub mod oracles;
 pub mod output;
+pub mod pipeline;
 pub mod progress;
 pub mod scene;
 pub mod solvers;

@@ -197,3 +197,4 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     }
     Ok(scene)
 }
+pub mod generators;

@@ -1,0 +1,136 @@
+//! From a scene to a solved hierarchy: builds the visibility structure and the hierarchy, picks the
+//! oracle and solver named in the settings, and runs the hierarchical solve. The command line and the
+//! tests share this one path.
+
+use crate::hierarchy::Hierarchy;
+use crate::oracles::{power::PowerOracle, RefinementOracle};
+use crate::progress::Progress;
+use crate::scene::Scene;
+use crate::solvers::coupling::CouplingSettings;
+use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi};
+use crate::solvers::refine::RefineSettings;
+use crate::solvers::{solve, SolveReport, SolveSettings};
+use crate::visibility::{brute_force::BruteForce, Visibility};
+use std::time::Instant;
+
+/// Refinement criterion (`--oracle`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OracleKind {
+    /// Transported power, Feixas et al. eq. (1).
+    Power,
+}
+
+/// Linear solver (`--solver`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverKind {
+    Jacobi,
+    GaussSeidel,
+}
+
+/// Ray casting back end (`--visibility`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VisibilityKind {
+    /// Exhaustive test of every polygon (reference; only for tiny scenes).
+    BruteForce,
+}
+
+/// Everything that determines a solution.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct SimulationSettings {
+    pub oracle: OracleKind,
+    pub solver: SolverKind,
+    pub visibility: VisibilityKind,
+    /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
+    pub eps: f64,
+    /// Smallest splittable element area relative to the total patch area.
+    pub min_area: f64,
+    /// Gauss points per direction on receivers for form factors.
+    pub receiver_order: usize,
+    /// Visibility rays per receiver node.
+    pub visibility_rays: usize,
+    /// Relative change of total power at which sweeps stop.
+    pub tolerance: f64,
+    pub max_iterations: usize,
+    pub max_passes: usize,
+    pub seed: u64,
+}
+
+impl Default for SimulationSettings {
+    fn default() -> Self {
+        SimulationSettings {
+            oracle: OracleKind::Power,
+            solver: SolverKind::GaussSeidel,
+            visibility: VisibilityKind::BruteForce,
+            eps: 1e-3,
+            min_area: 1e-5,
+            receiver_order: 2,
+            visibility_rays: 4,
+            tolerance: 1e-5,
+            max_iterations: 200,
+            max_passes: 12,
+            seed: 1,
+        }
+    }
+}
+
+/// A solved scene.
+pub struct Solution {
+    pub hierarchy: Hierarchy,
+    pub visibility: Box<dyn Visibility>,
+    pub report: SolveReport,
+    /// Seconds spent building the visibility structure.
+    pub visibility_seconds: f64,
+}
+
+/// Builds the ray-casting structure over the scene's polygons.
+pub fn build_visibility(scene: &Scene, kind: VisibilityKind) -> Box<dyn Visibility> {
+    let shapes = scene.polygons.iter().map(|p| p.shape).collect();
+    match kind {
+        VisibilityKind::BruteForce => Box::new(BruteForce::new(shapes)),
+    }
+}
+
+pub fn make_oracle(kind: OracleKind) -> Box<dyn RefinementOracle> {
+    match kind {
+        OracleKind::Power => Box::new(PowerOracle),
+    }
+}
+
+pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
+    match kind {
+        SolverKind::Jacobi => Box::new(Jacobi),
+        SolverKind::GaussSeidel => Box::new(GaussSeidel),
+    }
+}
+
+/// Runs hierarchical radiosity on `scene`.
+pub fn simulate(scene: &Scene, settings: &SimulationSettings, progress: &Progress) -> Solution {
+    let start = Instant::now();
+    let visibility = build_visibility(scene, settings.visibility);
+    let visibility_seconds = start.elapsed().as_secs_f64();
+    let mut hierarchy = Hierarchy::new(scene, 1);
+    let total_emission: f64 =
+        hierarchy.patches.iter().map(|p| p.emission.max_channel() * hierarchy.element(p.root).area).sum();
+    let total_area: f64 = hierarchy.patches.iter().map(|p| hierarchy.element(p.root).area).sum();
+    let solve_settings = SolveSettings {
+        refine: RefineSettings {
+            threshold: settings.eps * total_emission,
+            min_area: settings.min_area * total_area,
+            coupling: CouplingSettings {
+                receiver_order: settings.receiver_order,
+                visibility_rays: settings.visibility_rays,
+            },
+            seed: settings.seed,
+        },
+        tolerance: settings.tolerance,
+        max_iterations: settings.max_iterations,
+        max_passes: settings.max_passes,
+    };
+    let oracle = make_oracle(settings.oracle);
+    let solver = make_solver(settings.solver);
+    let report = solve(&mut hierarchy, visibility.as_ref(), oracle.as_ref(), solver.as_ref(), &solve_settings, progress);
+    Solution { hierarchy, visibility, report, visibility_seconds }
+}
