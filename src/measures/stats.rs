@@ -1,0 +1,81 @@
+//! Run statistics written by `--stats out.json`.
+
+use crate::color::Rgb;
+use crate::pipeline::{SimulationSettings, Solution};
+use serde::Serialize;
+
+/// Seconds spent in each phase of a run.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PhaseSeconds {
+    pub load: f64,
+    pub bvh: f64,
+    pub refine: f64,
+    pub solve: f64,
+    pub render: f64,
+}
+
+/// The statistics of one run, as written to the stats JSON.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunStats {
+    pub scene: String,
+    pub polygons: usize,
+    pub patches: usize,
+    pub elements: usize,
+    pub leaf_elements: usize,
+    pub links: usize,
+    /// All rays cast by the solver: form factors plus oracle evaluations.
+    pub rays: u64,
+    pub form_factor_rays: u64,
+    pub oracle_rays: u64,
+    pub iterations: usize,
+    pub passes: usize,
+    pub converged: bool,
+    pub seconds: PhaseSeconds,
+    /// Σ π A E (W per channel).
+    pub emitted_power: Rgb,
+    /// Σ π A (1 - ρ) H over leaves (W per channel).
+    pub absorbed_power: Rgb,
+    pub threads: usize,
+    pub settings: SimulationSettings,
+}
+
+impl RunStats {
+    pub fn new(scene: &str, polygons: usize, solution: &Solution, settings: &SimulationSettings) -> Self {
+        let h = &solution.hierarchy;
+        let r = &solution.report;
+        RunStats {
+            scene: scene.to_string(),
+            polygons,
+            patches: h.patches.len(),
+            elements: h.elements.len(),
+            leaf_elements: h.leaf_count(),
+            links: h.link_count(),
+            rays: r.form_factor_rays + r.oracle_rays,
+            form_factor_rays: r.form_factor_rays,
+            oracle_rays: r.oracle_rays,
+            iterations: r.iterations,
+            passes: r.passes,
+            converged: r.converged,
+            seconds: PhaseSeconds {
+                bvh: solution.visibility_seconds,
+                refine: r.refine_seconds,
+                solve: r.solve_seconds,
+                ..Default::default()
+            },
+            emitted_power: r.emitted_power,
+            absorbed_power: r.absorbed_power,
+            threads: rayon::current_num_threads(),
+            settings: *settings,
+        }
+    }
+
+    /// The statistics without timings and thread count: what must be identical for any thread count.
+    pub fn deterministic_part(&self) -> serde_json::Value {
+        let mut v = serde_json::to_value(self).expect("stats serialise");
+        if let Some(map) = v.as_object_mut() {
+            map.remove("seconds");
+            map.remove("threads");
+        }
+        v
+    }
+}
