@@ -112,9 +112,16 @@ pub fn simulate(scene: &Scene, settings: &SimulationSettings, progress: &Progres
     let visibility = build_visibility(scene, settings.visibility);
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, 1);
-    let total_emission: f64 =
-        hierarchy.patches.iter().map(|p| p.emission.max_channel() * hierarchy.element(p.root).area).sum();
-    let total_area: f64 = hierarchy.patches.iter().map(|p| hierarchy.element(p.root).area).sum();
+    let total_emission: f64 = hierarchy
+        .patches
+        .iter()
+        .map(|p| p.emission.max_channel() * hierarchy.element(p.root).area)
+        .sum();
+    let total_area: f64 = hierarchy
+        .patches
+        .iter()
+        .map(|p| hierarchy.element(p.root).area)
+        .sum();
     let solve_settings = SolveSettings {
         refine: RefineSettings {
             threshold: settings.eps * total_emission,
@@ -131,6 +138,18 @@ pub fn simulate(scene: &Scene, settings: &SimulationSettings, progress: &Progres
     };
     let oracle = make_oracle(settings.oracle);
     let solver = make_solver(settings.solver);
-    let report = solve(&mut hierarchy, visibility.as_ref(), oracle.as_ref(), solver.as_ref(), &solve_settings, progress);
-    Solution { hierarchy, visibility, report, visibility_seconds }
+    let report = solve(
+        &mut hierarchy,
+        visibility.as_ref(),
+        oracle.as_ref(),
+        solver.as_ref(),
+        &solve_settings,
+        progress,
+    );
+    Solution {
+        hierarchy,
+        visibility,
+        report,
+        visibility_seconds,
+    }
 }

@@ -35,7 +35,10 @@ impl Progress {
             return ProgressBar::hidden();
         }
         let bar = ProgressBar::new_spinner();
-        bar.set_style(ProgressStyle::with_template("{prefix:>10} {spinner} {msg} ({elapsed})").expect("static template"));
+        bar.set_style(
+            ProgressStyle::with_template("{prefix:>10} {spinner} {msg} ({elapsed})")
+                .expect("static template"),
+        );
         bar.set_prefix(phase.to_string());
         bar.enable_steady_tick(std::time::Duration::from_millis(120));
         bar

@@ -20,7 +20,11 @@ fn polygon_radiance(h: &Hierarchy, polygon: usize) -> Rgb {
 }
 
 fn solve(scene: &Scene, eps: f64) -> radiosity::pipeline::Solution {
-    let settings = SimulationSettings { eps, min_area: 1e-6, ..Default::default() };
+    let settings = SimulationSettings {
+        eps,
+        min_area: 1e-6,
+        ..Default::default()
+    };
     simulate(scene, &settings, &quiet())
 }
 
@@ -54,16 +58,28 @@ fn white_furnace_converges_to_e_over_one_minus_rho_everywhere() {
     let (rho, e) = (0.5, 1.0);
     let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, e);
     for solver in [SolverKind::Jacobi, SolverKind::GaussSeidel] {
-        let settings = SimulationSettings { eps: 1e-7, min_area: 1e-2, solver, ..Default::default() };
+        let settings = SimulationSettings {
+            eps: 1e-7,
+            min_area: 1e-2,
+            solver,
+            ..Default::default()
+        };
         let solution = simulate(&scene, &settings, &quiet());
         let h = &solution.hierarchy;
         let expected = e / (1.0 - rho);
         let leaves = h.leaves();
-        assert!(leaves.len() > 100, "the furnace must be refined, got {} leaves", leaves.len());
+        assert!(
+            leaves.len() > 100,
+            "the furnace must be refined, got {} leaves",
+            leaves.len()
+        );
         for id in leaves {
             let b = h.element(id).average_radiance();
             for c in b.to_array() {
-                assert!((c - expected).abs() / expected < 0.005, "{solver:?}: leaf {id} has {c}, expected {expected}");
+                assert!(
+                    (c - expected).abs() / expected < 0.005,
+                    "{solver:?}: leaf {id} has {c}, expected {expected}"
+                );
             }
         }
     }
@@ -74,7 +90,15 @@ fn closed_box_with_one_emitter_absorbs_what_it_emits() {
     let scene = generators::lit_box(DVec3::new(2.0, 1.0, 1.5), Rgb::new(0.5, 0.4, 0.3), 10.0);
     let solution = solve(&scene, 1e-3);
     let r = &solution.report;
-    for (emitted, absorbed) in r.emitted_power.to_array().iter().zip(r.absorbed_power.to_array()) {
-        assert!((emitted - absorbed).abs() / emitted < 0.005, "emitted {emitted}, absorbed {absorbed}");
+    for (emitted, absorbed) in r
+        .emitted_power
+        .to_array()
+        .iter()
+        .zip(r.absorbed_power.to_array())
+    {
+        assert!(
+            (emitted - absorbed).abs() / emitted < 0.005,
+            "emitted {emitted}, absorbed {absorbed}"
+        );
     }
 }

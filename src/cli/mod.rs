@@ -1,6 +1,65 @@
-//! Command line: `render`, `info`, `bench` and friends.
+//! Command line: `render` (default), `info`, `bench`. Every subcommand has `--help`; failures print one
+//! line `error: ...` with the file, line and reason where there is one, and exit with status 1.
+
+mod args;
+mod info;
+
+pub use args::parse_vec3;
+
+use crate::progress::Progress;
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+
+/// Hierarchical radiosity: refinement oracles, error control and feature-based visibility.
+#[derive(Parser, Debug)]
+#[command(name = "radiosity", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(long, global = true, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Seed of every random choice; the same seed gives the same result.
+    #[arg(long, global = true, default_value_t = 1)]
+    pub seed: u64,
+    /// No progress bars or summaries.
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Print counts, bounds and materials of a scene.
+    Info(info::InfoCommand),
+}
 
 /// Runs the command line and returns the process exit code.
 pub fn main() -> i32 {
-    0
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => 0,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            1
+        }
+    }
+}
+
+/// Runs a parsed command line on a thread pool of the requested size.
+pub fn run(cli: Cli) -> Result<()> {
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = cli.threads {
+        anyhow::ensure!(n > 0, "--threads must be at least 1");
+        pool = pool.num_threads(n);
+    }
+    let pool = pool.build().context("starting the thread pool")?;
+    let progress = Progress::new(cli.quiet);
+    let seed = cli.seed;
+    let _ = (seed, progress);
+    let Some(command) = cli.command else {
+        anyhow::bail!("no command given")
+    };
+    pool.install(|| match command {
+        Command::Info(c) => c.run(),
+    })
 }

@@ -40,7 +40,12 @@ pub struct RunStats {
 }
 
 impl RunStats {
-    pub fn new(scene: &str, polygons: usize, solution: &Solution, settings: &SimulationSettings) -> Self {
+    pub fn new(
+        scene: &str,
+        polygons: usize,
+        solution: &Solution,
+        settings: &SimulationSettings,
+    ) -> Self {
         let h = &solution.hierarchy;
         let r = &solution.report;
         RunStats {

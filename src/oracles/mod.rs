@@ -53,7 +53,12 @@ pub trait RefinementOracle: Sync + Send {
 
     /// Which element to split when the estimate exceeds the threshold. The classic rule (Hanrahan et al.,
     /// used with eqs. (1), (2) and (15)) splits the larger of the two elements.
-    fn element_to_split(&self, context: &OracleContext, receiver: ElementId, source: ElementId) -> Decision {
+    fn element_to_split(
+        &self,
+        context: &OracleContext,
+        receiver: ElementId,
+        source: ElementId,
+    ) -> Decision {
         let h = context.hierarchy;
         if h.element(receiver).area >= h.element(source).area {
             Decision::SubdivideReceiver
@@ -64,7 +69,11 @@ pub trait RefinementOracle: Sync + Send {
 }
 
 /// Largest per-channel product ρ_i B_j: the receiver-weighted source radiance that oracles scale by.
-pub fn reflected_source_radiance(hierarchy: &Hierarchy, receiver: ElementId, source: ElementId) -> f64 {
+pub fn reflected_source_radiance(
+    hierarchy: &Hierarchy,
+    receiver: ElementId,
+    source: ElementId,
+) -> f64 {
     let rho = hierarchy.patch_of(receiver).reflectance;
     let b = hierarchy.element(source).average_radiance();
     (rho * b).max_channel()

@@ -24,17 +24,30 @@ impl RefinementOracle for PowerOracle {
         "power"
     }
 
-    fn estimate(&self, context: &OracleContext, receiver: ElementId, source: ElementId, _: &mut Pcg64Mcg) -> Estimate {
+    fn estimate(
+        &self,
+        context: &OracleContext,
+        receiver: ElementId,
+        source: ElementId,
+        _: &mut Pcg64Mcg,
+    ) -> Estimate {
         let h = context.hierarchy;
         let (r, s) = (h.element(receiver), h.element(source));
         let f_ij = largest_point_form_factor(&r.shape, h.patch_of(receiver).normal, &s.shape);
         let f_ji = largest_point_form_factor(&s.shape, h.patch_of(source).normal, &r.shape);
         let transport = (r.area * f_ij).max(s.area * f_ji);
-        Estimate { error: reflected_source_radiance(h, receiver, source) * transport, rays: 0 }
+        Estimate {
+            error: reflected_source_radiance(h, receiver, source) * transport,
+            rays: 0,
+        }
     }
 }
 
 /// Largest unoccluded form factor from the centre and the vertices of `from` (normal `normal`) to `to`.
 fn largest_point_form_factor(from: &Shape, normal: DVec3, to: &Shape) -> f64 {
-    from.vertices().iter().chain(std::iter::once(&from.centroid())).map(|x| point_to_polygon(*x, normal, to)).fold(0.0, f64::max)
+    from.vertices()
+        .iter()
+        .chain(std::iter::once(&from.centroid()))
+        .map(|x| point_to_polygon(*x, normal, to))
+        .fold(0.0, f64::max)
 }

@@ -9,11 +9,21 @@ fn quad(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> Shape {
 }
 
 fn scene_of(faces: Vec<(Shape, usize, &str)>, materials: Vec<Material>) -> Scene {
-    let mut scene = Scene { materials, ..Default::default() };
+    let mut scene = Scene {
+        materials,
+        ..Default::default()
+    };
     for (shape, material, name) in faces {
         let object = scene.objects.len();
-        scene.objects.push(Object { name: name.to_string() });
-        scene.polygons.push(Polygon { shape, material, object, two_sided: false });
+        scene.objects.push(Object {
+            name: name.to_string(),
+        });
+        scene.polygons.push(Polygon {
+            shape,
+            material,
+            object,
+            two_sided: false,
+        });
     }
     scene
 }
@@ -23,9 +33,19 @@ fn scene_of(faces: Vec<(Shape, usize, &str)>, materials: Vec<Material>) -> Scene
 /// square's radiance is then ρ F E with F the analytic form factor.
 pub fn parallel_plates(size: f64, distance: f64, reflectance: f64, emission: f64) -> Scene {
     let s = size;
-    let receiver = quad(DVec3::ZERO, DVec3::new(s, 0.0, 0.0), DVec3::new(s, s, 0.0), DVec3::new(0.0, s, 0.0));
+    let receiver = quad(
+        DVec3::ZERO,
+        DVec3::new(s, 0.0, 0.0),
+        DVec3::new(s, s, 0.0),
+        DVec3::new(0.0, s, 0.0),
+    );
     let h = distance;
-    let emitter = quad(DVec3::new(0.0, 0.0, h), DVec3::new(0.0, s, h), DVec3::new(s, s, h), DVec3::new(s, 0.0, h));
+    let emitter = quad(
+        DVec3::new(0.0, 0.0, h),
+        DVec3::new(0.0, s, h),
+        DVec3::new(s, s, h),
+        DVec3::new(s, 0.0, h),
+    );
     scene_of(
         vec![(receiver, 0, "receiver"), (emitter, 1, "emitter")],
         vec![
@@ -39,8 +59,18 @@ pub fn parallel_plates(size: f64, distance: f64, reflectance: f64, emission: f64
 /// +z) reflects, the vertical one (facing +y) emits.
 pub fn perpendicular_plates(size: f64, reflectance: f64, emission: f64) -> Scene {
     let s = size;
-    let receiver = quad(DVec3::ZERO, DVec3::new(s, 0.0, 0.0), DVec3::new(s, s, 0.0), DVec3::new(0.0, s, 0.0));
-    let emitter = quad(DVec3::ZERO, DVec3::new(0.0, 0.0, s), DVec3::new(s, 0.0, s), DVec3::new(s, 0.0, 0.0));
+    let receiver = quad(
+        DVec3::ZERO,
+        DVec3::new(s, 0.0, 0.0),
+        DVec3::new(s, s, 0.0),
+        DVec3::new(0.0, s, 0.0),
+    );
+    let emitter = quad(
+        DVec3::ZERO,
+        DVec3::new(0.0, 0.0, s),
+        DVec3::new(s, 0.0, s),
+        DVec3::new(s, 0.0, 0.0),
+    );
     scene_of(
         vec![(receiver, 0, "receiver"), (emitter, 1, "emitter")],
         vec![
@@ -67,16 +97,33 @@ pub fn box_faces(size: DVec3) -> [Shape; 6] {
 /// The white furnace: a closed box whose faces all reflect ρ and emit E; every point converges to
 /// E / (1 - ρ).
 pub fn furnace(size: DVec3, reflectance: f64, emission: f64) -> Scene {
-    let faces = box_faces(size).into_iter().map(|f| (f, 0, "wall")).collect();
-    scene_of(faces, vec![Material::emitter("furnace", Rgb::splat(reflectance), Rgb::splat(emission))])
+    let faces = box_faces(size)
+        .into_iter()
+        .map(|f| (f, 0, "wall"))
+        .collect();
+    scene_of(
+        faces,
+        vec![Material::emitter(
+            "furnace",
+            Rgb::splat(reflectance),
+            Rgb::splat(emission),
+        )],
+    )
 }
 
 /// A closed box of reflectance ρ whose ceiling (+y face) alone emits: all emitted power must be absorbed.
 pub fn lit_box(size: DVec3, reflectance: Rgb, emission: f64) -> Scene {
-    let faces = box_faces(size).into_iter().enumerate().map(|(k, f)| (f, usize::from(k == 3), "wall")).collect();
+    let faces = box_faces(size)
+        .into_iter()
+        .enumerate()
+        .map(|(k, f)| (f, usize::from(k == 3), "wall"))
+        .collect();
     scene_of(
         faces,
-        vec![Material::diffuse("wall", reflectance), Material::emitter("ceiling", reflectance, Rgb::splat(emission))],
+        vec![
+            Material::diffuse("wall", reflectance),
+            Material::emitter("ceiling", reflectance, Rgb::splat(emission)),
+        ],
     )
 }
 

@@ -24,7 +24,10 @@ pub struct CouplingSettings {
 
 impl Default for CouplingSettings {
     fn default() -> Self {
-        CouplingSettings { receiver_order: 2, visibility_rays: 4 }
+        CouplingSettings {
+            receiver_order: 2,
+            visibility_rays: 4,
+        }
     }
 }
 
@@ -60,7 +63,10 @@ pub fn form_factor(
         let (mut seen, mut total) = (0.0, 0.0);
         let mut plain_seen = 0usize;
         for k in 0..rays_per_node {
-            let sample = DVec2::new((k as f64 + rng.random::<f64>()) / rays_per_node as f64, rng.random::<f64>());
+            let sample = DVec2::new(
+                (k as f64 + rng.random::<f64>()) / rays_per_node as f64,
+                rng.random::<f64>(),
+            );
             let y = s.shape.sample_uniform(sample);
             let g = point_to_point(node.point, n_r, y, n_s);
             rays += 1;
@@ -71,9 +77,17 @@ pub fn form_factor(
             }
             total += g;
         }
-        let v = if total > 0.0 { seen / total } else { plain_seen as f64 / rays_per_node as f64 };
+        let v = if total > 0.0 {
+            seen / total
+        } else {
+            plain_seen as f64 / rays_per_node as f64
+        };
         unoccluded += node.weight * f;
         visible += node.weight * f * v;
     }
-    Coupling { form_factor: visible / r.area, unoccluded: unoccluded / r.area, rays }
+    Coupling {
+        form_factor: visible / r.area,
+        unoccluded: unoccluded / r.area,
+        rays,
+    }
 }

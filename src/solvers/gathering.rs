@@ -52,7 +52,10 @@ impl GatheringSolver for Jacobi {
 
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
         let h = &*hierarchy;
-        let gathered: Vec<Rgb> = (0..h.elements.len() as ElementId).into_par_iter().map(|id| gather(h, id)).collect();
+        let gathered: Vec<Rgb> = (0..h.elements.len() as ElementId)
+            .into_par_iter()
+            .map(|id| gather(h, id))
+            .collect();
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
             .map(|p| push_pull(h, p, &|id| gathered[id as usize]))

@@ -65,7 +65,11 @@ pub struct SolveReport {
 
 /// Total self-emitted power Σ π A E of the patches.
 pub fn emitted_power(hierarchy: &Hierarchy) -> Rgb {
-    hierarchy.patches.iter().map(|p| p.emission * (PI * hierarchy.element(p.root).area)).sum()
+    hierarchy
+        .patches
+        .iter()
+        .map(|p| p.emission * (PI * hierarchy.element(p.root).area))
+        .sum()
 }
 
 /// Hierarchical radiosity: refine with `oracle`, sweep with `solver` to convergence, re-refine with the
@@ -78,15 +82,25 @@ pub fn solve(
     settings: &SolveSettings,
     progress: &Progress,
 ) -> SolveReport {
-    let mut report = SolveReport { emitted_power: emitted_power(hierarchy), ..Default::default() };
+    let mut report = SolveReport {
+        emitted_power: emitted_power(hierarchy),
+        ..Default::default()
+    };
     let mut candidates = initial_candidates(hierarchy);
     for pass in 1..=settings.max_passes.max(1) {
         report.passes = pass;
         let start = Instant::now();
         let spinner = progress.spinner("refine");
-        let outcome = refine(hierarchy, visibility, oracle, &settings.refine, candidates, &mut |round, n| {
-            spinner.set_message(format!("pass {pass}, round {round}: {n} candidate links"))
-        });
+        let outcome = refine(
+            hierarchy,
+            visibility,
+            oracle,
+            &settings.refine,
+            candidates,
+            &mut |round, n| {
+                spinner.set_message(format!("pass {pass}, round {round}: {n} candidate links"))
+            },
+        );
         spinner.finish_and_clear();
         report.refine_seconds += start.elapsed().as_secs_f64();
         report.oracle_rays += outcome.oracle_rays;

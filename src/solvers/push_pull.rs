@@ -19,10 +19,22 @@ pub struct PatchUpdate {
 
 /// Pushes `gathered` (incident radiance gathered over each element's own links, indexed by element) down
 /// the tree of `patch` and pulls the resulting radiance up.
-pub fn push_pull(hierarchy: &Hierarchy, patch: u32, gathered: &dyn Fn(ElementId) -> Rgb) -> PatchUpdate {
+pub fn push_pull(
+    hierarchy: &Hierarchy,
+    patch: u32,
+    gathered: &dyn Fn(ElementId) -> Rgb,
+) -> PatchUpdate {
     let p = &hierarchy.patches[patch as usize];
     let mut update = PatchUpdate::default();
-    visit(hierarchy, p.root, Rgb::BLACK, p.emission, p.reflectance, gathered, &mut update);
+    visit(
+        hierarchy,
+        p.root,
+        Rgb::BLACK,
+        p.emission,
+        p.reflectance,
+        gathered,
+        &mut update,
+    );
     update
 }
 

@@ -70,7 +70,11 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
                     && useful
                     && receiver.polygon != source.polygon
                     && can_interact(&receiver.shape, &source.shape))
-                .then_some(Candidate { receiver: receiver.root, source: source.root, form_factor: None })
+                .then_some(Candidate {
+                    receiver: receiver.root,
+                    source: source.root,
+                    form_factor: None,
+                })
             })
         })
         .collect()
@@ -82,7 +86,11 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
     let mut out = Vec::with_capacity(hierarchy.link_count());
     for (id, e) in hierarchy.elements.iter_mut().enumerate() {
         for link in e.links.drain(..) {
-            out.push(Candidate { receiver: id as ElementId, source: link.source, form_factor: Some(link.form_factor) });
+            out.push(Candidate {
+                receiver: id as ElementId,
+                source: link.source,
+                form_factor: Some(link.form_factor),
+            });
         }
     }
     out
@@ -107,8 +115,14 @@ pub fn refine(
         round += 1;
         on_round(round, candidates.len());
         let decisions: Vec<(Decision, u64)> = {
-            let context = OracleContext { hierarchy, visibility };
-            candidates.par_iter().map(|c| decide(&context, oracle, settings, c)).collect()
+            let context = OracleContext {
+                hierarchy,
+                visibility,
+            };
+            candidates
+                .par_iter()
+                .map(|c| decide(&context, oracle, settings, c))
+                .collect()
         };
         let mut next = Vec::new();
         for (c, (decision, rays)) in candidates.iter().zip(decisions) {
@@ -141,11 +155,27 @@ pub fn refine(
     let computed: Vec<(Option<Link>, u64)> = admissible
         .par_iter()
         .map(|c| match c.form_factor {
-            Some(f) => (Some(Link { source: c.source, form_factor: f }), 0),
+            Some(f) => (
+                Some(Link {
+                    source: c.source,
+                    form_factor: f,
+                }),
+                0,
+            ),
             None => {
                 let mut rng = link_rng(settings.seed, c.receiver, c.source, COUPLING_STREAM);
-                let k = form_factor(h, visibility, c.receiver, c.source, &settings.coupling, &mut rng);
-                let link = (k.unoccluded > 0.0).then_some(Link { source: c.source, form_factor: k.form_factor });
+                let k = form_factor(
+                    h,
+                    visibility,
+                    c.receiver,
+                    c.source,
+                    &settings.coupling,
+                    &mut rng,
+                );
+                let link = (k.unoccluded > 0.0).then_some(Link {
+                    source: c.source,
+                    form_factor: k.form_factor,
+                });
                 (link, k.rays)
             }
         })
@@ -159,9 +189,18 @@ pub fn refine(
     outcome
 }
 
-fn push_if_interacting(h: &Hierarchy, out: &mut Vec<Candidate>, receiver: ElementId, source: ElementId) {
+fn push_if_interacting(
+    h: &Hierarchy,
+    out: &mut Vec<Candidate>,
+    receiver: ElementId,
+    source: ElementId,
+) {
     if can_interact(&h.element(receiver).shape, &h.element(source).shape) {
-        out.push(Candidate { receiver, source, form_factor: None });
+        out.push(Candidate {
+            receiver,
+            source,
+            form_factor: None,
+        });
     }
 }
 

@@ -1,0 +1,187 @@
+//! Argument groups shared by several subcommands.
+
+use crate::geometry::DVec3;
+use crate::pipeline::{OracleKind, SimulationSettings, SolverKind, VisibilityKind};
+use crate::scene::{self, LoadOptions, Scene};
+use anyhow::{Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+/// Which scene to read.
+#[derive(Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Scene file (.mgf or .obj); the built-in Cornell box when omitted.
+    pub scene: Option<PathBuf>,
+    /// Treat every surface as two-sided, whatever the file says.
+    #[arg(long)]
+    pub two_sided: bool,
+    /// Segments per full circle when tessellating MGF spheres, cylinders, cones, rings and tori.
+    #[arg(long, default_value_t = 16, value_name = "N")]
+    pub tessellation: usize,
+}
+
+impl SceneArgs {
+    /// Loads the scene (or builds the Cornell box) and returns it with a display name.
+    pub fn load(&self) -> Result<(Scene, String)> {
+        let options = LoadOptions {
+            force_two_sided: self.two_sided,
+            tessellation: self.tessellation.max(3),
+        };
+        match &self.scene {
+            Some(path) => {
+                let scene = scene::load(path, &options)?;
+                Ok((scene, path.display().to_string()))
+            }
+            None => {
+                let mut scene: Scene = anyhow::bail!("the built-in Cornell box is not written yet");
+                if self.two_sided {
+                    scene.make_two_sided();
+                }
+                Ok((scene, "built-in Cornell box".to_string()))
+            }
+        }
+    }
+}
+
+/// How the radiosity solution is computed.
+#[derive(Args, Debug, Clone)]
+pub struct SolveArgs {
+    /// Refinement oracle.
+    #[arg(long, value_enum, default_value_t = OracleKind::Power)]
+    pub oracle: OracleKind,
+    /// Iterative solver for the linear system.
+    #[arg(long, value_enum, default_value_t = SolverKind::GaussSeidel)]
+    pub solver: SolverKind,
+    /// Ray casting back end.
+    #[arg(long, value_enum, default_value_t = VisibilityKind::BruteForce)]
+    pub visibility: VisibilityKind,
+    /// Refinement threshold ε relative to the scene's total emission (Σ A·max(E)); smaller is finer.
+    #[arg(long, default_value_t = 1e-3)]
+    pub eps: f64,
+    /// Smallest splittable element area, relative to the total surface area.
+    #[arg(long, default_value_t = 1e-5)]
+    pub min_area: f64,
+    /// Gauss points per direction on the receiver for link form factors (1-5).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=5))]
+    pub ff_order: u8,
+    /// Visibility rays per receiver Gauss point.
+    #[arg(long, default_value_t = 4)]
+    pub vis_rays: usize,
+    /// Stop iterating when the relative change of total power is below this.
+    #[arg(long, default_value_t = 1e-5)]
+    pub tolerance: f64,
+    /// Most solver sweeps per refinement pass.
+    #[arg(long, default_value_t = 200)]
+    pub max_iterations: usize,
+    /// Most refine/solve passes.
+    #[arg(long, default_value_t = 12)]
+    pub max_passes: usize,
+}
+
+impl SolveArgs {
+    pub fn settings(&self, seed: u64) -> Result<SimulationSettings> {
+        anyhow::ensure!(
+            self.eps.is_finite() && self.eps >= 0.0,
+            "--eps must be a non-negative number"
+        );
+        anyhow::ensure!(
+            self.min_area.is_finite() && self.min_area >= 0.0,
+            "--min-area must be non-negative"
+        );
+        anyhow::ensure!(self.vis_rays >= 1, "--vis-rays must be at least 1");
+        Ok(SimulationSettings {
+            oracle: self.oracle,
+            solver: self.solver,
+            visibility: self.visibility,
+            eps: self.eps,
+            min_area: self.min_area,
+            receiver_order: self.ff_order as usize,
+            visibility_rays: self.vis_rays,
+            tolerance: self.tolerance,
+            max_iterations: self.max_iterations,
+            max_passes: self.max_passes,
+            seed,
+        })
+    }
+}
+
+/// Pinhole camera; without `--eye` the scene's own camera (the Cornell box has one) or an automatic view of
+/// the scene bounds.
+#[derive(Args, Debug, Clone)]
+pub struct CameraArgs {
+    /// Eye position "x,y,z".
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub eye: Option<DVec3>,
+    /// Point looked at "x,y,z".
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub look_at: Option<DVec3>,
+    /// Up direction "x,y,z".
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub up: Option<DVec3>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fov: Option<f64>,
+    #[arg(long, default_value_t = 512)]
+    pub width: usize,
+    #[arg(long, default_value_t = 512)]
+    pub height: usize,
+}
+
+impl CameraArgs {
+    pub fn camera(&self, scene: &Scene) -> Result<crate::output::camera::Camera> {
+        use crate::output::camera::Camera;
+        anyhow::ensure!(
+            self.width > 0 && self.height > 0,
+            "--width and --height must be positive"
+        );
+        anyhow::ensure!(self.width * self.height <= 1 << 28, "image too large");
+        let fov = self
+            .fov
+            .unwrap_or(scene.camera.map_or(45.0, |c| c.fov_degrees));
+        anyhow::ensure!(
+            fov > 0.0 && fov < 180.0,
+            "--fov must be between 0 and 180 degrees"
+        );
+        let mut spec = match (self.eye, scene.camera) {
+            (None, Some(c)) => c,
+            _ => Camera::framing(&scene.bounds(), fov),
+        };
+        spec.fov_degrees = fov;
+        if let Some(eye) = self.eye {
+            spec.eye = eye;
+        }
+        if let Some(look_at) = self.look_at {
+            spec.look_at = look_at;
+        }
+        if let Some(up) = self.up {
+            spec.up = up;
+        }
+        anyhow::ensure!(
+            (spec.look_at - spec.eye).length() > 0.0,
+            "--eye and --look-at must differ"
+        );
+        Ok(Camera::new(&spec, self.width, self.height))
+    }
+}
+
+/// Parses "x,y,z" (commas or spaces).
+pub fn parse_vec3(text: &str) -> Result<DVec3> {
+    let parts: Vec<f64> = text
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            s.parse::<f64>()
+                .with_context(|| format!("'{s}' is not a number"))
+        })
+        .collect::<Result<_>>()?;
+    anyhow::ensure!(
+        parts.len() == 3,
+        "expected three numbers x,y,z, got {}",
+        parts.len()
+    );
+    anyhow::ensure!(
+        parts.iter().all(|v| v.is_finite()),
+        "coordinates must be finite"
+    );
+    Ok(DVec3::new(parts[0], parts[1], parts[2]))
+}

@@ -1,0 +1,52 @@
+//! `radiosity info SCENE`: counts, bounds, materials and load warnings.
+
+use super::args::SceneArgs;
+use anyhow::Result;
+use clap::Args;
+
+#[derive(Args, Debug)]
+pub struct InfoCommand {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// List every material with its reflectance and emission.
+    #[arg(long)]
+    pub materials: bool,
+}
+
+impl InfoCommand {
+    pub fn run(&self) -> Result<()> {
+        let (scene, name) = self.scene.load()?;
+        for warning in &scene.warnings {
+            eprintln!("warning: {warning}");
+        }
+        println!("scene: {name}");
+        println!(
+            "{} polygons, {} objects, {} materials",
+            scene.polygons.len(),
+            scene.objects.len(),
+            scene.materials.len()
+        );
+        if self.materials {
+            for m in &scene.materials {
+                let r = m.reflectance;
+                let e = m.emission;
+                println!(
+                    "material {:<24} rho ({:.3} {:.3} {:.3})  emission ({:.3} {:.3} {:.3})  {}",
+                    m.name,
+                    r.r,
+                    r.g,
+                    r.b,
+                    e.r,
+                    e.g,
+                    e.b,
+                    if m.two_sided {
+                        "two-sided"
+                    } else {
+                        "one-sided"
+                    }
+                );
+            }
+        }
+        Ok(())
+    }
+}
