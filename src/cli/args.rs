@@ -33,7 +33,7 @@ impl SceneArgs {
                 Ok((scene, path.display().to_string()))
             }
             None => {
-                let mut scene: Scene = anyhow::bail!("the built-in Cornell box is not written yet");
+                let mut scene = scene::cornell::cornell_box();
                 if self.two_sided {
                     scene.make_two_sided();
                 }

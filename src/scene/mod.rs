@@ -6,8 +6,10 @@
 //! a closed box of reflectance ρ emitting L_e everywhere converges to L_e / (1 - ρ).
 
 pub mod cornell;
+pub mod generators;
 pub mod mgf;
 pub mod obj;
+pub mod polygonize;
 
 use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec3, Shape};
@@ -107,7 +109,10 @@ impl SceneError {
 pub struct LoadOptions {
     /// Make every surface two-sided, whatever the file says.
     pub force_two_sided: bool,
-    /// Segments per full circle when tessellating MGF solids (sph, cyl, cone, ring, torus).
+    /// Quality of curved MGF solids: segments per full circle. A cylinder, cone or ring becomes this
+    /// many quads, a sphere half as many latitude bands of this many, a torus its square. The default 16
+    /// (4 per quarter circle, RenderPark's setting) loses about 2.6% of a sphere's area; 64 loses 0.16%.
+    /// Values below 3 are read as 3. See [`mgf::solids`].
     pub tessellation: usize,
 }
 
@@ -197,4 +202,71 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     }
     Ok(scene)
 }
-pub mod generators;
+
+/// Counts and totals describing a scene (printed by the `info` command).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneSummary {
+    pub polygons: usize,
+    pub triangles: usize,
+    pub quads: usize,
+    pub two_sided: usize,
+    pub objects: usize,
+    pub materials: usize,
+    /// Total area of the input polygons, each counted once (scene units squared).
+    pub total_area: f64,
+    pub bounds: Aabb,
+    /// Polygons whose material emits.
+    pub emitters: usize,
+    /// Φ = Σ π L_e A over emitting sides, per channel.
+    pub emitted_power: Rgb,
+    pub warnings: usize,
+}
+
+/// Summarises a scene: polygon, object and material counts, area, bounds and emission.
+pub fn summary(scene: &Scene) -> SceneSummary {
+    let triangles = scene
+        .polygons
+        .iter()
+        .filter(|p| p.shape.vertex_count() == 3)
+        .count();
+    SceneSummary {
+        polygons: scene.polygons.len(),
+        triangles,
+        quads: scene.polygons.len() - triangles,
+        two_sided: scene.polygons.iter().filter(|p| p.two_sided).count(),
+        objects: scene.objects.len(),
+        materials: scene.materials.len(),
+        total_area: scene.total_area(),
+        bounds: scene.bounds(),
+        emitters: scene.emitter_count(),
+        emitted_power: scene.emitted_power(),
+        warnings: scene.warnings.len(),
+    }
+}
+
+impl fmt::Display for SceneSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "polygons:      {} ({} triangles, {} quads; {} two-sided)",
+            self.polygons, self.triangles, self.quads, self.two_sided
+        )?;
+        writeln!(f, "objects:       {}", self.objects)?;
+        writeln!(f, "materials:     {}", self.materials)?;
+        writeln!(f, "total area:    {:.6}", self.total_area)?;
+        if self.bounds.is_empty() {
+            writeln!(f, "bounds:        empty")?;
+        } else {
+            let (lo, hi) = (self.bounds.min, self.bounds.max);
+            writeln!(
+                f,
+                "bounds:        ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})",
+                lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+            )?;
+        }
+        writeln!(f, "emitters:      {}", self.emitters)?;
+        let p = self.emitted_power;
+        writeln!(f, "emitted power: ({:.6}, {:.6}, {:.6}) W", p.r, p.g, p.b)?;
+        write!(f, "warnings:      {}", self.warnings)
+    }
+}

@@ -1,0 +1,829 @@
+//! MGF reader (Greg Ward's Materials and Geometry Format 1.0–2.0, the scene format of RenderPark).
+//!
+//! Supported: comments, `o` (objects named by their full path, "office/desk"), `xf` with every flag and
+//! arrays, `i` (relative to the including file, with a transform), colours `c` `cxy` `cspec` `cct` `cmix`,
+//! materials `m` `sides` `rd` `ed` (`rs` `ts` `td` are read and ignored with one warning per material,
+//! `ir` is ignored), vertices `v` `p` `n`, faces `f` (any planar polygon, seam holes included) and `fh`
+//! (MGF 2.0 face with holes), and the solids `sph` `cyl` `cone` `prism` `ring` `torus`, tessellated as
+//! [`solids`] describes. Named contexts follow MGF scoping: `m name =` (re)defines, `m name` reuses,
+//! the bare `m`/`c` is the default black material / neutral colour. Unknown entities are ignored with a
+//! warning (as MGF prescribes); malformed known entities are errors.
+//!
+//! Units: geometry keeps the file's units. Reflectance is `rd` times the colour normalised to luminance 1
+//! (see [`color`]). Emission: MGF's `ed` is the diffuse emittance in lumens per m² (luminous exitance).
+//! Following RenderPark, it is turned into radiometric exitance with the luminous efficacy of
+//! equal-energy white, 179 lm/W (the Radiance convention), and into radiance by dividing by π:
+//! L_e = ed / (179 π) × RGB(colour), in W/(m² sr).
+
+pub mod color;
+pub mod solids;
+pub mod transform;
+
+use self::color::Xyz;
+use self::transform::XfSpec;
+use super::polygonize::polygonize;
+use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError};
+use glam::{DAffine3, DVec3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Luminous efficacy of equal-energy white light, lm/W (Radiance and RenderPark).
+pub const WHITE_EFFICACY: f64 = 179.0;
+/// Largest reflectance channel; larger values are clamped with a warning.
+const MAX_REFLECTANCE: f64 = 0.999;
+/// Deepest include nesting (guards against recursive includes).
+const MAX_INCLUDE_DEPTH: usize = 32;
+/// Most entities one load may run, counting array replays (guards against runaway nested arrays).
+const MAX_ENTITIES: usize = 20_000_000;
+
+/// Reads an MGF file and its includes.
+pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
+    let lines = read_lines(path).map_err(|e| SceneError::new(path, 0, e))?;
+    let mut reader = Reader::new(options);
+    reader.run_file(path, &lines)?;
+    Ok(reader.scene)
+}
+
+/// Parses a finite number (MGF allows forms like `.5`, `5.` and `1e3`).
+pub(crate) fn parse_number(word: &str) -> Result<f64, String> {
+    match word.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("number '{word}' is not finite")),
+        Err(_) => Err(format!("'{word}' is not a number")),
+    }
+}
+
+/// One entity: its words and the number of the physical line it starts on.
+struct Line {
+    number: usize,
+    words: Vec<String>,
+}
+
+/// Splits a file into entities, joining lines continued with a backslash.
+fn read_lines(path: &Path) -> Result<Vec<Line>, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read file: {e}"))?;
+    let text = String::from_utf8_lossy(&bytes);
+    let mut lines = Vec::new();
+    let mut pending: Option<Line> = None;
+    for (k, raw) in text.lines().enumerate() {
+        let trimmed = raw.trim_end();
+        let (body, continued) = match trimmed.strip_suffix('\\') {
+            Some(b) => (b, true),
+            None => (trimmed, false),
+        };
+        let line = pending.get_or_insert_with(|| Line {
+            number: k + 1,
+            words: Vec::new(),
+        });
+        line.words
+            .extend(body.split_whitespace().map(str::to_string));
+        if !continued {
+            if let Some(l) = pending.take() {
+                if !l.words.is_empty() {
+                    lines.push(l);
+                }
+            }
+        }
+    }
+    if let Some(l) = pending.take() {
+        if !l.words.is_empty() {
+            lines.push(l);
+        }
+    }
+    Ok(lines)
+}
+
+/// An MGF vertex context: position and (optional, zero when absent) normal, untransformed.
+#[derive(Clone, Copy, Debug, Default)]
+struct Vertex {
+    p: DVec3,
+    n: DVec3,
+}
+
+/// An MGF material context (the diffuse part we use).
+#[derive(Clone, Debug)]
+struct MgfMaterial {
+    two_sided: bool,
+    rd: f64,
+    rd_colour: Xyz,
+    /// Where `rd` was last set (file, line), for the clamping warning.
+    rd_at: (PathBuf, usize),
+    ed: f64,
+    ed_colour: Xyz,
+    /// `rs`, `ts` or `td` met and reported once.
+    non_diffuse_reported: bool,
+}
+
+impl Default for MgfMaterial {
+    /// MGF's default: a perfect two-sided black absorber.
+    fn default() -> Self {
+        MgfMaterial {
+            two_sided: true,
+            rd: 0.0,
+            rd_colour: color::NEUTRAL,
+            rd_at: (PathBuf::new(), 0),
+            ed: 0.0,
+            ed_colour: color::NEUTRAL,
+            non_diffuse_reported: false,
+        }
+    }
+}
+
+/// An open `xf` context.
+struct XfFrame {
+    spec: XfSpec,
+    index: Vec<usize>,
+    /// Total transform (this context's arguments, then the enclosing contexts').
+    total: DAffine3,
+    /// First line of the body, replayed for each array instance.
+    body_start: usize,
+    /// Include depth of the file that opened it.
+    depth: usize,
+}
+
+struct Reader<'a> {
+    options: &'a LoadOptions,
+    scene: Scene,
+    file: PathBuf,
+    depth: usize,
+    colours: HashMap<String, Xyz>,
+    colour: Xyz,
+    colour_name: Option<String>,
+    materials: HashMap<String, MgfMaterial>,
+    material: MgfMaterial,
+    material_name: Option<String>,
+    /// Scene material of the current MGF material; `None` after any change.
+    material_index: Option<usize>,
+    vertices: HashMap<String, Vertex>,
+    vertex_name: Option<String>,
+    objects: Vec<String>,
+    object_index: Option<usize>,
+    object_lookup: HashMap<String, usize>,
+    xf: Vec<XfFrame>,
+    /// Entities run so far (see [`MAX_ENTITIES`]).
+    entities: usize,
+}
+
+type Result<T, E = SceneError> = std::result::Result<T, E>;
+
+impl<'a> Reader<'a> {
+    fn new(options: &'a LoadOptions) -> Self {
+        Reader {
+            options,
+            scene: Scene::default(),
+            file: PathBuf::new(),
+            depth: 0,
+            colours: HashMap::new(),
+            colour: color::NEUTRAL,
+            colour_name: None,
+            materials: HashMap::new(),
+            material: MgfMaterial::default(),
+            material_name: None,
+            material_index: None,
+            vertices: HashMap::new(),
+            vertex_name: None,
+            objects: Vec::new(),
+            object_index: None,
+            object_lookup: HashMap::new(),
+            xf: Vec::new(),
+            entities: 0,
+        }
+    }
+
+    fn error(&self, line: usize, message: impl Into<String>) -> SceneError {
+        SceneError::new(&self.file, line, message)
+    }
+
+    fn warn(&mut self, line: usize, message: impl Into<String>) {
+        self.scene.warnings.push(Diagnostic {
+            file: self.file.clone(),
+            line,
+            message: message.into(),
+        });
+    }
+
+    fn run_file(&mut self, path: &Path, lines: &[Line]) -> Result<()> {
+        let outer_file = std::mem::replace(&mut self.file, path.to_path_buf());
+        let frames_before = self.xf.len();
+        let mut k = 0;
+        while k < lines.len() {
+            let line = &lines[k];
+            self.entities += 1;
+            if self.entities > MAX_ENTITIES {
+                return Err(self.error(
+                    line.number,
+                    format!("more than {MAX_ENTITIES} entities to run (runaway transform arrays?)"),
+                ));
+            }
+            if line.words[0] == "xf" {
+                k = self.xf_entity(line, k)?;
+                continue;
+            }
+            self.entity(line)?;
+            k += 1;
+        }
+        let open = self.xf.len() - frames_before;
+        if open > 0 {
+            let last = lines.last().map_or(0, |l| l.number);
+            self.warn(
+                last,
+                format!("{open} xf context(s) left open at end of file: closed"),
+            );
+            self.xf.truncate(frames_before);
+        }
+        self.file = outer_file;
+        Ok(())
+    }
+
+    fn current_transform(&self) -> DAffine3 {
+        self.xf.last().map_or(DAffine3::IDENTITY, |f| f.total)
+    }
+
+    /// Handles an `xf` line at index `k`; returns the index of the next line to run.
+    fn xf_entity(&mut self, line: &Line, k: usize) -> Result<usize> {
+        if line.words.len() == 1 {
+            let Some(frame) = self.xf.last_mut() else {
+                return Err(self.error(line.number, "xf end without a matching xf"));
+            };
+            if frame.depth != self.depth {
+                return Err(self.error(
+                    line.number,
+                    "xf end closes a transform opened in another file",
+                ));
+            }
+            if frame.spec.advance(&mut frame.index) {
+                let local = frame.spec.matrix(&frame.index);
+                let start = frame.body_start;
+                let n = self.xf.len();
+                let parent = if n >= 2 {
+                    self.xf[n - 2].total
+                } else {
+                    DAffine3::IDENTITY
+                };
+                self.xf[n - 1].total = parent * local;
+                return Ok(start);
+            }
+            self.xf.pop();
+            return Ok(k + 1);
+        }
+        let spec = transform::parse(&line.words[1..]).map_err(|e| self.error(line.number, e))?;
+        self.push_xf(spec, k + 1);
+        Ok(k + 1)
+    }
+
+    fn push_xf(&mut self, spec: XfSpec, body_start: usize) {
+        let index = vec![0; spec.dims.len()];
+        let total = self.current_transform() * spec.matrix(&index);
+        self.xf.push(XfFrame {
+            spec,
+            index,
+            total,
+            body_start,
+            depth: self.depth,
+        });
+    }
+
+    fn entity(&mut self, line: &Line) -> Result<()> {
+        let w = &line.words;
+        let n = line.number;
+        let keyword = w[0].as_str();
+        if keyword.starts_with('#') {
+            return Ok(());
+        }
+        match keyword {
+            "o" => self.object(line),
+            "i" => self.include(line),
+            "ies" => {
+                self.warn(n, "IES luminaires (ies) are not supported: ignored");
+                Ok(())
+            }
+            "c" => self.colour_context(line),
+            "cxy" => {
+                let v = self.numbers(line, 2)?;
+                let c = color::from_xy(v[0], v[1]).map_err(|e| self.error(n, e))?;
+                self.set_colour(c);
+                Ok(())
+            }
+            "cspec" => {
+                if w.len() < 5 {
+                    return Err(self.error(n, "cspec needs l_min l_max and at least two values"));
+                }
+                let v = self.numbers(line, w.len() - 1)?;
+                let c = color::from_spectrum(v[0], v[1], &v[2..]).map_err(|e| self.error(n, e))?;
+                self.set_colour(c);
+                Ok(())
+            }
+            "cct" => {
+                let v = self.numbers(line, 1)?;
+                let c = color::blackbody(v[0]).map_err(|e| self.error(n, e))?;
+                self.set_colour(c);
+                Ok(())
+            }
+            "cmix" => self.cmix(line),
+            "m" => self.material_context(line),
+            "sides" => {
+                self.arity(line, 1)?;
+                let two = match w[1].as_str() {
+                    "1" => false,
+                    "2" => true,
+                    other => {
+                        return Err(self.error(n, format!("sides must be 1 or 2, not '{other}'")))
+                    }
+                };
+                self.modify_material(|m| m.two_sided = two);
+                Ok(())
+            }
+            "rd" => {
+                let v = self.numbers(line, 1)?;
+                if v[0] < 0.0 {
+                    return Err(self.error(n, format!("negative reflectance rd {}", v[0])));
+                }
+                let colour = self.colour;
+                let at = (self.file.clone(), n);
+                self.modify_material(|m| {
+                    m.rd = v[0];
+                    m.rd_colour = colour;
+                    m.rd_at = at;
+                });
+                Ok(())
+            }
+            "ed" => {
+                let v = self.numbers(line, 1)?;
+                if v[0] < 0.0 {
+                    return Err(self.error(n, format!("negative emittance ed {}", v[0])));
+                }
+                let colour = self.colour;
+                self.modify_material(|m| {
+                    m.ed = v[0];
+                    m.ed_colour = colour;
+                });
+                Ok(())
+            }
+            "rs" | "ts" | "td" => {
+                let count = if keyword == "td" { 1 } else { 2 };
+                let v = self.numbers(line, count)?;
+                if v[0] > 0.0 && !self.material.non_diffuse_reported {
+                    let name = self.material_display_name();
+                    self.warn(
+                        n,
+                        format!(
+                            "material '{name}': {keyword} (specular or transmitted light) ignored, \
+                             only diffuse reflection and emission are simulated"
+                        ),
+                    );
+                    self.modify_material(|m| m.non_diffuse_reported = true);
+                }
+                Ok(())
+            }
+            "ir" => {
+                self.numbers(line, 2)?;
+                Ok(())
+            }
+            "v" => self.vertex_context(line),
+            "p" | "n" => {
+                let v = self.numbers(line, 3)?;
+                let Some(name) = self.vertex_name.clone() else {
+                    return Err(self.error(n, format!("{keyword} outside a vertex context")));
+                };
+                let value = DVec3::new(v[0], v[1], v[2]);
+                let vertex = self.vertices.entry(name).or_default();
+                if keyword == "p" {
+                    vertex.p = value;
+                } else {
+                    vertex.n = value;
+                }
+                Ok(())
+            }
+            "f" => {
+                if w.len() < 4 {
+                    return Err(self.error(n, "a face needs at least three vertices"));
+                }
+                let points = w[1..]
+                    .iter()
+                    .map(|name| self.vertex(n, name).map(|v| v.p))
+                    .collect::<Result<Vec<_>>>()?;
+                self.add_polygons(n, vec![points]);
+                Ok(())
+            }
+            "fh" => self.face_with_holes(line),
+            "sph" => {
+                self.arity(line, 2)?;
+                let c = self.vertex(n, &w[1])?;
+                let r = self.number(n, &w[2])?;
+                let loops =
+                    solids::sphere(c.p, r, self.segments()).map_err(|e| self.error(n, e))?;
+                self.add_polygons(n, loops);
+                Ok(())
+            }
+            "cyl" | "cone" => {
+                let (v1, r1, v2, r2) = if keyword == "cyl" {
+                    self.arity(line, 3)?;
+                    let r = self.number(n, &w[2])?;
+                    (self.vertex(n, &w[1])?, r, self.vertex(n, &w[3])?, r)
+                } else {
+                    self.arity(line, 4)?;
+                    (
+                        self.vertex(n, &w[1])?,
+                        self.number(n, &w[2])?,
+                        self.vertex(n, &w[3])?,
+                        self.number(n, &w[4])?,
+                    )
+                };
+                let loops = solids::cone(v1.p, r1, v2.p, r2, self.segments())
+                    .map_err(|e| self.error(n, e))?;
+                self.add_polygons(n, loops);
+                Ok(())
+            }
+            "ring" | "torus" => {
+                self.arity(line, 3)?;
+                let c = self.vertex(n, &w[1])?;
+                let (r0, r1) = (self.number(n, &w[2])?, self.number(n, &w[3])?);
+                let loops = if keyword == "ring" {
+                    solids::ring(c.p, c.n, r0, r1, self.segments())
+                } else {
+                    solids::torus(c.p, c.n, r0, r1, self.segments())
+                }
+                .map_err(|e| self.error(n, e))?;
+                self.add_polygons(n, loops);
+                Ok(())
+            }
+            "prism" => {
+                if w.len() < 5 {
+                    return Err(self.error(n, "a prism needs at least three vertices and a length"));
+                }
+                let length = self.number(n, &w[w.len() - 1])?;
+                let base = w[1..w.len() - 1]
+                    .iter()
+                    .map(|name| self.vertex(n, name).map(|v| v.p))
+                    .collect::<Result<Vec<_>>>()?;
+                let loops = solids::prism(&base, length).map_err(|e| self.error(n, e))?;
+                self.add_polygons(n, loops);
+                Ok(())
+            }
+            other => {
+                self.warn(n, format!("unknown entity '{other}' ignored"));
+                Ok(())
+            }
+        }
+    }
+
+    fn segments(&self) -> usize {
+        self.options.tessellation.max(3)
+    }
+
+    fn arity(&self, line: &Line, count: usize) -> Result<()> {
+        if line.words.len() != count + 1 {
+            return Err(self.error(
+                line.number,
+                format!(
+                    "{} takes {count} argument(s), got {}",
+                    line.words[0],
+                    line.words.len() - 1
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn number(&self, line: usize, word: &str) -> Result<f64> {
+        parse_number(word).map_err(|e| self.error(line, e))
+    }
+
+    /// Exactly `count` numeric arguments.
+    fn numbers(&self, line: &Line, count: usize) -> Result<Vec<f64>> {
+        self.arity(line, count)?;
+        line.words[1..]
+            .iter()
+            .map(|w| self.number(line.number, w))
+            .collect()
+    }
+
+    fn vertex(&self, line: usize, name: &str) -> Result<Vertex> {
+        self.vertices
+            .get(name)
+            .copied()
+            .ok_or_else(|| self.error(line, format!("undefined vertex '{name}'")))
+    }
+
+    fn object(&mut self, line: &Line) -> Result<()> {
+        match line.words.len() {
+            1 => {
+                if self.objects.pop().is_none() {
+                    return Err(self.error(line.number, "o end without a matching o"));
+                }
+            }
+            2 => self.objects.push(line.words[1].clone()),
+            _ => return Err(self.error(line.number, "o takes at most one name")),
+        }
+        self.object_index = None;
+        Ok(())
+    }
+
+    fn current_object(&mut self) -> usize {
+        if let Some(i) = self.object_index {
+            return i;
+        }
+        let name = if self.objects.is_empty() {
+            "default".to_string()
+        } else {
+            self.objects.join("/")
+        };
+        let scene = &mut self.scene;
+        let i = *self.object_lookup.entry(name.clone()).or_insert_with(|| {
+            scene.objects.push(Object { name });
+            scene.objects.len() - 1
+        });
+        self.object_index = Some(i);
+        i
+    }
+
+    fn include(&mut self, line: &Line) -> Result<()> {
+        let n = line.number;
+        if line.words.len() < 2 {
+            return Err(self.error(n, "i needs a file name"));
+        }
+        if self.depth >= MAX_INCLUDE_DEPTH {
+            return Err(self.error(n, "includes nested too deeply (recursive include?)"));
+        }
+        let name = &line.words[1];
+        let target = match self.file.parent() {
+            Some(dir) => dir.join(name),
+            None => PathBuf::from(name),
+        };
+        let lines = read_lines(&target)
+            .map_err(|e| self.error(n, format!("cannot include '{}': {e}", target.display())))?;
+        let spec = if line.words.len() > 2 {
+            Some(transform::parse(&line.words[2..]).map_err(|e| self.error(n, e))?)
+        } else {
+            None
+        };
+        match spec {
+            None => self.run_include(&target, &lines),
+            Some(spec) => {
+                self.push_xf(spec, 0);
+                loop {
+                    self.run_include(&target, &lines)?;
+                    let Some(frame) = self.xf.last_mut() else {
+                        break;
+                    };
+                    if !frame.spec.advance(&mut frame.index) {
+                        break;
+                    }
+                    let local = frame.spec.matrix(&frame.index);
+                    let n = self.xf.len();
+                    let parent = if n >= 2 {
+                        self.xf[n - 2].total
+                    } else {
+                        DAffine3::IDENTITY
+                    };
+                    self.xf[n - 1].total = parent * local;
+                }
+                self.xf.pop();
+                Ok(())
+            }
+        }
+    }
+
+    fn run_include(&mut self, target: &Path, lines: &[Line]) -> Result<()> {
+        self.depth += 1;
+        let result = self.run_file(target, lines);
+        self.depth -= 1;
+        result
+    }
+
+    fn colour_context(&mut self, line: &Line) -> Result<()> {
+        let w = &line.words;
+        match w.len() {
+            1 => {
+                self.colour = color::NEUTRAL;
+                self.colour_name = None;
+            }
+            2 => {
+                let Some(c) = self.colours.get(&w[1]) else {
+                    return Err(self.error(line.number, format!("undefined colour '{}'", w[1])));
+                };
+                self.colour = *c;
+                self.colour_name = Some(w[1].clone());
+            }
+            3 | 4 if w[2] == "=" => {
+                let c = match w.get(3) {
+                    None => color::NEUTRAL,
+                    Some(t) => *self.colours.get(t).ok_or_else(|| {
+                        self.error(line.number, format!("undefined colour template '{t}'"))
+                    })?,
+                };
+                self.colours.insert(w[1].clone(), c);
+                self.colour = c;
+                self.colour_name = Some(w[1].clone());
+            }
+            _ => return Err(self.error(line.number, "expected c [name [= [template]]]")),
+        }
+        Ok(())
+    }
+
+    fn set_colour(&mut self, c: Xyz) {
+        self.colour = c;
+        if let Some(name) = &self.colour_name {
+            self.colours.insert(name.clone(), c);
+        }
+    }
+
+    fn cmix(&mut self, line: &Line) -> Result<()> {
+        let w = &line.words;
+        let n = line.number;
+        if w.len() < 3 || w.len().is_multiple_of(2) {
+            return Err(self.error(n, "cmix needs weight/colour pairs"));
+        }
+        let mut parts = Vec::new();
+        for pair in w[1..].chunks(2) {
+            let weight = self.number(n, &pair[0])?;
+            let c = self
+                .colours
+                .get(&pair[1])
+                .ok_or_else(|| self.error(n, format!("undefined colour '{}'", pair[1])))?;
+            parts.push((weight, *c));
+        }
+        let c = color::mix(&parts).map_err(|e| self.error(n, e))?;
+        self.set_colour(c);
+        Ok(())
+    }
+
+    fn material_context(&mut self, line: &Line) -> Result<()> {
+        let w = &line.words;
+        match w.len() {
+            1 => {
+                self.material = MgfMaterial::default();
+                self.material_name = None;
+            }
+            2 => {
+                let Some(m) = self.materials.get(&w[1]) else {
+                    return Err(self.error(line.number, format!("undefined material '{}'", w[1])));
+                };
+                self.material = m.clone();
+                self.material_name = Some(w[1].clone());
+            }
+            3 | 4 if w[2] == "=" => {
+                let m = match w.get(3) {
+                    None => MgfMaterial::default(),
+                    Some(t) => self.materials.get(t).cloned().ok_or_else(|| {
+                        self.error(line.number, format!("undefined material template '{t}'"))
+                    })?,
+                };
+                self.materials.insert(w[1].clone(), m.clone());
+                self.material = m;
+                self.material_name = Some(w[1].clone());
+            }
+            _ => return Err(self.error(line.number, "expected m [name [= [template]]]")),
+        }
+        self.material_index = None;
+        Ok(())
+    }
+
+    fn modify_material(&mut self, change: impl FnOnce(&mut MgfMaterial)) {
+        change(&mut self.material);
+        if let Some(name) = &self.material_name {
+            self.materials.insert(name.clone(), self.material.clone());
+        }
+        self.material_index = None;
+    }
+
+    fn material_display_name(&self) -> String {
+        self.material_name
+            .clone()
+            .unwrap_or_else(|| "(unnamed)".to_string())
+    }
+
+    /// The scene material for the current MGF material, created on first use after a change.
+    fn current_material(&mut self) -> usize {
+        if let Some(i) = self.material_index {
+            return i;
+        }
+        let m = &self.material;
+        let name = self.material_display_name();
+        let raw = color::to_linear_srgb(m.rd_colour) * m.rd;
+        let reflectance = raw.map(|c| c.clamp(0.0, MAX_REFLECTANCE));
+        let emission = (color::to_linear_srgb(m.ed_colour)
+            * (m.ed / (WHITE_EFFICACY * std::f64::consts::PI)))
+            .map(|c| c.max(0.0));
+        let material = Material {
+            name: name.clone(),
+            reflectance,
+            emission,
+            two_sided: m.two_sided,
+        };
+        let index = match self.scene.materials.iter().position(|x| *x == material) {
+            Some(i) => i,
+            None => {
+                if reflectance != raw {
+                    let (file, line) = m.rd_at.clone();
+                    self.scene.warnings.push(Diagnostic {
+                        file,
+                        line,
+                        message: format!(
+                            "material '{name}': reflectance ({:.4}, {:.4}, {:.4}) outside [0, 1) \
+                             (or outside the sRGB gamut) clamped to ({:.4}, {:.4}, {:.4})",
+                            raw.r, raw.g, raw.b, reflectance.r, reflectance.g, reflectance.b
+                        ),
+                    });
+                }
+                self.scene.materials.push(material);
+                self.scene.materials.len() - 1
+            }
+        };
+        self.material_index = Some(index);
+        index
+    }
+
+    fn vertex_context(&mut self, line: &Line) -> Result<()> {
+        let w = &line.words;
+        match w.len() {
+            2 => {
+                if !self.vertices.contains_key(&w[1]) {
+                    return Err(self.error(line.number, format!("undefined vertex '{}'", w[1])));
+                }
+            }
+            3 | 4 if w[2] == "=" => {
+                let v = match w.get(3) {
+                    None => Vertex::default(),
+                    Some(t) => self.vertex(line.number, t)?,
+                };
+                self.vertices.insert(w[1].clone(), v);
+            }
+            _ => return Err(self.error(line.number, "expected v name [= [template]]")),
+        }
+        self.vertex_name = Some(w[1].clone());
+        Ok(())
+    }
+
+    /// `fh outer... - hole... - hole...`: each hole is joined to the outline by a seam between their
+    /// closest vertices, then the seamed polygon is split like any face.
+    fn face_with_holes(&mut self, line: &Line) -> Result<()> {
+        let n = line.number;
+        let mut contours: Vec<Vec<DVec3>> = vec![Vec::new()];
+        for name in &line.words[1..] {
+            if name == "-" {
+                contours.push(Vec::new());
+            } else if let Some(last) = contours.last_mut() {
+                last.push(self.vertex(n, name)?.p);
+            }
+        }
+        if contours.iter().any(|c| c.len() < 3) {
+            return Err(self.error(n, "every contour of fh needs at least three vertices"));
+        }
+        let mut outline = contours[0].clone();
+        for hole in &contours[1..] {
+            let mut best = (0, 0, f64::INFINITY);
+            for (i, p) in outline.iter().enumerate() {
+                for (j, q) in hole.iter().enumerate() {
+                    let d = p.distance_squared(*q);
+                    if d < best.2 {
+                        best = (i, j, d);
+                    }
+                }
+            }
+            let (i, j, _) = best;
+            let mut seamed = outline[..=i].to_vec();
+            seamed.extend(hole[j..].iter().chain(&hole[..=j]));
+            seamed.extend(&outline[i..]);
+            outline = seamed;
+        }
+        self.add_polygons(n, vec![outline]);
+        Ok(())
+    }
+
+    /// Transforms polygons given in the current (untransformed) coordinates, splits them into shapes and
+    /// adds them with the current material and object.
+    fn add_polygons(&mut self, line: usize, loops: Vec<Vec<DVec3>>) {
+        let xf = self.current_transform();
+        let mirrored = xf.matrix3.determinant() < 0.0;
+        for local in loops {
+            let mut points: Vec<DVec3> = local.iter().map(|p| xf.transform_point3(*p)).collect();
+            // A mirror flips the winding; reversing keeps the front side the mirror image of the original.
+            if mirrored {
+                points.reverse();
+            }
+            match polygonize(&points) {
+                Ok(out) => {
+                    for w in out.warnings {
+                        self.warn(line, w);
+                    }
+                    if out.shapes.is_empty() {
+                        continue;
+                    }
+                    let material = self.current_material();
+                    let object = self.current_object();
+                    let two_sided = self.scene.materials[material].two_sided;
+                    self.scene
+                        .polygons
+                        .extend(out.shapes.into_iter().map(|shape| Polygon {
+                            shape,
+                            material,
+                            object,
+                            two_sided,
+                        }));
+                }
+                Err(e) => self.warn(line, format!("{e}: polygon dropped")),
+            }
+        }
+    }
+}
