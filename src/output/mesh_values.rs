@@ -18,6 +18,7 @@ use crate::geometry::{DVec2, DVec3, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// Marks an element that is not a leaf in [`VertexRadiosity::leaf_slot`].
 const NOT_A_LEAF: u32 = u32::MAX;
@@ -119,7 +120,7 @@ impl VertexRadiosity {
             .collect();
 
         // Pass 2: one vertex per (point, group); area-weighted average of the leaves touching it.
-        let mut vertex_of: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut vertex_of: FastMap<(u32, u32), u32> = FastMap::default();
         let mut positions = Vec::new();
         let mut normals = Vec::new();
         let mut sums: Vec<(Rgb, f64)> = Vec::new();
@@ -398,7 +399,7 @@ fn resolve_anchors(anchor_of: &[Option<Anchor>], values: &mut [Rgb]) {
 /// Read-only access to the welded vertices for the T-vertex search.
 struct VertexLookup<'a> {
     welder: &'a Welder,
-    vertex_of: &'a HashMap<(u32, u32), u32>,
+    vertex_of: &'a FastMap<(u32, u32), u32>,
     positions: &'a [DVec3],
     tolerance: f64,
 }
@@ -447,12 +448,14 @@ impl VertexLookup<'_> {
     }
 }
 
-/// Position welding on a hash grid of cells twice the tolerance wide, so a query touches at most 2 cells
-/// per axis (3 for the doubled tolerance of midpoint lookups). Sequential, hence deterministic.
+/// Welding grid cells are this many tolerances wide: a query usually touches a single cell.
+const CELL_SIZE: f64 = 64.0;
+
+/// Position welding on a hash grid; sequential, hence deterministic.
 struct Welder {
     tolerance: f64,
     cell: f64,
-    grid: HashMap<[i64; 3], Vec<u32>>,
+    grid: FastMap<[i64; 3], Vec<u32>>,
     points: Vec<DVec3>,
 }
 
@@ -460,8 +463,8 @@ impl Welder {
     fn new(tolerance: f64) -> Self {
         Welder {
             tolerance,
-            cell: 2.0 * tolerance,
-            grid: HashMap::new(),
+            cell: CELL_SIZE * tolerance,
+            grid: FastMap::default(),
             points: Vec::new(),
         }
     }
@@ -504,6 +507,41 @@ impl Welder {
         let cell = self.cell_of(p);
         self.grid.entry(cell).or_default().push(id);
         id
+    }
+}
+
+/// Keys here are small integers: a multiply-rotate hash (the Fx hash of rustc) is much faster than SipHash
+/// and needs no protection against adversarial keys.
+type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
+
+#[derive(Default)]
+struct FxHasher {
+    hash: u64,
+}
+
+impl Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.hash = (self.hash.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(u64::from(i));
+    }
+
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.hash
     }
 }
 
