@@ -266,8 +266,8 @@ fn linear_radiance_is_reproduced_inside_and_constant_everywhere() {
 
 #[test]
 fn vertex_values_are_area_weighted_and_t_vertices_interpolated() {
-    // Two leaves of the root split: the left half refined once. The T-vertex at the middle of the right
-    // half's left edge... build it explicitly and check the numbers.
+    // The root split in four, the lower-left child split again: its corner (0.5, 0.25) is a T-vertex
+    // inside the left edge of the lower-right child. Check the numbers by hand.
     let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
     let mut h = Hierarchy::new(&s, 1);
     let children = h.subdivide(h.patches[0].root);

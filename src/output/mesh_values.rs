@@ -14,7 +14,7 @@
 //! found by looking up the edge midpoint among the welded vertices, recursively.
 
 use crate::color::Rgb;
-use crate::geometry::{DVec2, DVec3, Shape};
+use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -78,9 +78,7 @@ impl VertexRadiosity {
         let bounds = hierarchy
             .patches
             .iter()
-            .fold(crate::geometry::Aabb::EMPTY, |b, p| {
-                b.union(&p.shape.bounds())
-            });
+            .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()));
         let tolerance = (WELD_TOLERANCE * bounds.diagonal()).max(1e-300);
 
         // Pass 1: weld corner positions regardless of patch, and note which patches meet at each point.
