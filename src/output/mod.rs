@@ -2,4 +2,13 @@
 //! OpenEXR images, illuminated models (PLY, glTF).
 
 pub mod camera;
+pub mod export;
 pub mod image;
+pub mod mesh_values;
+pub mod render;
+pub mod tonemap;
+
+pub use export::{write_glb, write_ply};
+pub use mesh_values::{ShadedMesh, VertexRadiosity};
+pub use render::{render, render_with, RenderOptions, Shading};
+pub use tonemap::{to_srgb8, write_png, Curve, Exposure, ToneMap};

@@ -1,0 +1,573 @@
+//! Radiosity at the vertices of the leaf elements, for smooth (Gouraud, as in RenderPark) shading and for
+//! illuminated-model export.
+//!
+//! Leaves carry constant radiance; smooth shading averages it to their corners and interpolates. Two things
+//! make the result free of cracks:
+//! - vertices are welded by position within a *smoothing group*: the patches that are coplanar, share a
+//!   material and face the same way (a triangulated floor is one group), so the average runs across patch
+//!   borders;
+//! - *T-vertices* (a corner of a small leaf lying inside an edge of a larger neighbour) take the value
+//!   interpolated along that larger edge, and the larger leaf interpolates through them (a fan from its
+//!   centre), so both sides of every edge agree.
+//!
+//! The quadtree splits edges at their midpoints, so T-vertices sit at dyadic points of an edge: they are
+//! found by looking up the edge midpoint among the welded vertices, recursively.
+
+use crate::color::Rgb;
+use crate::geometry::{Aabb, DVec2, DVec3, Shape};
+use crate::hierarchy::{ElementId, Hierarchy};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Marks an element that is not a leaf in [`VertexRadiosity::leaf_slot`].
+const NOT_A_LEAF: u32 = u32::MAX;
+/// Vertices closer than this fraction of the scene diagonal are the same vertex.
+const WELD_TOLERANCE: f64 = 1e-7;
+/// Patches whose unit normals' dot product is at least this are coplanar-compatible (about 0.08 degrees).
+const SAME_NORMAL_COS: f64 = 1.0 - 1e-6;
+/// Deepest midpoint recursion along one edge (far below any element size that matters).
+const MAX_EDGE_DEPTH: u32 = 40;
+
+/// Radiosity averaged to the welded vertices of the leaf elements of a [`Hierarchy`], with the T-vertex
+/// structure needed to interpolate it continuously. Build once, then use for rendering and export; it
+/// refers to the hierarchy it was built from by element id.
+#[derive(Clone, Debug)]
+pub struct VertexRadiosity {
+    positions: Vec<DVec3>,
+    normals: Vec<DVec3>,
+    values: Vec<Rgb>,
+    /// Per element of the hierarchy: index into `leaves`, or [`NOT_A_LEAF`].
+    leaf_slot: Vec<u32>,
+    leaves: Vec<LeafVertices>,
+}
+
+#[derive(Clone, Debug)]
+struct LeafVertices {
+    element: ElementId,
+    /// Vertex ids of the shape's corners (the first 3 for a triangle).
+    corners: [u32; 4],
+    /// The boundary loop (corners and T-vertices, counter-clockwise) when some edge carries T-vertices.
+    boundary: Option<Box<[u32]>>,
+}
+
+/// A triangle mesh of the leaf elements with radiance per vertex (T-vertices fanned as in rendering).
+#[derive(Clone, Debug, Default)]
+pub struct ShadedMesh {
+    pub positions: Vec<DVec3>,
+    pub normals: Vec<DVec3>,
+    /// Linear exitant radiance at each vertex.
+    pub radiance: Vec<Rgb>,
+    /// Counter-clockwise seen from the front (the radiating side).
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// A T-vertex found inside edge `(a, b)` of a leaf at parameter `s` along it.
+#[derive(Clone, Copy, Debug)]
+struct Anchor {
+    a: u32,
+    b: u32,
+    s: f64,
+    edge_length: f64,
+}
+
+impl VertexRadiosity {
+    /// Welds the leaves' corners, averages leaf radiance to them (area-weighted) and anchors T-vertices.
+    pub fn new(hierarchy: &Hierarchy) -> Self {
+        let leaves = hierarchy.leaves();
+        let bounds = hierarchy
+            .patches
+            .iter()
+            .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()));
+        let tolerance = (WELD_TOLERANCE * bounds.diagonal()).max(1e-300);
+
+        // Pass 1: weld corner positions regardless of patch, and note which patches meet at each point.
+        let mut welder = Welder::new(tolerance);
+        let mut corner_points: Vec<[u32; 4]> = Vec::with_capacity(leaves.len());
+        let mut point_patches: Vec<Vec<u32>> = Vec::new();
+        for &leaf in &leaves {
+            let element = hierarchy.element(leaf);
+            let mut ids = [0u32; 4];
+            for (k, &p) in element.shape.vertices().iter().enumerate() {
+                let id = welder.insert(p);
+                if id as usize == point_patches.len() {
+                    point_patches.push(Vec::new());
+                }
+                let list = &mut point_patches[id as usize];
+                if !list.contains(&element.patch) {
+                    list.push(element.patch);
+                }
+                ids[k] = id;
+            }
+            corner_points.push(ids);
+        }
+
+        // Smoothing groups: patches meeting at a point with the same material and normal.
+        let mut groups = UnionFind::new(hierarchy.patches.len());
+        for list in &point_patches {
+            for (i, &p) in list.iter().enumerate() {
+                for &q in &list[i + 1..] {
+                    if compatible(hierarchy, p, q) {
+                        groups.union(p, q);
+                    }
+                }
+            }
+        }
+        let group_of: Vec<u32> = (0..hierarchy.patches.len() as u32)
+            .map(|p| groups.find(p))
+            .collect();
+
+        // Pass 2: one vertex per (point, group); area-weighted average of the leaves touching it.
+        let mut vertex_of: FastMap<(u32, u32), u32> = FastMap::default();
+        let mut positions = Vec::new();
+        let mut normals = Vec::new();
+        let mut sums: Vec<(Rgb, f64)> = Vec::new();
+        let mut leaf_slot = vec![NOT_A_LEAF; hierarchy.elements.len()];
+        let mut records = Vec::with_capacity(leaves.len());
+        for (slot, (&leaf, points)) in leaves.iter().zip(&corner_points).enumerate() {
+            let element = hierarchy.element(leaf);
+            let group = group_of[element.patch as usize];
+            let mut corners = [0u32; 4];
+            for k in 0..element.shape.vertex_count() {
+                let id = *vertex_of.entry((points[k], group)).or_insert_with(|| {
+                    positions.push(welder.points[points[k] as usize]);
+                    normals.push(hierarchy.patches[group as usize].normal);
+                    sums.push((Rgb::BLACK, 0.0));
+                    positions.len() as u32 - 1
+                });
+                let (value, area) = &mut sums[id as usize];
+                *value += element.radiance[0] * element.area;
+                *area += element.area;
+                corners[k] = id;
+            }
+            leaf_slot[leaf as usize] = slot as u32;
+            records.push(LeafVertices {
+                element: leaf,
+                corners,
+                boundary: None,
+            });
+        }
+        let mut values: Vec<Rgb> = sums
+            .iter()
+            .map(|&(v, a)| if a > 0.0 { v / a } else { Rgb::BLACK })
+            .collect();
+
+        // T-vertices: dyadic points of each leaf edge that are vertices of the same group.
+        let lookup = VertexLookup {
+            welder: &welder,
+            vertex_of: &vertex_of,
+            positions: &positions,
+            tolerance,
+        };
+        let found: Vec<_> = records
+            .par_iter()
+            .map(|record| {
+                let element = hierarchy.element(record.element);
+                let group = group_of[element.patch as usize];
+                let n = element.shape.vertex_count();
+                let mut loop_ids = Vec::with_capacity(n);
+                let mut anchors = Vec::new();
+                for k in 0..n {
+                    let (a, b) = (record.corners[k], record.corners[(k + 1) % n]);
+                    loop_ids.push(a);
+                    let before = anchors.len();
+                    lookup.edge_vertices(group, a, b, &mut anchors);
+                    loop_ids.extend(anchors[before..].iter().map(|(v, _)| *v));
+                }
+                let boundary = (loop_ids.len() > n).then(|| loop_ids.into_boxed_slice());
+                (boundary, anchors)
+            })
+            .collect();
+
+        // Anchor each T-vertex on the longest edge containing it; resolve in dependency order so that an
+        // edge's end points (themselves possibly T-vertices of larger edges) are final first.
+        let mut anchor_of: Vec<Option<Anchor>> = vec![None; positions.len()];
+        for (record, (boundary, anchors)) in records.iter_mut().zip(found) {
+            record.boundary = boundary;
+            for (v, anchor) in anchors {
+                let slot = &mut anchor_of[v as usize];
+                if slot.is_none_or(|old| anchor.edge_length > old.edge_length) {
+                    *slot = Some(anchor);
+                }
+            }
+        }
+        resolve_anchors(&anchor_of, &mut values);
+
+        VertexRadiosity {
+            positions,
+            normals,
+            values,
+            leaf_slot,
+            leaves: records,
+        }
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Radiance at the welded vertex `id`.
+    pub fn vertex_value(&self, id: usize) -> Rgb {
+        self.values[id]
+    }
+
+    pub fn vertex_position(&self, id: usize) -> DVec3 {
+        self.positions[id]
+    }
+
+    /// Number of leaves whose edges carry T-vertices (interpolated by a fan from their centre).
+    pub fn fanned_leaf_count(&self) -> usize {
+        self.leaves.iter().filter(|l| l.boundary.is_some()).count()
+    }
+
+    /// Smoothly interpolated radiance at point `p` of leaf element `leaf`: barycentric on a triangle,
+    /// bilinear on a quad, or barycentric in the fan triangle containing `p` when the leaf has T-vertices.
+    /// Returns the leaf's own radiance for an element that was not a leaf when this was built.
+    pub fn evaluate(&self, hierarchy: &Hierarchy, leaf: ElementId, p: DVec3) -> Rgb {
+        let element = hierarchy.element(leaf);
+        let slot = self
+            .leaf_slot
+            .get(leaf as usize)
+            .copied()
+            .unwrap_or(NOT_A_LEAF);
+        if slot == NOT_A_LEAF {
+            return element.radiance[0];
+        }
+        let record = &self.leaves[slot as usize];
+        let shape = &element.shape;
+        let c = |k: usize| self.values[record.corners[k] as usize];
+        match &record.boundary {
+            None => match shape {
+                Shape::Triangle(_) => {
+                    let uv = shape.parameters_of(p);
+                    c(0) * (1.0 - uv.x - uv.y) + c(1) * uv.x + c(2) * uv.y
+                }
+                Shape::Quad(_) => {
+                    let uv = shape.parameters_of(p).clamp(DVec2::ZERO, DVec2::ONE);
+                    bilinear([c(0), c(1), c(2), c(3)], uv)
+                }
+            },
+            Some(boundary) => {
+                let normal = hierarchy.patch_of(leaf).normal;
+                let (centre, centre_value) = self.fan_centre(shape, &record.corners);
+                let mut best = (f64::NEG_INFINITY, Rgb::BLACK);
+                for i in 0..boundary.len() {
+                    let (a, b) = (
+                        boundary[i] as usize,
+                        boundary[(i + 1) % boundary.len()] as usize,
+                    );
+                    let w = barycentric(centre, self.positions[a], self.positions[b], p, normal);
+                    let margin = w[0].min(w[1]).min(w[2]);
+                    if margin > best.0 {
+                        let value =
+                            centre_value * w[0] + self.values[a] * w[1] + self.values[b] * w[2];
+                        best = (margin, value);
+                    }
+                }
+                best.1
+            }
+        }
+    }
+
+    /// The leaves as a triangle mesh: triangles as they are, quads split along the diagonal (0, 2), and
+    /// leaves with T-vertices fanned from an extra centre vertex, exactly as [`Self::evaluate`] does.
+    pub fn mesh(&self, hierarchy: &Hierarchy) -> ShadedMesh {
+        let mut mesh = ShadedMesh {
+            positions: self.positions.clone(),
+            normals: self.normals.clone(),
+            radiance: self.values.clone(),
+            triangles: Vec::new(),
+        };
+        for record in &self.leaves {
+            let shape = &hierarchy.element(record.element).shape;
+            let c = record.corners;
+            match (&record.boundary, shape) {
+                (None, Shape::Triangle(_)) => mesh.triangles.push([c[0], c[1], c[2]]),
+                (None, Shape::Quad(_)) => {
+                    mesh.triangles.push([c[0], c[1], c[2]]);
+                    mesh.triangles.push([c[0], c[2], c[3]]);
+                }
+                (Some(boundary), _) => {
+                    let (centre, value) = self.fan_centre(shape, &c);
+                    let centre_id = mesh.positions.len() as u32;
+                    mesh.positions.push(centre);
+                    mesh.normals.push(self.normals[c[0] as usize]);
+                    mesh.radiance.push(value);
+                    for i in 0..boundary.len() {
+                        let next = boundary[(i + 1) % boundary.len()];
+                        mesh.triangles.push([centre_id, boundary[i], next]);
+                    }
+                }
+            }
+        }
+        mesh
+    }
+
+    /// Centre of a fanned leaf and its value: the interpolation of the corners there (the average of the
+    /// corners, both barycentric at a triangle's centroid and bilinear at a quad's (1/2, 1/2)).
+    fn fan_centre(&self, shape: &Shape, corners: &[u32; 4]) -> (DVec3, Rgb) {
+        let n = shape.vertex_count();
+        let value = corners[..n]
+            .iter()
+            .map(|&v| self.values[v as usize])
+            .sum::<Rgb>()
+            / n as f64;
+        let centre = match shape {
+            Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
+            Shape::Quad(_) => shape.point_at(DVec2::splat(0.5)),
+        };
+        (centre, value)
+    }
+}
+
+fn bilinear(c: [Rgb; 4], uv: DVec2) -> Rgb {
+    let (u, v) = (uv.x, uv.y);
+    c[0] * ((1.0 - u) * (1.0 - v))
+        + c[1] * (u * (1.0 - v))
+        + c[2] * (u * v)
+        + c[3] * ((1.0 - u) * v)
+}
+
+/// Barycentric weights of `p` in triangle (a, b, c), measured in the plane with normal `n`.
+fn barycentric(a: DVec3, b: DVec3, c: DVec3, p: DVec3, n: DVec3) -> [f64; 3] {
+    let area = (b - a).cross(c - a).dot(n);
+    if area.abs() < 1e-300 {
+        return [f64::NEG_INFINITY, 0.0, 0.0];
+    }
+    let wa = (b - p).cross(c - p).dot(n) / area;
+    let wb = (c - p).cross(a - p).dot(n) / area;
+    [wa, wb, 1.0 - wa - wb]
+}
+
+/// Same smoothing group: same material (reflectance and emission) and the same facing direction. Patches
+/// meeting at a point with the same normal lie in the same plane.
+fn compatible(hierarchy: &Hierarchy, p: u32, q: u32) -> bool {
+    let (a, b) = (
+        &hierarchy.patches[p as usize],
+        &hierarchy.patches[q as usize],
+    );
+    a.reflectance == b.reflectance
+        && a.emission == b.emission
+        && a.normal.dot(b.normal) >= SAME_NORMAL_COS
+}
+
+/// Sets each T-vertex to the interpolation along its anchoring edge, end points first (an explicit-stack
+/// depth-first walk; a cycle, which planar meshes do not produce, falls back to the current value).
+fn resolve_anchors(anchor_of: &[Option<Anchor>], values: &mut [Rgb]) {
+    #[derive(Clone, Copy, PartialEq)]
+    enum State {
+        Todo,
+        Visiting,
+        Done,
+    }
+    let mut state = vec![State::Todo; anchor_of.len()];
+    let mut stack = Vec::new();
+    for start in 0..anchor_of.len() {
+        if anchor_of[start].is_none() || state[start] == State::Done {
+            continue;
+        }
+        stack.push(start);
+        while let Some(&v) = stack.last() {
+            let Some(anchor) = anchor_of[v] else {
+                state[v] = State::Done;
+                stack.pop();
+                continue;
+            };
+            if state[v] == State::Done {
+                stack.pop();
+                continue;
+            }
+            state[v] = State::Visiting;
+            let pending: Vec<usize> = [anchor.a as usize, anchor.b as usize]
+                .into_iter()
+                .filter(|&e| anchor_of[e].is_some() && state[e] == State::Todo)
+                .collect();
+            if pending.is_empty() {
+                values[v] = values[anchor.a as usize] * (1.0 - anchor.s)
+                    + values[anchor.b as usize] * anchor.s;
+                state[v] = State::Done;
+                stack.pop();
+            } else {
+                stack.extend(pending);
+            }
+        }
+    }
+}
+
+/// Read-only access to the welded vertices for the T-vertex search.
+struct VertexLookup<'a> {
+    welder: &'a Welder,
+    vertex_of: &'a FastMap<(u32, u32), u32>,
+    positions: &'a [DVec3],
+    tolerance: f64,
+}
+
+impl VertexLookup<'_> {
+    /// Appends, in order from `a` to `b`, the vertices of `group` at dyadic points strictly inside the
+    /// leaf edge (a, b), each with its anchor on that edge.
+    fn edge_vertices(&self, group: u32, a: u32, b: u32, out: &mut Vec<(u32, Anchor)>) {
+        let edge = Anchor {
+            a,
+            b,
+            s: 0.0,
+            edge_length: self.positions[a as usize].distance(self.positions[b as usize]),
+        };
+        self.split(group, &edge, (a, b), (0.0, 1.0), 0, out);
+    }
+
+    /// Recursion of [`Self::edge_vertices`] on the part (from, to) spanning parameters `range` of `edge`.
+    fn split(
+        &self,
+        group: u32,
+        edge: &Anchor,
+        (from, to): (u32, u32),
+        range: (f64, f64),
+        depth: u32,
+        out: &mut Vec<(u32, Anchor)>,
+    ) {
+        let (pa, pb) = (self.positions[from as usize], self.positions[to as usize]);
+        if depth >= MAX_EDGE_DEPTH || pa.distance(pb) < 4.0 * self.tolerance {
+            return;
+        }
+        let Some(m) = self
+            .welder
+            .find((pa + pb) * 0.5, 2.0 * self.tolerance)
+            .and_then(|point| self.vertex_of.get(&(point, group)).copied())
+        else {
+            return;
+        };
+        if m == from || m == to {
+            return;
+        }
+        let s = 0.5 * (range.0 + range.1);
+        self.split(group, edge, (from, m), (range.0, s), depth + 1, out);
+        out.push((m, Anchor { s, ..*edge }));
+        self.split(group, edge, (m, to), (s, range.1), depth + 1, out);
+    }
+}
+
+/// Welding grid cells are this many tolerances wide: a query usually touches a single cell.
+const CELL_SIZE: f64 = 64.0;
+
+/// Position welding on a hash grid; sequential, hence deterministic.
+struct Welder {
+    tolerance: f64,
+    cell: f64,
+    grid: FastMap<[i64; 3], Vec<u32>>,
+    points: Vec<DVec3>,
+}
+
+impl Welder {
+    fn new(tolerance: f64) -> Self {
+        Welder {
+            tolerance,
+            cell: CELL_SIZE * tolerance,
+            grid: FastMap::default(),
+            points: Vec::new(),
+        }
+    }
+
+    fn cell_of(&self, p: DVec3) -> [i64; 3] {
+        let c = (p / self.cell).floor();
+        [c.x as i64, c.y as i64, c.z as i64]
+    }
+
+    /// The lowest-numbered point within `radius` of `p`.
+    fn find(&self, p: DVec3, radius: f64) -> Option<u32> {
+        let lo = self.cell_of(p - DVec3::splat(radius));
+        let hi = self.cell_of(p + DVec3::splat(radius));
+        let mut best: Option<u32> = None;
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                for z in lo[2]..=hi[2] {
+                    let Some(ids) = self.grid.get(&[x, y, z]) else {
+                        continue;
+                    };
+                    for &id in ids {
+                        if self.points[id as usize].distance(p) <= radius
+                            && best.is_none_or(|b| id < b)
+                        {
+                            best = Some(id);
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    fn insert(&mut self, p: DVec3) -> u32 {
+        if let Some(id) = self.find(p, self.tolerance) {
+            return id;
+        }
+        let id = self.points.len() as u32;
+        self.points.push(p);
+        let cell = self.cell_of(p);
+        self.grid.entry(cell).or_default().push(id);
+        id
+    }
+}
+
+/// Keys here are small integers: a multiply-rotate hash (the Fx hash of rustc) is much faster than SipHash
+/// and needs no protection against adversarial keys.
+type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
+
+#[derive(Default)]
+struct FxHasher {
+    hash: u64,
+}
+
+impl Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.hash = (self.hash.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(u64::from(i));
+    }
+
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.hash
+    }
+}
+
+/// Disjoint sets of patches with path halving; the representative is the smallest index, so group ids do
+/// not depend on union order.
+struct UnionFind {
+    parent: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        UnionFind {
+            parent: (0..n as u32).collect(),
+        }
+    }
+
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.parent[x as usize] != x {
+            let grand = self.parent[self.parent[x as usize] as usize];
+            self.parent[x as usize] = grand;
+            x = grand;
+        }
+        x
+    }
+
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        self.parent[hi as usize] = lo;
+    }
+}

@@ -1,0 +1,238 @@
+//! Ray-cast rendering of a radiosity solution: each camera ray finds the visible surface point, and the
+//! image holds the solution's exitant radiance there (linear, so that it can be compared with a reference
+//! renderer pixel by pixel). Flat shading shows the leaf elements' constant radiance, smooth shading the
+//! vertex interpolation of [`VertexRadiosity`]; the mesh overlay draws the leaf edges.
+
+use super::camera::Camera;
+use super::image::Image;
+use super::mesh_values::VertexRadiosity;
+use crate::color::Rgb;
+use crate::geometry::{DVec3, Shape};
+use crate::hierarchy::Hierarchy;
+use crate::visibility::Visibility;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
+
+/// How the radiance of the visible leaf element is shown.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Shading {
+    /// The leaf's constant radiance: exactly the computed solution.
+    #[default]
+    Flat,
+    /// Vertex-averaged radiance interpolated over each leaf (RenderPark's Gouraud look), crack free.
+    Smooth,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderOptions {
+    pub shading: Shading,
+    /// Draw the leaf elements' edges on top.
+    pub mesh: bool,
+    /// 1: the pixel centre only. n > 1: n stratified, jittered samples inside the pixel, averaged.
+    pub samples_per_pixel: u32,
+    /// Seed of the jitter (the image depends only on it, never on the thread count).
+    pub seed: u64,
+    /// Colour of the mesh lines (linear radiance).
+    pub mesh_colour: Rgb,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            shading: Shading::Flat,
+            mesh: false,
+            samples_per_pixel: 1,
+            seed: 0,
+            mesh_colour: Rgb::BLACK,
+        }
+    }
+}
+
+/// Mesh lines are drawn where the hit point is closer to a leaf edge than this many pixel footprints; both
+/// leaves beside an edge draw their half, so the line is about one pixel wide.
+const MESH_HALF_WIDTH: f64 = 0.5;
+
+/// Renders linear radiance; builds the vertex radiosity first when shading is smooth.
+pub fn render(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    camera: &Camera,
+    options: &RenderOptions,
+) -> Image {
+    let vertices = (options.shading == Shading::Smooth).then(|| VertexRadiosity::new(hierarchy));
+    render_with(hierarchy, visibility, camera, options, vertices.as_ref())
+}
+
+/// [`render`] reusing vertex radiosity already computed (for export too); built here if smooth shading
+/// needs it and `vertices` is `None`.
+pub fn render_with(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    camera: &Camera,
+    options: &RenderOptions,
+    vertices: Option<&VertexRadiosity>,
+) -> Image {
+    let built;
+    let vertices = match (options.shading, vertices) {
+        (Shading::Smooth, None) => {
+            built = VertexRadiosity::new(hierarchy);
+            Some(&built)
+        }
+        (_, v) => v,
+    };
+    let tracer = Tracer {
+        hierarchy,
+        visibility,
+        camera,
+        options,
+        vertices,
+    };
+    let mut image = Image::new(camera.width, camera.height);
+    let samples = options.samples_per_pixel.max(1);
+    image
+        .pixels
+        .par_chunks_mut(camera.width)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, pixel) in row.iter_mut().enumerate() {
+                *pixel = if samples == 1 {
+                    tracer.radiance(x as f64 + 0.5, y as f64 + 0.5)
+                } else {
+                    let index = (y * camera.width + x) as u64;
+                    let mut rng = Pcg64Mcg::seed_from_u64(mix(options.seed, index));
+                    let mut sum = Rgb::BLACK;
+                    for (sx, sy) in stratified(samples, &mut rng) {
+                        sum += tracer.radiance(x as f64 + sx, y as f64 + sy);
+                    }
+                    sum / samples as f64
+                };
+            }
+        });
+    image
+}
+
+/// Everything a primary ray needs.
+struct Tracer<'a> {
+    hierarchy: &'a Hierarchy,
+    visibility: &'a dyn Visibility,
+    camera: &'a Camera,
+    options: &'a RenderOptions,
+    vertices: Option<&'a VertexRadiosity>,
+}
+
+impl Tracer<'_> {
+    /// Radiance seen through image position (x, y) in pixels.
+    fn radiance(&self, x: f64, y: f64) -> Rgb {
+        let ray = self.camera.ray(x, y);
+        let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
+            return Rgb::BLACK;
+        };
+        // The back of a one-sided polygon is an opaque black surface.
+        let Some(patch) = self.hierarchy.patch_for_side(hit.polygon, hit.front) else {
+            return Rgb::BLACK;
+        };
+        let patch_ref = &self.hierarchy.patches[patch as usize];
+        // Project onto the patch plane so that parameter inversion sees an in-plane point.
+        let p = ray.at(hit.t);
+        let p = p - patch_ref.normal * patch_ref.normal.dot(p - patch_ref.shape.vertices()[0]);
+        let leaf = self.hierarchy.locate(patch, p);
+        let element = self.hierarchy.element(leaf);
+        if self.options.mesh {
+            // Camera rays are unit length, so t is the distance from the eye.
+            let width = MESH_HALF_WIDTH * self.camera.pixel_footprint(hit.t);
+            if boundary_distance(&element.shape, p) < width {
+                return self.options.mesh_colour;
+            }
+        }
+        match (self.options.shading, self.vertices) {
+            (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
+            _ => element.radiance[0],
+        }
+    }
+}
+
+/// Distance from a point in the shape's plane to the nearest of its edges.
+fn boundary_distance(shape: &Shape, p: DVec3) -> f64 {
+    let v = shape.vertices();
+    (0..v.len())
+        .map(|k| segment_distance(v[k], v[(k + 1) % v.len()], p))
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn segment_distance(a: DVec3, b: DVec3, p: DVec3) -> f64 {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    p.distance(a + t * ab)
+}
+
+/// `n` equal-area strata `(x0, y0, width, height)` tiling the unit pixel: rows of equal-width cells, each
+/// row as high as its share of the cells, so that any `n` stratifies exactly.
+fn strata(n: u32) -> Vec<(f64, f64, f64, f64)> {
+    let columns = (n as f64).sqrt().ceil() as u32;
+    let rows = n.div_ceil(columns);
+    let mut out = Vec::with_capacity(n as usize);
+    let mut y0 = 0.0;
+    for row in 0..rows {
+        // Spread the remainder over the first rows.
+        let cells = n / rows + u32::from(row < n % rows);
+        let height = cells as f64 / n as f64;
+        for cell in 0..cells {
+            out.push((cell as f64 / cells as f64, y0, 1.0 / cells as f64, height));
+        }
+        y0 += height;
+    }
+    out
+}
+
+/// One jittered position in each of the `n` strata of the unit pixel.
+fn stratified(n: u32, rng: &mut Pcg64Mcg) -> Vec<(f64, f64)> {
+    strata(n)
+        .into_iter()
+        .map(|(x0, y0, w, h)| (x0 + rng.random::<f64>() * w, y0 + rng.random::<f64>() * h))
+        .collect()
+}
+
+/// SplitMix64 finaliser of (seed, pixel): independent per-pixel streams whatever the thread schedule.
+fn mix(seed: u64, index: u64) -> u64 {
+    let mut z = seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strata_tile_the_pixel_with_equal_areas() {
+        for n in 1..=17u32 {
+            let cells = strata(n);
+            assert_eq!(cells.len(), n as usize);
+            let total: f64 = cells.iter().map(|c| c.2 * c.3).sum();
+            assert!((total - 1.0).abs() < 1e-12);
+            for &(x0, y0, w, h) in &cells {
+                assert!((w * h - 1.0 / n as f64).abs() < 1e-12);
+                assert!(x0 >= 0.0 && y0 >= 0.0 && x0 + w <= 1.0 + 1e-12 && y0 + h <= 1.0 + 1e-12);
+            }
+            // Disjoint: no two cells overlap with positive area.
+            for (i, a) in cells.iter().enumerate() {
+                for b in &cells[i + 1..] {
+                    let ox = (a.0 + a.2).min(b.0 + b.2) - a.0.max(b.0);
+                    let oy = (a.1 + a.3).min(b.1 + b.3) - a.1.max(b.1);
+                    assert!(ox <= 1e-12 || oy <= 1e-12, "n = {n}: {a:?} overlaps {b:?}");
+                }
+            }
+            let mut rng = Pcg64Mcg::seed_from_u64(u64::from(n));
+            for ((x, y), (x0, y0, w, h)) in stratified(n, &mut rng).into_iter().zip(cells) {
+                assert!(x >= x0 && x <= x0 + w && y >= y0 && y <= y0 + h);
+            }
+        }
+    }
+}

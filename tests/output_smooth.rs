@@ -1,0 +1,295 @@
+//! Smooth shading (vertex radiosity): exactness on linear and constant data, and continuity across leaf
+//! edges with T-vertices, within a patch and across coplanar patches.
+
+use radiosity::color::Rgb;
+use radiosity::geometry::{DVec3, Shape};
+use radiosity::hierarchy::{ElementId, Hierarchy};
+use radiosity::output::VertexRadiosity;
+use radiosity::scene::{Material, Object, Polygon, Scene};
+
+fn scene(shapes: &[(Shape, usize)], materials: Vec<Material>) -> Scene {
+    Scene {
+        polygons: shapes
+            .iter()
+            .map(|&(shape, material)| Polygon {
+                shape,
+                material,
+                object: 0,
+                two_sided: false,
+            })
+            .collect(),
+        materials,
+        objects: vec![Object {
+            name: "test".into(),
+        }],
+        ..Default::default()
+    }
+}
+
+fn grey(name: &str) -> Material {
+    Material::diffuse(name, Rgb::splat(0.5))
+}
+
+fn unit_square() -> Shape {
+    Shape::Quad([DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y])
+}
+
+/// Subdivides the leaf of `patch` containing `p` until it is at `level`.
+fn refine_at(h: &mut Hierarchy, patch: u32, p: DVec3, level: u16) {
+    loop {
+        let leaf = h.locate(patch, p);
+        if h.element(leaf).level >= level {
+            return;
+        }
+        h.subdivide(leaf);
+    }
+}
+
+/// Deterministic "arbitrary" leaf values: a hash of the leaf centroid.
+fn scrambled(c: DVec3) -> Rgb {
+    let f = |k: f64| {
+        1.0 + ((c.x * 12.9898 + c.y * 78.233 + c.z * 37.719 + k).sin() * 43758.5453)
+            .fract()
+            .abs()
+    };
+    Rgb::new(f(0.0), 2.0 * f(1.0), 3.0 * f(2.0))
+}
+
+fn set_leaves(h: &mut Hierarchy, value: impl Fn(DVec3) -> Rgb) {
+    for leaf in h.leaves() {
+        let c = h.element(leaf).shape.centroid();
+        h.elements[leaf as usize].radiance[0] = value(c);
+    }
+}
+
+/// Signed in-plane distance of `p` inside a convex shape (negative outside).
+fn margin(shape: &Shape, p: DVec3) -> f64 {
+    let v = shape.vertices();
+    let n = shape.normal();
+    (0..v.len())
+        .map(|k| {
+            n.cross(v[(k + 1) % v.len()] - v[k])
+                .normalize()
+                .dot(p - v[k])
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn rel_diff(a: Rgb, b: Rgb) -> f64 {
+    let d = (a - b).map(f64::abs).max_channel();
+    d / a.max_channel().abs().max(b.max_channel().abs()).max(1e-30)
+}
+
+/// Samples every leaf edge of `patches` (at dyadic points, which include all T-vertices, and at generic
+/// points), steps a tiny distance to both sides and compares the interpolated values. Returns the number of
+/// comparisons made.
+fn check_continuity(h: &Hierarchy, vr: &VertexRadiosity, patches: &[u32]) -> usize {
+    let delta = 1e-10;
+    let mut params: Vec<f64> = (1..32).map(|k| k as f64 / 32.0).collect();
+    params.extend([0.1234, 0.377, 0.618, 0.9001, 1e-6, 1.0 - 1e-6]);
+    let mut compared = 0;
+    let mut worst = 0.0f64;
+    for &patch in patches {
+        let mut leaves = Vec::new();
+        h.collect_leaves(h.patches[patch as usize].root, &mut leaves);
+        for leaf in leaves {
+            let shape = h.element(leaf).shape;
+            let n = shape.normal();
+            let v = shape.vertices();
+            for k in 0..v.len() {
+                let (a, b) = (v[k], v[(k + 1) % v.len()]);
+                let inward = n.cross(b - a).normalize();
+                for &s in &params {
+                    let q = a + s * (b - a);
+                    let (inside, outside) = (q + delta * inward, q - delta * inward);
+                    let Some(&other) = patches
+                        .iter()
+                        .find(|&&p| margin(&h.patches[p as usize].shape, outside) > 0.0)
+                    else {
+                        continue; // the edge is on the boundary of the surface
+                    };
+                    let mine = vr.evaluate(h, leaf, inside);
+                    let neighbour_leaf: ElementId = h.locate(other, outside);
+                    assert_ne!(neighbour_leaf, leaf);
+                    let theirs = vr.evaluate(h, neighbour_leaf, outside);
+                    let d = rel_diff(mine, theirs);
+                    worst = worst.max(d);
+                    assert!(
+                        d < 1e-6,
+                        "leaf {leaf} edge {k} at s = {s}: {mine:?} vs {theirs:?} (leaf {neighbour_leaf})"
+                    );
+                    compared += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{compared} comparisons, worst relative difference {worst:e}");
+    compared
+}
+
+#[test]
+fn t_vertices_within_a_patch_leave_no_crack() {
+    let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, 1);
+    // Coarse leaves beside a refined corner, refined down to three levels: several T-vertices per edge.
+    h.subdivide(h.patches[0].root);
+    refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
+    refine_at(&mut h, 0, DVec3::new(0.49, 0.1, 0.0), 4);
+    refine_at(&mut h, 0, DVec3::new(0.7, 0.2, 0.0), 2);
+    set_leaves(&mut h, scrambled);
+    let vr = VertexRadiosity::new(&h);
+    assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+    assert!(check_continuity(&h, &vr, &[0]) > 500);
+}
+
+#[test]
+fn t_vertices_across_coplanar_patches_leave_no_crack() {
+    // A floor quad triangulated into two one-sided triangles of the same material, refined differently:
+    // one smoothing group, continuous across the diagonal.
+    let (a, b, c, d) = (
+        DVec3::ZERO,
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(2.0, 1.0, 0.0),
+        DVec3::new(0.0, 1.0, 0.0),
+    );
+    let s = scene(
+        &[
+            (Shape::Triangle([a, b, c]), 0),
+            (Shape::Triangle([a, c, d]), 0),
+        ],
+        vec![grey("floor")],
+    );
+    let mut h = Hierarchy::new(&s, 1);
+    refine_at(&mut h, 0, DVec3::new(1.0, 0.5, 0.0), 3);
+    refine_at(&mut h, 0, DVec3::new(1.5, 0.4, 0.0), 4);
+    refine_at(&mut h, 1, DVec3::new(0.3, 0.5, 0.0), 1);
+    set_leaves(&mut h, scrambled);
+    let vr = VertexRadiosity::new(&h);
+    assert!(vr.fanned_leaf_count() >= 1);
+    assert!(check_continuity(&h, &vr, &[0, 1]) > 300);
+}
+
+#[test]
+fn smoothing_stops_at_material_and_orientation_changes() {
+    // A floor (radiance 1) and a wall (radiance 5) meeting at an edge, and a differently coloured floor tile
+    // beside the first: neither leaks into the floor's values.
+    let floor = unit_square();
+    let wall = Shape::Quad([
+        DVec3::ZERO,
+        DVec3::Y,
+        DVec3::new(0.0, 1.0, 1.0),
+        DVec3::new(0.0, 0.0, 1.0),
+    ]);
+    let tile = Shape::Quad([
+        DVec3::X,
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(2.0, 1.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.0),
+    ]);
+    let s = scene(
+        &[(floor, 0), (wall, 0), (tile, 1)],
+        vec![
+            grey("grey"),
+            Material::diffuse("red", Rgb::new(0.7, 0.1, 0.1)),
+        ],
+    );
+    let mut h = Hierarchy::new(&s, 1);
+    for patch in 0..3 {
+        refine_at(&mut h, patch, DVec3::new(0.01, 0.01, 0.0), 3);
+    }
+    set_leaves(&mut h, |c| {
+        if c.z > 1e-9 {
+            Rgb::splat(5.0)
+        } else if c.x > 1.0 {
+            Rgb::splat(9.0)
+        } else {
+            Rgb::splat(1.0)
+        }
+    });
+    let vr = VertexRadiosity::new(&h);
+    for (x, y) in [
+        (0.0, 0.5),
+        (1e-9, 1e-9),
+        (1.0, 0.5),
+        (0.999, 0.001),
+        (0.5, 0.5),
+    ] {
+        let p = DVec3::new(x, y, 0.0);
+        let leaf = h.locate(0, p);
+        assert_eq!(vr.evaluate(&h, leaf, p), Rgb::splat(1.0), "at ({x}, {y})");
+    }
+}
+
+#[test]
+fn linear_radiance_is_reproduced_inside_and_constant_everywhere() {
+    let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, 1);
+    for _ in 0..3 {
+        for leaf in h.leaves() {
+            h.subdivide(leaf);
+        }
+    }
+    let ramp = |p: DVec3| Rgb::new(1.0 + 2.0 * p.x, 3.0 - p.x, 0.5 + 4.0 * p.x);
+    set_leaves(&mut h, ramp);
+    let vr = VertexRadiosity::new(&h);
+    assert_eq!(vr.vertex_count(), 81);
+    // Leaves away from the patch border have symmetric vertex neighbourhoods: the interpolation is the ramp.
+    for leaf in h.leaves() {
+        let shape = h.element(leaf).shape;
+        let b = shape.bounds();
+        if b.min.x < 0.1 || b.max.x > 0.9 || b.min.y < 0.1 || b.max.y > 0.9 {
+            continue;
+        }
+        for p in shape.vertices().iter().copied().chain([shape.centroid()]) {
+            let d = rel_diff(vr.evaluate(&h, leaf, p), ramp(p));
+            assert!(d < 1e-12, "{p} {d}");
+        }
+    }
+
+    // A constant solution stays exactly constant with T-vertices and fans.
+    let mut h = Hierarchy::new(&s, 1);
+    refine_at(&mut h, 0, DVec3::new(0.2, 0.7, 0.0), 4);
+    set_leaves(&mut h, |_| Rgb::new(0.25, 0.5, 2.0));
+    let vr = VertexRadiosity::new(&h);
+    assert!(vr.fanned_leaf_count() > 0);
+    for leaf in h.leaves() {
+        let shape = h.element(leaf).shape;
+        for p in [
+            shape.centroid(),
+            shape.vertices()[1] * 0.9 + shape.centroid() * 0.1,
+        ] {
+            let d = rel_diff(vr.evaluate(&h, leaf, p), Rgb::new(0.25, 0.5, 2.0));
+            assert!(d < 1e-14);
+        }
+    }
+}
+
+#[test]
+fn vertex_values_are_area_weighted_and_t_vertices_interpolated() {
+    // The root split in four, the lower-left child split again: its corner (0.5, 0.25) is a T-vertex
+    // inside the left edge of the lower-right child. Check the numbers by hand.
+    let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, 1);
+    let children = h.subdivide(h.patches[0].root);
+    // children: [0,.5]^2, [.5,1]x[0,.5], [.5,1]^2, [0,.5]x[.5,1]
+    let grand = h.subdivide(children[0]);
+    for (i, &c) in children.iter().enumerate() {
+        h.elements[c as usize].radiance[0] = Rgb::splat(10.0 * (i as f64 + 1.0));
+    }
+    for (i, &g) in grand.iter().enumerate() {
+        h.elements[g as usize].radiance[0] = Rgb::splat(i as f64 + 1.0);
+    }
+    let vr = VertexRadiosity::new(&h);
+    let at = |x: f64, y: f64| {
+        let p = DVec3::new(x, y, 0.0);
+        vr.evaluate(&h, h.locate(0, p), p).r
+    };
+    // Centre vertex (0.5, 0.5): grandchild 2 (area 1/16, value 3), children 1, 2, 3 (area 1/4 each).
+    let centre = (3.0 / 16.0 + (20.0 + 30.0 + 40.0) / 4.0) / (1.0 / 16.0 + 3.0 / 4.0);
+    assert!((at(0.5, 0.5) - centre).abs() < 1e-12);
+    // Vertex (0.5, 0): grandchild 1 (value 2) and child 1 (value 20).
+    let bottom = (2.0 / 16.0 + 20.0 / 4.0) / (1.0 / 16.0 + 1.0 / 4.0);
+    // The T-vertex (0.5, 0.25) lies inside child 1's left edge: the mean of its end points.
+    assert!((at(0.5, 0.25) - 0.5 * (bottom + centre)).abs() < 1e-12);
+    assert!((at(0.5 + 1e-12, 0.25) - 0.5 * (bottom + centre)).abs() < 1e-9);
+}
