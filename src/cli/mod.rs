@@ -3,6 +3,7 @@
 
 mod args;
 mod info;
+mod render;
 
 pub use args::parse_vec3;
 
@@ -27,8 +28,12 @@ pub struct Cli {
     pub quiet: bool,
 }
 
+// Parsed once per run: the size difference between variants does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Solve a scene (the built-in Cornell box by default) and render it to PNG / EXR / PLY / glTF.
+    Render(render::RenderCommand),
     /// Print counts, bounds and materials of a scene.
     Info(info::InfoCommand),
 }
@@ -55,11 +60,15 @@ pub fn run(cli: Cli) -> Result<()> {
     let pool = pool.build().context("starting the thread pool")?;
     let progress = Progress::new(cli.quiet);
     let seed = cli.seed;
-    let _ = (seed, progress);
-    let Some(command) = cli.command else {
-        anyhow::bail!("no command given")
+    // Without a subcommand: render the built-in Cornell box with the defaults.
+    let command = match cli.command {
+        Some(command) => command,
+        None => Cli::try_parse_from(["radiosity", "render"])?
+            .command
+            .context("default command")?,
     };
     pool.install(|| match command {
+        Command::Render(c) => c.run(seed, &progress),
         Command::Info(c) => c.run(),
     })
 }

@@ -1,5 +1,5 @@
 //! From linear radiance to displayable 8-bit sRGB: exposure (a fixed multiplier, or automatic from the
-//! 99th-percentile luminance), a tone curve per channel, then the sRGB transfer function (IEC 61966-2-1).
+//! log-average luminance), a tone curve per channel, then the sRGB transfer function (IEC 61966-2-1).
 
 use super::image::Image;
 use crate::color::Rgb;
@@ -11,13 +11,14 @@ use std::path::Path;
 pub enum Exposure {
     /// Multiply radiance by this factor.
     Multiplier(f64),
-    /// Map the 99th percentile of the (non-black) luminances to [`AUTO_TARGET`], so that a few very bright
-    /// pixels (the light sources) do not decide the exposure of the whole image.
+    /// Map the log-average (geometric mean) of the non-black luminances to the middle grey [`AUTO_KEY`]
+    /// (Reinhard et al.'s photographic key): the light sources, bright but few, barely move it, whereas a
+    /// percentile rule keys on the light as soon as it covers more than a percent of the picture.
     Auto,
 }
 
 /// The tone curve applied per channel after exposure; its output is display-linear in [0, 1].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum Curve {
     /// Clamp to [0, 1].
     Linear,
@@ -44,10 +45,8 @@ impl Default for ToneMap {
     }
 }
 
-/// Luminance that automatic exposure gives the 99th-percentile value.
-pub const AUTO_TARGET: f64 = 0.9;
-/// Percentile used by automatic exposure.
-const AUTO_PERCENTILE: f64 = 0.99;
+/// Exposed luminance that automatic exposure gives the log-average luminance.
+pub const AUTO_KEY: f64 = 0.3;
 
 impl ToneMap {
     /// The radiance multiplier for a set of linear colours (the pixels of an image, the vertices of a
@@ -56,18 +55,17 @@ impl ToneMap {
         match self.exposure {
             Exposure::Multiplier(m) => m,
             Exposure::Auto => {
-                let mut lum: Vec<f64> = colours
-                    .into_iter()
-                    .map(Rgb::luminance)
-                    .filter(|l| l.is_finite() && *l > 0.0)
-                    .collect();
-                if lum.is_empty() {
+                let (mut log_sum, mut count) = (0.0, 0usize);
+                for l in colours.into_iter().map(Rgb::luminance) {
+                    if l.is_finite() && l > 0.0 {
+                        log_sum += l.ln();
+                        count += 1;
+                    }
+                }
+                if count == 0 {
                     return 1.0;
                 }
-                lum.sort_by(f64::total_cmp);
-                let rank =
-                    ((AUTO_PERCENTILE * lum.len() as f64).ceil() as usize).clamp(1, lum.len());
-                AUTO_TARGET / lum[rank - 1]
+                AUTO_KEY / (log_sum / count as f64).exp()
             }
         }
     }
@@ -193,7 +191,7 @@ mod tests {
     }
 
     #[test]
-    fn auto_exposure_maps_99th_percentile_to_target() {
+    fn auto_exposure_maps_the_log_average_to_the_key() {
         // 1000 pixels: 990 of luminance 2 (grey), 10 of 1000 (a light), plus black background.
         let mut pixels = vec![Rgb::splat(2.0); 990];
         pixels.extend(vec![Rgb::splat(1000.0); 10]);
@@ -201,7 +199,8 @@ mod tests {
         let tone = ToneMap::default();
         let scale = tone.exposure_scale(pixels.iter().copied());
         // Grey luminance is 2 * (0.2126 + 0.7152 + 0.0722) = 2.
-        assert!((scale * 2.0 - AUTO_TARGET).abs() < 1e-12);
+        let log_average = ((990.0 * 2f64.ln() + 10.0 * 1000f64.ln()) / 1000.0).exp();
+        assert!((scale * log_average - AUTO_KEY).abs() < 1e-12);
         assert_eq!(tone.exposure_scale([Rgb::BLACK]), 1.0);
         let fixed = ToneMap {
             exposure: Exposure::Multiplier(0.25),

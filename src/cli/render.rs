@@ -1,0 +1,155 @@
+//! `radiosity render`: load, solve, render to PNG (and EXR, PLY/GLB, stats JSON).
+
+use super::args::{CameraArgs, SceneArgs, SolveArgs};
+use crate::measures::stats::RunStats;
+use crate::output::export::{write_glb, write_ply};
+use crate::output::mesh_values::VertexRadiosity;
+use crate::output::render::{render_with, RenderOptions, Shading};
+use crate::output::tonemap::{write_png, Curve, Exposure, ToneMap};
+use crate::pipeline::simulate;
+use crate::progress::Progress;
+use anyhow::{Context, Result};
+use clap::Args;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct RenderCommand {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub solve: SolveArgs,
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    /// PNG image to write (exposed, tone-mapped, sRGB).
+    #[arg(short, long, default_value = "radiosity.png")]
+    pub output: PathBuf,
+    /// Flat: element constants. Smooth: radiosity averaged to vertices and interpolated (Gouraud).
+    #[arg(long, value_enum, default_value_t = Shading::Smooth)]
+    pub shading: Shading,
+    /// Draw the element mesh on top.
+    #[arg(long)]
+    pub mesh: bool,
+    /// Samples per pixel (1 = pixel centres, comparable with `reference`).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
+    #[arg(long)]
+    pub exposure: Option<f64>,
+    /// Tone curve for the PNG.
+    #[arg(long, value_enum, default_value_t = Curve::Filmic)]
+    pub tone: Curve,
+    /// Also write linear radiance as OpenEXR.
+    #[arg(long, value_name = "FILE.exr")]
+    pub hdr: Option<PathBuf>,
+    /// Write the illuminated mesh (.ply or .glb; repeatable).
+    #[arg(long, value_name = "FILE")]
+    pub export: Vec<PathBuf>,
+    /// Write run statistics as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    pub stats: Option<PathBuf>,
+}
+
+impl RenderCommand {
+    pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
+        for path in &self.export {
+            let ext = extension(path);
+            anyhow::ensure!(
+                ext == "ply" || ext == "glb",
+                "--export {}: expected a .ply or .glb file",
+                path.display()
+            );
+        }
+        if let Some(e) = self.exposure {
+            anyhow::ensure!(
+                e.is_finite() && e > 0.0,
+                "--exposure must be a positive number"
+            );
+        }
+        let start = Instant::now();
+        let (scene, name) = self.scene.load()?;
+        let load_seconds = start.elapsed().as_secs_f64();
+        if !progress.quiet {
+            for warning in &scene.warnings {
+                eprintln!("warning: {warning}");
+            }
+        }
+        anyhow::ensure!(
+            !scene.polygons.is_empty(),
+            "{name}: the scene has no polygons"
+        );
+        let settings = self.solve.settings(seed)?;
+        let camera = self.camera.camera(&scene)?;
+        let solution = simulate(&scene, &settings, progress);
+
+        let start = Instant::now();
+        let vertices = (self.shading == Shading::Smooth || !self.export.is_empty())
+            .then(|| VertexRadiosity::new(&solution.hierarchy));
+        let options = RenderOptions {
+            shading: self.shading,
+            mesh: self.mesh,
+            samples_per_pixel: self.spp.max(1),
+            seed,
+            ..Default::default()
+        };
+        let image = render_with(
+            &solution.hierarchy,
+            solution.visibility.as_ref(),
+            &camera,
+            &options,
+            vertices.as_ref(),
+        );
+        let render_seconds = start.elapsed().as_secs_f64();
+
+        let tone = ToneMap {
+            exposure: self.exposure.map_or(Exposure::Auto, Exposure::Multiplier),
+            curve: self.tone,
+        };
+        write_png(&self.output, &image, &tone)?;
+        if let Some(path) = &self.hdr {
+            image.write_exr(path)?;
+        }
+        for path in &self.export {
+            let vertices = vertices.as_ref().context("vertex radiosity")?;
+            match extension(path).as_str() {
+                "ply" => write_ply(path, &solution.hierarchy, vertices, &tone)?,
+                _ => write_glb(path, &solution.hierarchy, vertices, &tone)?,
+            }
+        }
+        let mut stats = RunStats::new(&name, scene.polygons.len(), &solution, &settings);
+        stats.seconds.load = load_seconds;
+        stats.seconds.render = render_seconds;
+        if let Some(path) = &self.stats {
+            let json = serde_json::to_string_pretty(&stats)?;
+            std::fs::write(path, json + "\n")
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        if !progress.quiet {
+            let s = &stats.seconds;
+            eprintln!(
+                "{name}: {} elements ({} leaves), {} links, {} rays, {} passes, {} sweeps; \
+                 load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
+                stats.elements,
+                stats.leaf_elements,
+                stats.links,
+                stats.rays,
+                stats.passes,
+                stats.iterations,
+                s.load,
+                s.bvh,
+                s.refine,
+                s.solve,
+                s.render,
+                self.output.display()
+            );
+        }
+        Ok(())
+    }
+}
+
+fn extension(path: &Path) -> String {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
+}
