@@ -2,7 +2,7 @@
 //! against.
 
 use super::{Hit, Visibility};
-use crate::geometry::{Ray, Shape};
+use crate::geometry::{DVec3, Ray, Shape};
 
 /// Tests every polygon for every ray.
 pub struct BruteForce {
@@ -42,42 +42,73 @@ pub fn intersect_shape(
     t_max: f64,
 ) -> Option<Hit> {
     let v = shape.vertices();
-    let triangles: &[[usize; 3]] = if v.len() == 3 {
-        &[[0, 1, 2]]
-    } else {
-        &[[0, 1, 2], [0, 2, 3]]
-    };
-    for tri in triangles {
-        let (a, b, c) = (v[tri[0]], v[tri[1]], v[tri[2]]);
-        let (e1, e2) = (b - a, c - a);
-        let p = ray.direction.cross(e2);
-        let det = e1.dot(p);
-        if det.abs() < 1e-300 {
-            continue;
+    let s = ray.origin - v[0];
+    let e2 = v[2] - v[0];
+    let found = ray_triangle(ray, s, v[1] - v[0], e2, t_min, t_max).or_else(|| {
+        if v.len() == 4 {
+            ray_triangle(ray, s, e2, v[3] - v[0], t_min, t_max)
+        } else {
+            None
         }
-        let inv = 1.0 / det;
-        let s = ray.origin - a;
-        let u = s.dot(p) * inv;
-        if !(0.0..=1.0).contains(&u) {
-            continue;
-        }
-        let q = s.cross(e1);
-        let w = ray.direction.dot(q) * inv;
-        if w < 0.0 || u + w > 1.0 {
-            continue;
-        }
-        let t = e2.dot(q) * inv;
-        if t <= t_min || t >= t_max {
-            continue;
-        }
-        let point = ray.at(t);
-        let front = ray.direction.dot(shape.vector_area()) < 0.0;
-        return Some(Hit {
-            t,
-            polygon: index,
-            uv: shape.parameters_of(point),
-            front,
-        });
+    });
+    let (t, _, _) = found?;
+    Some(Hit {
+        t,
+        polygon: index,
+        uv: shape.parameters_of(ray.at(t)),
+        front: ray.direction.dot(shape.vector_area()) < 0.0,
+    })
+}
+
+/// Relative distance (to the coordinates' magnitude) below which a ray origin counts as lying in a
+/// polygon's plane: far above the rounding of points sampled on the polygon (~1e-16), far below any
+/// geometric feature.
+const IN_PLANE: f64 = 1e-10;
+
+/// Möller–Trumbore on the triangle `a, a + e1, a + e2` with `s = origin - a`: the ray parameter in
+/// `(t_min, t_max)` and the barycentric (u, v) of the hit.
+///
+/// A ray whose origin lies in the triangle's plane (up to rounding) never hits it: the only true
+/// intersection is the origin itself, which `t_min > 0` excludes, and a ray along a floor would otherwise
+/// "cross" the floor, or its coplanar neighbours, wherever the rounding of its end points puts it. This
+/// is what keeps segments between surface points from being blocked by the surfaces they start on.
+#[inline(always)]
+pub fn ray_triangle(
+    ray: &Ray,
+    s: DVec3,
+    e1: DVec3,
+    e2: DVec3,
+    t_min: f64,
+    t_max: f64,
+) -> Option<(f64, f64, f64)> {
+    let p = ray.direction.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-300 {
+        return None;
     }
-    None
+    let inv = 1.0 / det;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let w = ray.direction.dot(q) * inv;
+    if w < 0.0 || u + w > 1.0 {
+        return None;
+    }
+    // e2 . (s x e1) = s . (e1 x e2): the origin's height above the plane times |e1 x e2|.
+    let height = e2.dot(q);
+    let t = height * inv;
+    if t <= t_min || t >= t_max {
+        return None;
+    }
+    let scale = ray
+        .origin
+        .abs()
+        .max_element()
+        .max((ray.origin - s).abs().max_element());
+    if height.abs() <= IN_PLANE * scale * e1.cross(e2).length() {
+        return None;
+    }
+    Some((t, u, w))
 }

@@ -3,8 +3,11 @@
 //! behind the `embree` cargo feature, Embree 3. Later the cluster hierarchy's extinction-based visibility
 //! (Sillion–Drettakis §3.1) and multi-resolution visibility (§3.2) become further implementations.
 
+pub mod bench;
 pub mod brute_force;
 pub mod bvh;
+#[cfg(feature = "embree")]
+pub mod embree;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 

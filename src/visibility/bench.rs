@@ -1,0 +1,88 @@
+//! Benchmark helpers: the occlusion rays radiosity casts (segments between area-uniform points on
+//! area-weighted random polygons), their throughput on a fixed thread pool, and build timing.
+
+use super::Visibility;
+use crate::geometry::{DVec2, DVec3, Shape};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Throughput of one occlusion run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BenchResult {
+    pub rays: usize,
+    pub threads: usize,
+    pub seconds: f64,
+    pub rays_per_second: f64,
+    /// Blocked segments: equal across implementations and thread counts for the same segments.
+    pub blocked: usize,
+}
+
+/// `count` segments between two area-uniform random points, each on a polygon chosen with probability
+/// proportional to its area. Empty when the scene has no area.
+pub fn random_segments(shapes: &[Shape], count: usize, seed: u64) -> Vec<(DVec3, DVec3)> {
+    let mut cumulative = Vec::with_capacity(shapes.len());
+    let mut total = 0.0;
+    for s in shapes {
+        total += s.area();
+        cumulative.push(total);
+    }
+    if total.is_nan() || total <= 0.0 {
+        return Vec::new();
+    }
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let point = |rng: &mut Pcg64Mcg| {
+        let x = rng.random::<f64>() * total;
+        // First polygon whose cumulative area exceeds x (zero-area polygons are never chosen).
+        let k = cumulative
+            .partition_point(|&c| c <= x)
+            .min(shapes.len() - 1);
+        shapes[k].sample_uniform(DVec2::new(rng.random(), rng.random()))
+    };
+    (0..count)
+        .map(|_| {
+            let a = point(&mut rng);
+            (a, point(&mut rng))
+        })
+        .collect()
+}
+
+/// Occlusion throughput of `vis` over `segments` (via [`Visibility::segment_occluded`]) on a rayon pool
+/// of `threads` threads (0: rayon's default).
+pub fn occlusion_rate(
+    vis: &dyn Visibility,
+    segments: &[(DVec3, DVec3)],
+    threads: usize,
+) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    let start = Instant::now();
+    let blocked = pool.install(|| {
+        segments
+            .par_chunks(256)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .filter(|(a, b)| vis.segment_occluded(*a, *b))
+                    .count()
+            })
+            .sum()
+    });
+    let seconds = start.elapsed().as_secs_f64();
+    Ok(BenchResult {
+        rays: segments.len(),
+        threads: pool.current_num_threads(),
+        seconds,
+        rays_per_second: segments.len() as f64 / seconds.max(1e-12),
+        blocked,
+    })
+}
+
+/// Runs `build` and returns its result with the wall-clock seconds it took.
+pub fn timed<T>(build: impl FnOnce() -> T) -> (T, f64) {
+    let start = Instant::now();
+    let value = build();
+    (value, start.elapsed().as_secs_f64())
+}
