@@ -10,7 +10,7 @@ use crate::solvers::coupling::CouplingSettings;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi};
 use crate::solvers::refine::RefineSettings;
 use crate::solvers::{solve, SolveReport, SolveSettings};
-use crate::visibility::{brute_force::BruteForce, Visibility};
+use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
 /// Refinement criterion (`--oracle`).
@@ -33,6 +33,11 @@ pub enum SolverKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum VisibilityKind {
+    /// Our SAH bounding volume hierarchy.
+    Bvh,
+    /// Embree 3 (build with `--features embree`).
+    #[cfg(feature = "embree")]
+    Embree,
     /// Exhaustive test of every polygon (reference; only for tiny scenes).
     BruteForce,
 }
@@ -63,7 +68,7 @@ impl Default for SimulationSettings {
         SimulationSettings {
             oracle: OracleKind::Power,
             solver: SolverKind::GaussSeidel,
-            visibility: VisibilityKind::BruteForce,
+            visibility: VisibilityKind::Bvh,
             eps: 1e-3,
             min_area: 1e-5,
             receiver_order: 2,
@@ -86,11 +91,17 @@ pub struct Solution {
 }
 
 /// Builds the ray-casting structure over the scene's polygons.
-pub fn build_visibility(scene: &Scene, kind: VisibilityKind) -> Box<dyn Visibility> {
-    let shapes = scene.polygons.iter().map(|p| p.shape).collect();
-    match kind {
+pub fn build_visibility(
+    scene: &Scene,
+    kind: VisibilityKind,
+) -> anyhow::Result<Box<dyn Visibility>> {
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    Ok(match kind {
+        VisibilityKind::Bvh => Box::new(Bvh::new(&shapes)),
+        #[cfg(feature = "embree")]
+        VisibilityKind::Embree => Box::new(crate::visibility::embree::EmbreeScene::new(&shapes)?),
         VisibilityKind::BruteForce => Box::new(BruteForce::new(shapes)),
-    }
+    })
 }
 
 pub fn make_oracle(kind: OracleKind) -> Box<dyn RefinementOracle> {
@@ -107,9 +118,13 @@ pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
 }
 
 /// Runs hierarchical radiosity on `scene`.
-pub fn simulate(scene: &Scene, settings: &SimulationSettings, progress: &Progress) -> Solution {
+pub fn simulate(
+    scene: &Scene,
+    settings: &SimulationSettings,
+    progress: &Progress,
+) -> anyhow::Result<Solution> {
     let start = Instant::now();
-    let visibility = build_visibility(scene, settings.visibility);
+    let visibility = build_visibility(scene, settings.visibility)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, 1);
     let total_emission: f64 = hierarchy
@@ -146,10 +161,10 @@ pub fn simulate(scene: &Scene, settings: &SimulationSettings, progress: &Progres
         &solve_settings,
         progress,
     );
-    Solution {
+    Ok(Solution {
         hierarchy,
         visibility,
         report,
         visibility_seconds,
-    }
+    })
 }

@@ -25,7 +25,7 @@ fn solve(scene: &Scene, eps: f64) -> radiosity::pipeline::Solution {
         min_area: 1e-6,
         ..Default::default()
     };
-    simulate(scene, &settings, &quiet())
+    simulate(scene, &settings, &quiet()).expect("solve")
 }
 
 #[test]
@@ -64,7 +64,7 @@ fn white_furnace_converges_to_e_over_one_minus_rho_everywhere() {
             solver,
             ..Default::default()
         };
-        let solution = simulate(&scene, &settings, &quiet());
+        let solution = simulate(&scene, &settings, &quiet()).expect("solve");
         let h = &solution.hierarchy;
         let expected = e / (1.0 - rho);
         let leaves = h.leaves();

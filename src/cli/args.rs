@@ -53,7 +53,7 @@ pub struct SolveArgs {
     #[arg(long, value_enum, default_value_t = SolverKind::GaussSeidel)]
     pub solver: SolverKind,
     /// Ray casting back end.
-    #[arg(long, value_enum, default_value_t = VisibilityKind::BruteForce)]
+    #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
     pub visibility: VisibilityKind,
     /// Refinement threshold ε relative to the scene's total emission (Σ A·max(E)); smaller is finer.
     #[arg(long, default_value_t = 1e-3)]

@@ -2,6 +2,7 @@
 //! line `error: ...` with the file, line and reason where there is one, and exit with status 1.
 
 mod args;
+mod bench;
 mod info;
 mod render;
 
@@ -36,6 +37,8 @@ pub enum Command {
     Render(render::RenderCommand),
     /// Print counts, bounds and materials of a scene.
     Info(info::InfoCommand),
+    /// Measure BVH build time, ray throughput and full render times.
+    Bench(bench::BenchCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -70,5 +73,6 @@ pub fn run(cli: Cli) -> Result<()> {
     pool.install(|| match command {
         Command::Render(c) => c.run(seed, &progress),
         Command::Info(c) => c.run(),
+        Command::Bench(c) => c.run(seed, &progress),
     })
 }

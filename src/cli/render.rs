@@ -80,7 +80,7 @@ impl RenderCommand {
         );
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene)?;
-        let solution = simulate(&scene, &settings, progress);
+        let solution = simulate(&scene, &settings, progress)?;
 
         let start = Instant::now();
         let vertices = (self.shading == Shading::Smooth || !self.export.is_empty())

@@ -1,0 +1,141 @@
+//! `radiosity bench`: BVH build time and occlusion-ray throughput (`rays`), and full render times of whole
+//! scenes (`render`), printed as Markdown table rows for BENCHMARKS.md. Speed is measured here, never
+//! asserted in tests.
+
+use super::args::{SceneArgs, SolveArgs};
+use crate::output::camera::Camera;
+use crate::output::render::{render, RenderOptions, Shading};
+use crate::pipeline::{build_visibility, simulate, VisibilityKind};
+use crate::progress::Progress;
+use crate::scene::{self, LoadOptions};
+use crate::visibility::bench::{occlusion_rate, random_segments, timed};
+use anyhow::Result;
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct BenchCommand {
+    #[command(subcommand)]
+    pub what: BenchKind,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchKind {
+    /// Build time and occlusion rays per second of the ray-casting back ends on one scene.
+    Rays(RaysBench),
+    /// Full solve + render time of each scene (the built-in Cornell box when none is given).
+    Render(RenderBench),
+}
+
+#[derive(Args, Debug)]
+pub struct RaysBench {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Random polygon-to-polygon segments to cast.
+    #[arg(long, default_value_t = 2_000_000)]
+    pub rays: usize,
+    /// Back ends to measure (repeatable).
+    #[arg(long = "backend", value_enum, default_values_t = [VisibilityKind::Bvh])]
+    pub backends: Vec<VisibilityKind>,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderBench {
+    /// Scene files; "cornell" names the built-in Cornell box.
+    #[arg(default_values_t = ["cornell".to_string()])]
+    pub scenes: Vec<String>,
+    #[command(flatten)]
+    pub solve: SolveArgs,
+    #[arg(long, default_value_t = 512)]
+    pub width: usize,
+    #[arg(long, default_value_t = 512)]
+    pub height: usize,
+}
+
+impl BenchCommand {
+    pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
+        match &self.what {
+            BenchKind::Rays(b) => b.run(seed),
+            BenchKind::Render(b) => b.run(seed, progress),
+        }
+    }
+}
+
+impl RaysBench {
+    fn run(&self, seed: u64) -> Result<()> {
+        let (scene, name) = self.scene.load()?;
+        let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+        let triangles: usize = shapes.iter().map(|s| s.vertex_count() - 2).sum();
+        let segments = random_segments(&shapes, self.rays, seed);
+        println!(
+            "| scene | polygons (triangles) | back end | build (s) | threads | rays/s | blocked |"
+        );
+        println!("|---|---|---|---|---|---|---|");
+        for &kind in &self.backends {
+            let (visibility, build_seconds) = timed(|| build_visibility(&scene, kind));
+            let visibility = visibility?;
+            for threads in [1, rayon::current_num_threads()] {
+                let r = occlusion_rate(visibility.as_ref(), &segments, threads)?;
+                println!(
+                    "| {name} | {} ({triangles}) | {} | {build_seconds:.3} | {threads} | {:.3} M | {} |",
+                    shapes.len(),
+                    visibility.name(),
+                    r.rays_per_second / 1e6,
+                    r.blocked
+                );
+                if threads == rayon::current_num_threads() {
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl RenderBench {
+    fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
+        let settings = self.solve.settings(seed)?;
+        println!("| scene | polygons | elements | leaves | links | rays | load (s) | solve (s) | render (s) | total (s) |");
+        println!("|---|---|---|---|---|---|---|---|---|---|");
+        for name in &self.scenes {
+            let start = Instant::now();
+            let scene = if name == "cornell" {
+                scene::cornell::cornell_box()
+            } else {
+                scene::load(&PathBuf::from(name), &LoadOptions::default())?
+            };
+            let load = start.elapsed().as_secs_f64();
+            let solution = simulate(&scene, &settings, progress)?;
+            let solve = start.elapsed().as_secs_f64() - load;
+            let spec = scene
+                .camera
+                .unwrap_or_else(|| Camera::framing(&scene.bounds(), 45.0));
+            let camera = Camera::new(&spec, self.width, self.height);
+            let options = RenderOptions {
+                shading: Shading::Smooth,
+                ..Default::default()
+            };
+            let (_, render_seconds) = timed(|| {
+                render(
+                    &solution.hierarchy,
+                    solution.visibility.as_ref(),
+                    &camera,
+                    &options,
+                )
+            });
+            let h = &solution.hierarchy;
+            let r = &solution.report;
+            println!(
+                "| {name} | {} | {} | {} | {} | {} | {load:.3} | {solve:.3} | {render_seconds:.3} | {:.3} |",
+                scene.polygons.len(),
+                h.elements.len(),
+                h.leaf_count(),
+                h.link_count(),
+                r.form_factor_rays + r.oracle_rays,
+                start.elapsed().as_secs_f64()
+            );
+        }
+        Ok(())
+    }
+}
