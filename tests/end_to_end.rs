@@ -1,0 +1,100 @@
+//! The whole path: Cornell box solve converging under refinement, and results independent of the
+//! thread count.
+
+use radiosity::color::Rgb;
+use radiosity::hierarchy::Hierarchy;
+use radiosity::measures::stats::RunStats;
+use radiosity::output::camera::Camera;
+use radiosity::output::render::{render, RenderOptions, Shading};
+use radiosity::pipeline::{simulate, SimulationSettings};
+use radiosity::progress::Progress;
+use radiosity::scene::{cornell::cornell_box, Scene};
+
+/// Area-weighted mean radiance of every object whose name is given.
+fn object_means(scene: &Scene, h: &Hierarchy, names: &[&str]) -> Vec<Rgb> {
+    names
+        .iter()
+        .map(|name| {
+            let (mut sum, mut area) = (Rgb::BLACK, 0.0);
+            for patch in &h.patches {
+                let polygon = &scene.polygons[patch.polygon];
+                if scene.objects[polygon.object].name == *name {
+                    let root = h.element(patch.root);
+                    sum += root.average_radiance() * root.area;
+                    area += root.area;
+                }
+            }
+            assert!(area > 0.0, "no object named {name}");
+            sum / area
+        })
+        .collect()
+}
+
+#[test]
+fn cornell_wall_radiance_converges_as_eps_halves() {
+    let scene = cornell_box();
+    let walls = ["floor", "ceiling", "back_wall", "left_wall", "right_wall"];
+    let means: Vec<Vec<Rgb>> = [4e-4, 2e-4, 1e-4]
+        .iter()
+        .map(|&eps| {
+            let settings = SimulationSettings {
+                eps,
+                ..Default::default()
+            };
+            let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+            object_means(&scene, &solution.hierarchy, &walls)
+        })
+        .collect();
+    for (w, wall) in walls.iter().enumerate() {
+        let (coarse, fine) = (means[1][w], means[2][w]);
+        for (c, f) in coarse.to_array().iter().zip(fine.to_array()) {
+            let change = (c - f).abs() / f;
+            assert!(
+                change < 0.01,
+                "{wall}: mean radiance changed by {:.2}% ({c} -> {f})",
+                change * 100.0
+            );
+        }
+    }
+}
+
+#[test]
+fn stats_and_images_do_not_depend_on_thread_count() {
+    let scene = cornell_box();
+    let settings = SimulationSettings {
+        eps: 5e-4,
+        ..Default::default()
+    };
+    let camera = Camera::new(&scene.camera.expect("Cornell camera"), 64, 64);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+            let stats = RunStats::new("cornell", scene.polygons.len(), &solution, &settings);
+            let images: Vec<_> = [Shading::Flat, Shading::Smooth]
+                .iter()
+                .map(|&shading| {
+                    let options = RenderOptions {
+                        shading,
+                        mesh: true,
+                        ..Default::default()
+                    };
+                    render(
+                        &solution.hierarchy,
+                        solution.visibility.as_ref(),
+                        &camera,
+                        &options,
+                    )
+                })
+                .collect();
+            (stats.deterministic_part(), images)
+        })
+    };
+    let (stats1, images1) = run(1);
+    let (stats2, images2) = run(2);
+    assert_eq!(stats1, stats2);
+    assert_eq!(images1, images2);
+}
