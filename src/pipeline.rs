@@ -3,6 +3,8 @@
 //! tests share this one path.
 
 use crate::hierarchy::Hierarchy;
+use crate::oracles::mutual_information::MutualInformationOracle;
+use crate::oracles::smoothness::SmoothnessOracle;
 use crate::oracles::{power::PowerOracle, RefinementOracle};
 use crate::progress::Progress;
 use crate::scene::Scene;
@@ -19,6 +21,12 @@ use std::time::Instant;
 pub enum OracleKind {
     /// Transported power, Feixas et al. eq. (1).
     Power,
+    /// Kernel smoothness, Feixas et al. eq. (2).
+    Smoothness,
+    /// Mutual information (continuous minus discrete), Feixas et al. eq. (15).
+    #[value(name = "mi", alias = "mutual-information")]
+    #[serde(rename = "mi")]
+    MutualInformation,
 }
 
 /// Linear solver (`--solver`).
@@ -56,6 +64,8 @@ pub struct SimulationSettings {
     pub receiver_order: usize,
     /// Visibility rays per receiver node.
     pub visibility_rays: usize,
+    /// Random point pairs per evaluation of the sampling oracles (eqs. (2) and (15); the paper uses 10).
+    pub oracle_samples: usize,
     /// Relative change of total power at which sweeps stop.
     pub tolerance: f64,
     pub max_iterations: usize,
@@ -73,6 +83,7 @@ impl Default for SimulationSettings {
             min_area: 1e-5,
             receiver_order: 2,
             visibility_rays: 4,
+            oracle_samples: 10,
             tolerance: 1e-5,
             max_iterations: 200,
             max_passes: 12,
@@ -104,9 +115,16 @@ pub fn build_visibility(
     })
 }
 
-pub fn make_oracle(kind: OracleKind) -> Box<dyn RefinementOracle> {
-    match kind {
+/// The oracle named in `settings` for refining `hierarchy` (eq. (2) takes its reference area from it).
+pub fn make_oracle(
+    settings: &SimulationSettings,
+    hierarchy: &Hierarchy,
+) -> Box<dyn RefinementOracle> {
+    let samples = settings.oracle_samples;
+    match settings.oracle {
         OracleKind::Power => Box::new(PowerOracle),
+        OracleKind::Smoothness => Box::new(SmoothnessOracle::for_hierarchy(samples, hierarchy)),
+        OracleKind::MutualInformation => Box::new(MutualInformationOracle::new(samples)),
     }
 }
 
@@ -151,7 +169,7 @@ pub fn simulate(
         max_iterations: settings.max_iterations,
         max_passes: settings.max_passes,
     };
-    let oracle = make_oracle(settings.oracle);
+    let oracle = make_oracle(settings, &hierarchy);
     let solver = make_solver(settings.solver);
     let report = solve(
         &mut hierarchy,

@@ -67,6 +67,9 @@ pub struct SolveArgs {
     /// Visibility rays per receiver Gauss point.
     #[arg(long, default_value_t = 4)]
     pub vis_rays: usize,
+    /// Random point pairs (one visibility ray each) per evaluation of the smoothness and MI oracles.
+    #[arg(long, default_value_t = 10, value_name = "N")]
+    pub oracle_samples: usize,
     /// Stop iterating when the relative change of total power is below this.
     #[arg(long, default_value_t = 1e-5)]
     pub tolerance: f64,
@@ -89,6 +92,10 @@ impl SolveArgs {
             "--min-area must be non-negative"
         );
         anyhow::ensure!(self.vis_rays >= 1, "--vis-rays must be at least 1");
+        anyhow::ensure!(
+            self.oracle_samples >= 2,
+            "--oracle-samples must be at least 2 (a kernel variation needs two samples)"
+        );
         Ok(SimulationSettings {
             oracle: self.oracle,
             solver: self.solver,
@@ -97,6 +104,7 @@ impl SolveArgs {
             min_area: self.min_area,
             receiver_order: self.ff_order as usize,
             visibility_rays: self.vis_rays,
+            oracle_samples: self.oracle_samples,
             tolerance: self.tolerance,
             max_iterations: self.max_iterations,
             max_passes: self.max_passes,

@@ -1,13 +1,23 @@
 //! Refinement oracles: for a candidate link (source element j → receiver element i) estimate the error of
 //! representing the interaction by that single link, and decide whether it is admissible or which of the
 //! two elements to subdivide. One implementation per criterion, chosen with `--oracle`:
-//! [`power::PowerOracle`] (Feixas et al. eq. (1)); the kernel-smoothness (eq. 2), mutual-information
-//! (eq. 15) and Bekaert–Willems link-error oracles implement the same trait.
+//! [`power::PowerOracle`] (Feixas et al. eq. (1)), [`smoothness::SmoothnessOracle`] (kernel smoothness,
+//! eq. (2)) and [`mutual_information::MutualInformationOracle`] (eq. (15)); the Bekaert–Willems link-error
+//! oracle will implement the same trait.
+//!
+//! Shared conventions: ρ and B are RGB and every oracle scales by the largest per-channel product ρ_i B_j
+//! ([`reflected_source_radiance`]); the sampling oracles evaluate the kernel at random point pairs with
+//! [`sample_kernel`] and report its visibility rays.
 
+pub mod mutual_information;
 pub mod power;
+pub mod smoothness;
 
+use crate::geometry::form_factor::point_to_point;
+use crate::geometry::DVec2;
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::visibility::Visibility;
+use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 
 /// What to do with a candidate link.
@@ -77,4 +87,105 @@ pub fn reflected_source_radiance(
     let rho = hierarchy.patch_of(receiver).reflectance;
     let b = hierarchy.element(source).average_radiance();
     (rho * b).max_channel()
+}
+
+/// Kernel values at random point pairs of a candidate link, with the rays they cost.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KernelSamples {
+    /// G(x_k, y_k) = F(x_k, y_k) vis(x_k, y_k), per unit source area.
+    pub values: Vec<f64>,
+    /// Visibility rays cast (one per pair whose unoccluded kernel is positive).
+    pub rays: u64,
+}
+
+/// The radiosity kernel G(x, y) = F(x, y) vis(x, y) (Feixas et al. §2.1) at `n` independent random point
+/// pairs, x uniform on the receiver and y uniform on the source: the "point-to-point form factor
+/// computations between a pair of elements" of the smoothness and MI oracles (§4). Pairs that face away
+/// from each other have G = 0 without a ray; every other pair casts one shadow ray.
+pub fn sample_kernel(
+    context: &OracleContext,
+    receiver: ElementId,
+    source: ElementId,
+    n: usize,
+    rng: &mut Pcg64Mcg,
+) -> KernelSamples {
+    let h = context.hierarchy;
+    let (r, s) = (h.element(receiver), h.element(source));
+    let (nx, ny) = (h.patch_of(receiver).normal, h.patch_of(source).normal);
+    let mut out = KernelSamples {
+        values: Vec::with_capacity(n),
+        rays: 0,
+    };
+    for _ in 0..n {
+        let x = r
+            .shape
+            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let y = s
+            .shape
+            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let f = point_to_point(x, nx, y, ny);
+        let g = if f > 0.0 {
+            out.rays += 1;
+            if context.visibility.segment_occluded(x, y) {
+                0.0
+            } else {
+                f
+            }
+        } else {
+            0.0
+        };
+        out.values.push(g);
+    }
+    out
+}
+
+/// Sum of the patch areas (the total surface area A_T of the scene).
+pub fn total_area(hierarchy: &Hierarchy) -> f64 {
+    hierarchy
+        .patches
+        .iter()
+        .map(|p| hierarchy.element(p.root).area)
+        .sum()
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use crate::geometry::Shape;
+    use crate::hierarchy::Hierarchy;
+    use crate::pipeline::{build_visibility, VisibilityKind};
+    use crate::scene::{generators, Polygon, Scene};
+    use crate::visibility::Visibility;
+
+    /// Receiver square [0, side]² at z = 0 (facing +z, patch 0) under an emitting square at height
+    /// `distance` (patch 1), with an optional black one-sided blocker.
+    pub fn two_squares(
+        side: f64,
+        distance: f64,
+        reflectance: f64,
+        emission: f64,
+        blocker: Option<Shape>,
+    ) -> Scene {
+        let mut scene = generators::parallel_plates(side, distance, reflectance, emission);
+        if let Some(shape) = blocker {
+            let material = scene.materials.len();
+            scene.materials.push(crate::scene::Material::diffuse(
+                "blocker",
+                crate::color::Rgb::BLACK,
+            ));
+            scene.polygons.push(Polygon {
+                shape,
+                material,
+                object: 0,
+                two_sided: false,
+            });
+        }
+        scene
+    }
+
+    pub fn context_for(scene: &Scene) -> (Hierarchy, Box<dyn Visibility>) {
+        (
+            Hierarchy::new(scene, 1),
+            build_visibility(scene, VisibilityKind::BruteForce),
+        )
+    }
 }
