@@ -40,7 +40,7 @@ fn settings(oracle: OracleKind) -> SimulationSettings {
 fn every_oracle_solves_the_closed_box_with_energy_balance() {
     let scene = generators::lit_box(DVec3::new(2.0, 1.0, 1.5), Rgb::new(0.5, 0.4, 0.3), 10.0);
     for oracle in ORACLES {
-        let solution = simulate(&scene, &settings(oracle), &Progress::new(true));
+        let solution = simulate(&scene, &settings(oracle), &Progress::new(true)).expect("solve");
         let (h, r) = (&solution.hierarchy, &solution.report);
         for (emitted, absorbed) in r
             .emitted_power
@@ -78,7 +78,7 @@ fn every_oracle_reproduces_the_parallel_plates_form_factor() {
     let scene = generators::parallel_plates(1.0, 1.0, rho, e);
     let exact = parallel_rectangles(1.0, 1.0, 1.0);
     for oracle in ORACLES {
-        let solution = simulate(&scene, &settings(oracle), &Progress::new(true));
+        let solution = simulate(&scene, &settings(oracle), &Progress::new(true)).expect("solve");
         let h = &solution.hierarchy;
         let root = h.patches[0].root;
         let f = h.element(root).average_radiance().g / (rho * e);
@@ -102,7 +102,7 @@ fn every_oracle_reproduces_the_parallel_plates_form_factor() {
 fn every_oracle_estimate_is_deterministic_for_a_seed() {
     let scene = generators::lit_box(DVec3::new(2.0, 1.0, 1.5), Rgb::new(0.5, 0.4, 0.3), 10.0);
     let h = Hierarchy::new(&scene, 1);
-    let visibility = build_visibility(&scene, VisibilityKind::BruteForce);
+    let visibility = build_visibility(&scene, VisibilityKind::BruteForce).expect("visibility");
     let context = OracleContext {
         hierarchy: &h,
         visibility: visibility.as_ref(),

@@ -185,7 +185,7 @@ pub(crate) mod tests {
     pub fn context_for(scene: &Scene) -> (Hierarchy, Box<dyn Visibility>) {
         (
             Hierarchy::new(scene, 1),
-            build_visibility(scene, VisibilityKind::BruteForce),
+            build_visibility(scene, VisibilityKind::BruteForce).expect("brute force"),
         )
     }
 }
