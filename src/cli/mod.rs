@@ -2,6 +2,7 @@
 //! line `error: ...` with the file, line and reason where there is one, and exit with status 1.
 
 mod args;
+mod compare;
 mod info;
 
 pub use args::parse_vec3;
@@ -31,6 +32,8 @@ pub struct Cli {
 pub enum Command {
     /// Print counts, bounds and materials of a scene.
     Info(info::InfoCommand),
+    /// Error metrics of an image against a reference, false-colour error image, feature-based error.
+    Compare(compare::CompareCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -61,5 +64,6 @@ pub fn run(cli: Cli) -> Result<()> {
     };
     pool.install(|| match command {
         Command::Info(c) => c.run(),
+        Command::Compare(c) => c.run(),
     })
 }

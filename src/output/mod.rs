@@ -2,4 +2,5 @@
 //! OpenEXR images, illuminated models (PLY, glTF).
 
 pub mod camera;
+pub mod false_colour;
 pub mod image;
