@@ -155,3 +155,64 @@ fn table_1_behaviour() {
         }
     }
 }
+
+#[test]
+fn compare_command_reports_the_fbem() {
+    let dir = std::env::temp_dir().join(format!("radiosity-compare-fbem-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let reference = wall(true);
+    let approx = averaged(&reference, 1);
+    let paths = ["a.exr", "b.exr", "u.exr"].map(|n| dir.join(n));
+    approx.write_exr(&paths[0]).unwrap();
+    reference.write_exr(&paths[1]).unwrap();
+    wall(false).write_exr(&paths[2]).unwrap();
+    let [a, b, u] = paths.each_ref().map(|p| p.to_str().unwrap());
+    let diff = dir.join("diff.png");
+    let mask = dir.join("mask.png");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radiosity"))
+        .args([
+            "compare",
+            a,
+            b,
+            "--unoccluded",
+            u,
+            "--json",
+            "--fbem",
+            "4",
+            "16",
+        ])
+        .args([
+            "--diff",
+            diff.to_str().unwrap(),
+            "--mask-out",
+            mask.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["fbem_mask"], "shadow");
+    // The EXR files hold f32: compare with the library on the same rounded images.
+    let (approx, reference) = (
+        Image::read_exr(&paths[0]).unwrap(),
+        Image::read_exr(&paths[1]).unwrap(),
+    );
+    let features =
+        fbem::shadow_mask(&reference, &Image::read_exr(&paths[2]).unwrap(), 0.1).unwrap();
+    for (entry, s) in json["fbem"].as_array().unwrap().iter().zip([4, 16]) {
+        assert_eq!(entry["size"].as_u64().unwrap(), s as u64);
+        let expected = fbem_value(&approx, &reference, &features, s);
+        assert!((entry["value"].as_f64().unwrap() - expected).abs() < 1e-12);
+    }
+    // The written feature mask of s = 16 keeps the 24-pixel shadows and drops the 6-pixel ones.
+    let m16 = Mask::read_png(&dir.join("mask-s16.png")).unwrap();
+    assert_eq!(m16, fbem::feature_mask(&features, 16));
+    assert!(m16.get(3 * TILE + MARGIN + 12, MARGIN + 12));
+    assert!(!m16.get(TILE + MARGIN + 3, MARGIN + 3));
+    assert!(diff.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -75,11 +75,14 @@ struct DiffReport<'a> {
 
 impl CompareCommand {
     pub fn run(&self) -> Result<()> {
+        ensure!(
+            self.mask_out.is_none() || !self.fbem.is_empty(),
+            "--mask-out needs --fbem SIZE"
+        );
         let a = Image::read_exr(&self.a)?;
         let b = Image::read_exr(&self.b)?;
-        image_metrics::ensure_same_size(&a, &b).with_context(|| {
-            format!("comparing {} with {}", self.a.display(), self.b.display())
-        })?;
+        image_metrics::ensure_same_size(&a, &b)
+            .with_context(|| format!("comparing {} with {}", self.a.display(), self.b.display()))?;
         let ignore = self.ignore_mask(&b)?;
         let ignore = ignore.as_deref();
         let errors = image_metrics::compare(&a, &b, ignore)?;
@@ -113,8 +116,6 @@ impl CompareCommand {
                     fbem::feature_mask(&features, size).write_png(&path, ignore)?;
                 }
             }
-        } else {
-            ensure!(self.mask_out.is_none(), "--mask-out needs --fbem SIZE");
         }
 
         let report = Report {
@@ -173,7 +174,8 @@ impl CompareCommand {
                     .feature_window
                     .unwrap_or(b.width.min(b.height) / 4)
                     .max(1);
-                let m = fbem::feature_mask_from_reference(b, window, self.shadow_threshold, ignore)?;
+                let m =
+                    fbem::feature_mask_from_reference(b, window, self.shadow_threshold, ignore)?;
                 Ok((m, "reference"))
             }
         }
@@ -232,7 +234,10 @@ fn print_text(r: &Report) {
             "shadow" => "shadow region (with --unoccluded)",
             _ => "estimated from the reference alone",
         };
-        println!("FBEM of luminance, p = {}; feature mask: {source}", r.fbem.first().map_or(2.0, |f| f.p));
+        println!(
+            "FBEM of luminance, p = {}; feature mask: {source}",
+            r.fbem.first().map_or(2.0, |f| f.p)
+        );
         println!(
             "{:>6} {:>12} {:>10} {:>14}",
             "size", "FBEM", "openings", "feature frac."

@@ -38,7 +38,9 @@ impl Mask {
 
     /// The mask whose pixel (x, y) is `f(x, y)`.
     pub fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> bool) -> Self {
-        let bits = (0..width * height).map(|i| f(i % width, i / width)).collect();
+        let bits = (0..width * height)
+            .map(|i| f(i % width, i / width))
+            .collect();
         Mask {
             width,
             height,
@@ -90,7 +92,13 @@ impl Mask {
 /// stay readable.
 impl std::fmt::Debug for Mask {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        writeln!(f, "Mask {}×{}, {} set", self.width, self.height, self.count())?;
+        writeln!(
+            f,
+            "Mask {}×{}, {} set",
+            self.width,
+            self.height,
+            self.count()
+        )?;
         if self.width <= 80 && self.height <= 80 {
             for row in self.bits.chunks(self.width.max(1)) {
                 let line: String = row.iter().map(|&b| if b { '#' } else { '.' }).collect();
@@ -324,7 +332,7 @@ fn box_1d(v: &[f64], size: usize) -> Vec<f64> {
         prefix[i + 1] = prefix[i] + v[i];
     }
     let full = (size - 1) / 2;
-    let half = size % 2 == 0;
+    let half = size.is_multiple_of(2);
     (0..n)
         .map(|i| {
             let lo = i.saturating_sub(full);
@@ -467,7 +475,10 @@ mod tests {
                     && (y0 + n..y0 + rh.saturating_sub(n)).contains(&y)
             });
             assert_eq!(e, expected, "erosion by {n}");
-            assert_eq!(e.count(), rw.saturating_sub(2 * n) * rh.saturating_sub(2 * n));
+            assert_eq!(
+                e.count(),
+                rw.saturating_sub(2 * n) * rh.saturating_sub(2 * n)
+            );
             // Expansion adds every pixel within L1 distance n of the rectangle.
             let x_gap = |x: usize| (x0.saturating_sub(x)).max(x.saturating_sub(x0 + rw - 1));
             let y_gap = |y: usize| (y0.saturating_sub(y)).max(y.saturating_sub(y0 + rh - 1));
@@ -557,6 +568,21 @@ mod tests {
         // A window narrower than the shadow misses its inside.
         let narrow = feature_mask_from_reference(&img, 3, 0.2, None).unwrap();
         assert!(!narrow.get(13, 16));
+        // Ignored pixels (here a black band of background) are neither features nor light sources for
+        // the closing: the shadow beside them is still found, the band is not marked.
+        for y in 0..h {
+            for x in 0..4 {
+                img.set(x, y, Rgb::BLACK);
+            }
+        }
+        let ignore: Vec<bool> = (0..w * h).map(|i| i % w < 4).collect();
+        let with_bg = feature_mask_from_reference(&img, 10, 0.2, Some(&ignore)).unwrap();
+        assert_eq!(with_bg, Mask::from_fn(w, h, shadow));
+        let unmasked = feature_mask_from_reference(&img, 10, 0.2, None).unwrap();
+        assert!(
+            unmasked.get(0, 0),
+            "the black band is a dark feature when not ignored"
+        );
     }
 
     #[test]
