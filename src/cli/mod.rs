@@ -3,6 +3,7 @@
 
 mod args;
 mod bench;
+mod compare;
 mod info;
 mod render;
 
@@ -39,6 +40,8 @@ pub enum Command {
     Info(info::InfoCommand),
     /// Measure BVH build time, ray throughput and full render times.
     Bench(bench::BenchCommand),
+    /// Error metrics of an image against a reference, false-colour error image, feature-based error.
+    Compare(compare::CompareCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -74,5 +77,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Render(c) => c.run(seed, &progress),
         Command::Info(c) => c.run(),
         Command::Bench(c) => c.run(seed, &progress),
+        Command::Compare(c) => c.run(),
     })
 }

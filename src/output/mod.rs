@@ -3,6 +3,7 @@
 
 pub mod camera;
 pub mod export;
+pub mod false_colour;
 pub mod image;
 pub mod mesh_values;
 pub mod render;

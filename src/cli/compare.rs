@@ -1,0 +1,252 @@
+//! `radiosity compare A.exr B.exr`: error metrics of image A against reference B, a false-colour error
+//! image, and the feature-based error metric of Sillion & Drettakis (§2.2) for chosen feature sizes.
+
+use crate::measures::fbem::{self, Fbem, Mask};
+use crate::measures::image_metrics::{self, ChannelErrors, ImageErrors};
+use crate::output::false_colour::{self, ErrorScale};
+use crate::output::image::Image;
+use anyhow::{ensure, Context, Result};
+use clap::Args;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Debug)]
+pub struct CompareCommand {
+    /// Approximation (linear OpenEXR).
+    pub a: PathBuf,
+    /// Reference (linear OpenEXR); relative errors are relative to it.
+    pub b: PathBuf,
+    /// PNG of pixels to ignore (nonzero = ignore), the size of the images.
+    #[arg(long, value_name = "PNG")]
+    pub mask: Option<PathBuf>,
+    /// Also ignore pixels where the reference is exactly black (background).
+    #[arg(long)]
+    pub ignore_black_reference: bool,
+    /// Write a false-colour PNG of the per-pixel luminance error (log scale) with a colour bar.
+    #[arg(long, value_name = "PNG")]
+    pub diff: Option<PathBuf>,
+    /// Show the relative luminance error |L(a) − L(b)| / L(b) in --diff instead of the absolute one.
+    #[arg(long)]
+    pub relative: bool,
+    /// Print every number as JSON on standard output.
+    #[arg(long)]
+    pub json: bool,
+    /// Feature-based error metric for each feature size (pixels).
+    #[arg(long, num_args = 1.., value_name = "SIZE")]
+    pub fbem: Vec<usize>,
+    /// Exponent p of the FBEM norm.
+    #[arg(long, default_value_t = 2.0, value_name = "P")]
+    pub fbem_p: f64,
+    /// Rendering of the reference view without the occluders (or with visibility ignored): the feature
+    /// mask is then the reference's shadow region. Without it, the mask is estimated from the reference.
+    #[arg(long, value_name = "EXR")]
+    pub unoccluded: Option<PathBuf>,
+    /// Relative darkening that marks a pixel as shadowed (feature) for the FBEM mask.
+    #[arg(long, default_value_t = 0.1, value_name = "T")]
+    pub shadow_threshold: f64,
+    /// Largest shadow width (pixels) detected when the mask is estimated from the reference alone;
+    /// default: a quarter of the smaller image side.
+    #[arg(long, value_name = "PIXELS")]
+    pub feature_window: Option<usize>,
+    /// Write the feature mask 𝓕^s as PNG (white = feature, grey = ignored); with several sizes, one file
+    /// per size named with `-sSIZE` before the extension.
+    #[arg(long, value_name = "PNG")]
+    pub mask_out: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    a: &'a Path,
+    b: &'a Path,
+    errors: ImageErrors,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    diff: Option<DiffReport<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fbem_mask: Option<&'static str>,
+    fbem: Vec<Fbem>,
+}
+
+#[derive(Serialize)]
+struct DiffReport<'a> {
+    path: &'a Path,
+    relative: bool,
+    scale: ErrorScale,
+}
+
+impl CompareCommand {
+    pub fn run(&self) -> Result<()> {
+        ensure!(
+            self.mask_out.is_none() || !self.fbem.is_empty(),
+            "--mask-out needs --fbem SIZE"
+        );
+        let a = Image::read_exr(&self.a)?;
+        let b = Image::read_exr(&self.b)?;
+        image_metrics::ensure_same_size(&a, &b)
+            .with_context(|| format!("comparing {} with {}", self.a.display(), self.b.display()))?;
+        let ignore = self.ignore_mask(&b)?;
+        let ignore = ignore.as_deref();
+        let errors = image_metrics::compare(&a, &b, ignore)?;
+
+        let diff = match &self.diff {
+            Some(path) => {
+                let map = image_metrics::luminance_error_map(&a, &b, ignore, self.relative)?;
+                let scale = false_colour::write_png(path, &map, a.width, a.height)?;
+                Some(DiffReport {
+                    path,
+                    relative: self.relative,
+                    scale,
+                })
+            }
+            None => None,
+        };
+
+        let mut fbem_mask = None;
+        let mut results = Vec::new();
+        if !self.fbem.is_empty() {
+            let (features, kind) = self.features(&b, ignore)?;
+            fbem_mask = Some(kind);
+            for &size in &self.fbem {
+                results.push(fbem::fbem(&a, &b, &features, size, self.fbem_p, ignore)?);
+                if let Some(out) = &self.mask_out {
+                    let path = if self.fbem.len() > 1 {
+                        with_size_suffix(out, size)
+                    } else {
+                        out.clone()
+                    };
+                    fbem::feature_mask(&features, size).write_png(&path, ignore)?;
+                }
+            }
+        }
+
+        let report = Report {
+            a: &self.a,
+            b: &self.b,
+            errors,
+            diff,
+            fbem_mask,
+            fbem: results,
+        };
+        if self.json {
+            println!("{}", serde_json::to_string_pretty(&report)?);
+        } else {
+            print_text(&report);
+        }
+        Ok(())
+    }
+
+    /// Pixels to ignore: the --mask PNG, plus black reference pixels with --ignore-black-reference.
+    fn ignore_mask(&self, b: &Image) -> Result<Option<Vec<bool>>> {
+        let mut ignore: Option<Vec<bool>> = None;
+        if let Some(path) = &self.mask {
+            let m = Mask::read_png(path)?;
+            ensure!(
+                m.width == b.width && m.height == b.height,
+                "mask {} is {}×{} but the images are {}×{}",
+                path.display(),
+                m.width,
+                m.height,
+                b.width,
+                b.height
+            );
+            ignore = Some(m.bits);
+        }
+        if self.ignore_black_reference {
+            let black = image_metrics::black_pixels(b);
+            ignore = Some(match ignore {
+                Some(m) => m.iter().zip(&black).map(|(&x, &y)| x || y).collect(),
+                None => black,
+            });
+        }
+        Ok(ignore)
+    }
+
+    /// The unfiltered feature mask of the reference and how it was obtained.
+    fn features(&self, b: &Image, ignore: Option<&[bool]>) -> Result<(Mask, &'static str)> {
+        match &self.unoccluded {
+            Some(path) => {
+                let u = Image::read_exr(path)?;
+                let m = fbem::shadow_mask(b, &u, self.shadow_threshold)
+                    .with_context(|| format!("shadow mask from {}", path.display()))?;
+                Ok((m, "shadow"))
+            }
+            None => {
+                let window = self
+                    .feature_window
+                    .unwrap_or(b.width.min(b.height) / 4)
+                    .max(1);
+                let m =
+                    fbem::feature_mask_from_reference(b, window, self.shadow_threshold, ignore)?;
+                Ok((m, "reference"))
+            }
+        }
+    }
+}
+
+/// `mask.png` → `mask-s12.png`.
+fn with_size_suffix(path: &Path, size: usize) -> PathBuf {
+    let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}-s{size}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-s{size}"),
+    };
+    path.with_file_name(name)
+}
+
+fn print_text(r: &Report) {
+    let e = &r.errors;
+    println!("a: {}", r.a.display());
+    println!("b: {} (reference)", r.b.display());
+    println!(
+        "{}×{} pixels, {} compared, {} ignored",
+        e.width, e.height, e.compared, e.ignored
+    );
+    println!(
+        "{:<10} {:>12} {:>12} {:>12} {:>12} {:>12}",
+        "", "RMSE", "rel. RMSE", "MAE", "max", "max at"
+    );
+    let row = |name: &str, c: &ChannelErrors| {
+        let rel = c
+            .relative_rmse
+            .map_or_else(|| "-".to_string(), |v| format!("{v:.6e}"));
+        println!(
+            "{name:<10} {:>12.6e} {rel:>12} {:>12.6e} {:>12.6e} {:>12}",
+            c.rmse,
+            c.mae,
+            c.max,
+            format!("({}, {})", c.max_at[0], c.max_at[1])
+        );
+    };
+    row("r", &e.r);
+    row("g", &e.g);
+    row("b", &e.b);
+    row("luminance", &e.luminance);
+    if let Some(d) = &r.diff {
+        println!(
+            "diff: {} ({} luminance error, colour scale {:.3e} .. {:.3e})",
+            d.path.display(),
+            if d.relative { "relative" } else { "absolute" },
+            d.scale.min,
+            d.scale.max
+        );
+    }
+    if let Some(kind) = r.fbem_mask {
+        let source = match kind {
+            "shadow" => "shadow region (with --unoccluded)",
+            _ => "estimated from the reference alone",
+        };
+        println!(
+            "FBEM of luminance, p = {}; feature mask: {source}",
+            r.fbem.first().map_or(2.0, |f| f.p)
+        );
+        println!(
+            "{:>6} {:>12} {:>10} {:>14}",
+            "size", "FBEM", "openings", "feature frac."
+        );
+        for f in &r.fbem {
+            println!(
+                "{:>6} {:>12.6e} {:>10} {:>14.4}",
+                f.size, f.value, f.openings, f.feature_fraction
+            );
+        }
+    }
+}
