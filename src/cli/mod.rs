@@ -3,6 +3,8 @@
 
 mod args;
 mod info;
+mod probe;
+mod reference;
 
 pub use args::parse_vec3;
 
@@ -31,6 +33,10 @@ pub struct Cli {
 pub enum Command {
     /// Print counts, bounds and materials of a scene.
     Info(info::InfoCommand),
+    /// Render an unbiased path-traced reference image (radiance at pixel centres, with standard errors).
+    Reference(reference::ReferenceCommand),
+    /// Print the radiosity solution's radiance (and a path-traced reference) at given surface points.
+    Probe(probe::ProbeCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -61,5 +67,7 @@ pub fn run(cli: Cli) -> Result<()> {
     };
     pool.install(|| match command {
         Command::Info(c) => c.run(),
+        Command::Reference(c) => c.run(seed, &progress),
+        Command::Probe(c) => c.run(seed, &progress),
     })
 }

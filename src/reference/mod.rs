@@ -1,0 +1,506 @@
+//! Ground truth: an unbiased path tracer for the diffuse scenes the radiosity solver handles, and point
+//! probes comparing the two ([`probe`]).
+//!
+//! The estimator is the rendering equation for Lambertian surfaces, L(x) = L_e(x) + ρ(x)/π ∫ L_i(x, ω)
+//! cos θ dω, evaluated by path tracing with
+//! - next-event estimation: at every vertex one emitting polygon side is chosen with probability
+//!   proportional to its power π L_e A, a point on it uniformly by area, and a shadow segment tests it;
+//! - cosine-weighted bounce directions, so the throughput only picks up ρ;
+//! - Russian roulette after [`ReferenceSettings::roulette_depth`] bounces with survival probability
+//!   max(ρ) (unbiased: the surviving throughput is divided by it).
+//!
+//! Emission is counted where the camera ray (or the probed point) sees it and through next-event
+//! estimation only; bounce rays that hit an emitter add nothing, so nothing is counted twice.
+//!
+//! Every sample of a pixel goes through the pixel *centre* (no antialiasing): a pixel's value is an
+//! estimate of the radiance leaving the surface point seen through that centre, directly comparable with
+//! the radiosity renderer, which shades the same centre ray. Each pixel's random numbers come from its own
+//! generator seeded from (seed, pixel), so images are bit-identical for any thread count.
+
+pub mod probe;
+
+use crate::color::Rgb;
+use crate::geometry::{DVec2, DVec3, Ray, Shape};
+use crate::output::camera::Camera;
+use crate::output::image::Image;
+use crate::progress::Progress;
+use crate::scene::Scene;
+use crate::visibility::Visibility;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// How the reference image is computed.
+#[derive(Clone, Copy, Debug)]
+pub struct ReferenceSettings {
+    /// Paths per pixel (at least 2, so that a standard error can be estimated).
+    pub spp: usize,
+    pub seed: u64,
+    /// Bounces taken before Russian roulette may end a path.
+    pub roulette_depth: usize,
+}
+
+impl Default for ReferenceSettings {
+    fn default() -> Self {
+        ReferenceSettings {
+            spp: 64,
+            seed: 1,
+            roulette_depth: 3,
+        }
+    }
+}
+
+/// A Monte Carlo estimate: the sample mean and its standard error (sample standard deviation / √n), per
+/// channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Estimate {
+    pub mean: Rgb,
+    pub stderr: Rgb,
+}
+
+/// A reference image: per pixel the mean radiance and its standard error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceImage {
+    pub mean: Image,
+    pub stderr: Image,
+}
+
+impl ReferenceImage {
+    /// Mean over non-black pixels of the relative standard error, measured on the channel average
+    /// (stderr.average() / mean.average(), which bounds the relative error of the channel average from
+    /// above); `None` when every pixel is black.
+    pub fn mean_relative_stderr(&self) -> Option<f64> {
+        let (sum, count) = self
+            .mean
+            .pixels
+            .iter()
+            .zip(&self.stderr.pixels)
+            .filter(|(m, _)| m.average() > 0.0)
+            .fold((0.0, 0usize), |(s, n), (m, e)| {
+                (s + e.average() / m.average(), n + 1)
+            });
+        (count > 0).then(|| sum / count as f64)
+    }
+}
+
+/// Per-polygon data the inner loop needs, gathered once.
+#[derive(Clone, Copy, Debug)]
+struct Surface {
+    normal: DVec3,
+    reflectance: Rgb,
+    emission: Rgb,
+    two_sided: bool,
+}
+
+/// One emitting polygon side: its shape oriented so that the normal points out of the emitting side.
+#[derive(Clone, Copy, Debug)]
+struct EmitterSide {
+    shape: Shape,
+    normal: DVec3,
+    area: f64,
+    emission: Rgb,
+    /// Probability of choosing this side.
+    probability: f64,
+}
+
+/// The path tracer over one scene and its ray-casting structure; cheap to share between threads.
+pub struct PathTracer<'a> {
+    visibility: &'a dyn Visibility,
+    surfaces: Vec<Surface>,
+    emitters: Vec<EmitterSide>,
+    /// Cumulative probabilities of `emitters` (last entry 1).
+    emitter_cdf: Vec<f64>,
+    /// Smallest accepted hit distance for rays leaving a surface, relative to the scene size.
+    t_min: f64,
+    roulette_depth: usize,
+}
+
+/// Relative (to the scene diagonal) distance below which a hit of a ray leaving a surface is taken to be
+/// that surface itself.
+const SELF_HIT_EPSILON: f64 = 1e-9;
+
+/// A surface point a path leaves from.
+#[derive(Clone, Copy, Debug)]
+struct Vertex {
+    point: DVec3,
+    /// Unit normal of the side the path is on.
+    normal: DVec3,
+    reflectance: Rgb,
+}
+
+impl<'a> PathTracer<'a> {
+    /// Prepares the emitter table (sides chosen by power π L_e A, power measured by the channel average).
+    pub fn new(scene: &Scene, visibility: &'a dyn Visibility, roulette_depth: usize) -> Self {
+        let surfaces: Vec<Surface> = scene
+            .polygons
+            .iter()
+            .map(|p| {
+                let m = scene.material_of(p);
+                Surface {
+                    normal: p.shape.normal(),
+                    reflectance: m.reflectance,
+                    emission: m.emission,
+                    two_sided: p.two_sided,
+                }
+            })
+            .collect();
+        let mut emitters = Vec::new();
+        for p in &scene.polygons {
+            let emission = scene.material_of(p).emission;
+            let area = p.shape.area();
+            let power = emission.average() * PI * area;
+            if power.is_nan() || power <= 0.0 {
+                continue;
+            }
+            let sides: &[bool] = if p.two_sided { &[true, false] } else { &[true] };
+            for &front in sides {
+                let shape = if front { p.shape } else { p.shape.flipped() };
+                emitters.push(EmitterSide {
+                    shape,
+                    normal: shape.normal(),
+                    area,
+                    emission,
+                    probability: power,
+                });
+            }
+        }
+        let total: f64 = emitters.iter().map(|e| e.probability).sum();
+        let mut cumulative = 0.0;
+        let mut emitter_cdf = Vec::with_capacity(emitters.len());
+        for e in &mut emitters {
+            e.probability /= total;
+            cumulative += e.probability;
+            emitter_cdf.push(cumulative);
+        }
+        if let Some(last) = emitter_cdf.last_mut() {
+            *last = 1.0;
+        }
+        let diagonal = scene.bounds().diagonal();
+        PathTracer {
+            visibility,
+            surfaces,
+            emitters,
+            emitter_cdf,
+            t_min: SELF_HIT_EPSILON * if diagonal > 0.0 { diagonal } else { 1.0 },
+            roulette_depth,
+        }
+    }
+
+    /// The vertex where a ray arriving at `polygon` on side `front` leaves from, or `None` for the back of
+    /// a one-sided polygon (an opaque black absorber).
+    fn vertex(&self, point: DVec3, polygon: usize, front: bool) -> Option<(Vertex, Rgb)> {
+        let s = &self.surfaces[polygon];
+        if !front && !s.two_sided {
+            return None;
+        }
+        let normal = if front { s.normal } else { -s.normal };
+        Some((
+            Vertex {
+                point,
+                normal,
+                reflectance: s.reflectance,
+            },
+            s.emission,
+        ))
+    }
+
+    /// One sample of the reflected radiance ρ/π ∫ L_i cos θ dω leaving `start` (emission at `start` not
+    /// included).
+    fn sample_reflected(&self, start: Vertex, rng: &mut Pcg64Mcg) -> Rgb {
+        let mut radiance = Rgb::BLACK;
+        let mut throughput = Rgb::WHITE;
+        let mut vertex = start;
+        let mut depth = 0;
+        loop {
+            if vertex.reflectance.is_black() {
+                break;
+            }
+            // Next-event estimation: ρ/π L_e cos θx cos θy / r² · A / P(side).
+            if let Some(direct) = self.sample_emitter(&vertex, rng) {
+                radiance += throughput * vertex.reflectance * direct;
+            }
+            // Cosine-weighted bounce: pdf cos θ / π cancels the ρ/π cos θ of the integrand, leaving ρ.
+            throughput = throughput * vertex.reflectance;
+            depth += 1;
+            if depth > self.roulette_depth {
+                let survival = vertex.reflectance.max_channel().min(MAX_SURVIVAL);
+                if rng.random::<f64>() >= survival {
+                    break;
+                }
+                throughput *= 1.0 / survival;
+            }
+            let direction = cosine_direction(vertex.normal, rng.random(), rng.random());
+            let ray = Ray::new(vertex.point, direction);
+            let Some(hit) = self.visibility.intersect(&ray, self.t_min, f64::INFINITY) else {
+                break;
+            };
+            // Emission at the hit is not counted: next-event estimation already has it.
+            match self.vertex(ray.at(hit.t), hit.polygon, hit.front) {
+                Some((next, _)) => vertex = next,
+                None => break,
+            }
+        }
+        radiance
+    }
+
+    /// L_e cos θx cos θy / (π r²) / pdf for one emitter point (the BRDF's ρ is applied by the caller; the
+    /// 1/π here is the Lambertian BRDF's), or `None` when it contributes nothing.
+    fn sample_emitter(&self, vertex: &Vertex, rng: &mut Pcg64Mcg) -> Option<Rgb> {
+        if self.emitters.is_empty() {
+            return None;
+        }
+        let u: f64 = rng.random();
+        let index = self
+            .emitter_cdf
+            .partition_point(|&c| c <= u)
+            .min(self.emitters.len() - 1);
+        let emitter = &self.emitters[index];
+        let y = emitter
+            .shape
+            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let d = y - vertex.point;
+        let r2 = d.length_squared();
+        if r2 <= 0.0 {
+            return None;
+        }
+        let cos_x = vertex.normal.dot(d);
+        let cos_y = -emitter.normal.dot(d);
+        if cos_x <= 0.0 || cos_y <= 0.0 {
+            return None;
+        }
+        if self.visibility.segment_occluded(vertex.point, y) {
+            return None;
+        }
+        let geometry = cos_x * cos_y / (r2 * r2);
+        Some(emitter.emission * (geometry * emitter.area / (PI * emitter.probability)))
+    }
+
+    /// `spp` samples of the radiance leaving `start` from one generator: (Σ x, Σ x²) of the reflected
+    /// part per channel.
+    fn accumulate(&self, start: Vertex, spp: usize, rng: &mut Pcg64Mcg) -> (Rgb, Rgb) {
+        let mut sum = Rgb::BLACK;
+        let mut sum_sq = Rgb::BLACK;
+        for _ in 0..spp {
+            let x = self.sample_reflected(start, rng);
+            sum += x;
+            sum_sq += x * x;
+        }
+        (sum, sum_sq)
+    }
+
+    /// Radiance leaving `point` on side `front` of `polygon`, L_e + ρ/π ∫ L_i cos θ dω, from `spp`
+    /// independent paths (a path-traced final gather). `normal` orients the hemisphere; it should be the
+    /// unit normal of that side. The back of a one-sided polygon leaves nothing (exactly zero).
+    ///
+    /// Samples are drawn in fixed-size chunks, each with its own generator seeded from (seed, chunk), run
+    /// in parallel and summed in chunk order: the result does not depend on the thread count.
+    pub fn radiance_leaving(
+        &self,
+        point: DVec3,
+        normal: DVec3,
+        polygon: usize,
+        front: bool,
+        spp: usize,
+        seed: u64,
+    ) -> Estimate {
+        let Some((mut start, emission)) = self.vertex(point, polygon, front) else {
+            return Estimate::default();
+        };
+        start.normal = normal.normalize_or(start.normal);
+        let chunks = spp.div_ceil(CHUNK);
+        let partial: Vec<(Rgb, Rgb)> = (0..chunks)
+            .into_par_iter()
+            .map(|chunk| {
+                let n = CHUNK.min(spp - chunk * CHUNK);
+                let mut rng = stream(seed, chunk as u64);
+                self.accumulate(start, n, &mut rng)
+            })
+            .collect();
+        let (sum, sum_sq) = partial
+            .iter()
+            .fold((Rgb::BLACK, Rgb::BLACK), |(s, q), (a, b)| (s + *a, q + *b));
+        let estimate = statistics(sum, sum_sq, spp);
+        Estimate {
+            mean: emission + estimate.mean,
+            stderr: estimate.stderr,
+        }
+    }
+
+    /// The reference image seen by `camera`: per pixel, `settings.spp` paths from the surface point seen
+    /// through the pixel centre. Rows run in parallel; each pixel has its own generator.
+    pub fn render(
+        &self,
+        camera: &Camera,
+        settings: &ReferenceSettings,
+        progress: &Progress,
+    ) -> ReferenceImage {
+        let (width, height) = (camera.width, camera.height);
+        let bar = progress.bar(height as u64, "reference");
+        let rows: Vec<(Vec<Rgb>, Vec<Rgb>)> = (0..height)
+            .into_par_iter()
+            .map(|y| {
+                let mut means = Vec::with_capacity(width);
+                let mut errors = Vec::with_capacity(width);
+                for x in 0..width {
+                    let pixel = (y * width + x) as u64;
+                    let estimate = self.pixel(camera, x, y, pixel, settings);
+                    means.push(estimate.mean);
+                    errors.push(estimate.stderr);
+                }
+                bar.inc(1);
+                (means, errors)
+            })
+            .collect();
+        bar.finish_and_clear();
+        let mut mean = Image::new(width, height);
+        let mut stderr = Image::new(width, height);
+        for (y, (means, errors)) in rows.into_iter().enumerate() {
+            mean.pixels[y * width..(y + 1) * width].copy_from_slice(&means);
+            stderr.pixels[y * width..(y + 1) * width].copy_from_slice(&errors);
+        }
+        ReferenceImage { mean, stderr }
+    }
+
+    fn pixel(
+        &self,
+        camera: &Camera,
+        x: usize,
+        y: usize,
+        pixel: u64,
+        settings: &ReferenceSettings,
+    ) -> Estimate {
+        let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
+        let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
+            return Estimate::default();
+        };
+        let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front) else {
+            return Estimate::default();
+        };
+        let mut rng = stream(settings.seed, pixel);
+        let (sum, sum_sq) = self.accumulate(start, settings.spp, &mut rng);
+        let estimate = statistics(sum, sum_sq, settings.spp);
+        Estimate {
+            mean: emission + estimate.mean,
+            stderr: estimate.stderr,
+        }
+    }
+}
+
+/// Samples per independent generator in [`PathTracer::radiance_leaving`].
+const CHUNK: usize = 1024;
+
+/// Upper bound of the Russian roulette survival probability, so that paths end even if a material's
+/// reflectance reaches 1.
+const MAX_SURVIVAL: f64 = 0.99;
+
+/// Renders the reference image of `scene` (see the module documentation for the estimator).
+pub fn render_reference(
+    scene: &Scene,
+    visibility: &dyn Visibility,
+    camera: &Camera,
+    settings: &ReferenceSettings,
+    progress: &Progress,
+) -> ReferenceImage {
+    PathTracer::new(scene, visibility, settings.roulette_depth).render(camera, settings, progress)
+}
+
+/// Radiance leaving a surface point (see [`PathTracer::radiance_leaving`]); builds the emitter table on
+/// every call, so use a [`PathTracer`] for many points.
+#[allow(clippy::too_many_arguments)]
+pub fn radiance_leaving(
+    scene: &Scene,
+    visibility: &dyn Visibility,
+    point: DVec3,
+    normal: DVec3,
+    polygon: usize,
+    front: bool,
+    spp: usize,
+    seed: u64,
+) -> Estimate {
+    PathTracer::new(
+        scene,
+        visibility,
+        ReferenceSettings::default().roulette_depth,
+    )
+    .radiance_leaving(point, normal, polygon, front, spp, seed)
+}
+
+/// Sample mean and standard error of the mean from Σx and Σx² over `n` samples (unbiased sample
+/// variance; zero error for fewer than 2 samples).
+fn statistics(sum: Rgb, sum_sq: Rgb, n: usize) -> Estimate {
+    if n == 0 {
+        return Estimate::default();
+    }
+    let nf = n as f64;
+    let mean = sum / nf;
+    let stderr = if n < 2 {
+        Rgb::BLACK
+    } else {
+        // Var = (Σx² - n m²) / (n - 1), clamped against rounding; stderr = √(Var / n).
+        (sum_sq - mean * mean * nf).map(|v| (v.max(0.0) / ((nf - 1.0) * nf)).sqrt())
+    };
+    Estimate { mean, stderr }
+}
+
+/// An independent generator for stream `index` of `seed` (splitmix64 finalisers decorrelate nearby
+/// seeds and indices).
+fn stream(seed: u64, index: u64) -> Pcg64Mcg {
+    Pcg64Mcg::seed_from_u64(derive_seed(seed, index))
+}
+
+/// The seed of sub-stream `index` of `seed`.
+pub(crate) fn derive_seed(seed: u64, index: u64) -> u64 {
+    splitmix64(splitmix64(seed) ^ index)
+}
+
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Cosine-weighted direction about the unit `normal` from two uniform numbers (Malley's method).
+fn cosine_direction(normal: DVec3, u1: f64, u2: f64) -> DVec3 {
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    let (t, b) = normal.any_orthonormal_pair();
+    let z = (1.0 - u1).max(0.0).sqrt();
+    r * phi.cos() * t + r * phi.sin() * b + z * normal
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn statistics_match_the_textbook_formulas() {
+        let xs = [1.0, 2.0, 4.0, 7.0];
+        let (sum, sum_sq) = xs.iter().fold((Rgb::BLACK, Rgb::BLACK), |(s, q), &x| {
+            (s + Rgb::splat(x), q + Rgb::splat(x * x))
+        });
+        let e = statistics(sum, sum_sq, xs.len());
+        let mean = 3.5;
+        let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / 3.0;
+        assert!((e.mean.r - mean).abs() < 1e-12);
+        assert!((e.stderr.g - (var / 4.0).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn cosine_directions_stay_in_the_hemisphere_with_mean_cosine_two_thirds() {
+        let mut rng = stream(7, 0);
+        let n = DVec3::new(1.0, 2.0, -0.5).normalize();
+        let count = 20_000;
+        let mut total = 0.0;
+        for _ in 0..count {
+            let d = cosine_direction(n, rng.random(), rng.random());
+            assert!((d.length() - 1.0).abs() < 1e-9);
+            let c = d.dot(n);
+            assert!(c >= 0.0);
+            total += c;
+        }
+        // E[cos θ] under the cosine density is 2/3.
+        assert!((total / count as f64 - 2.0 / 3.0).abs() < 0.01);
+    }
+}
