@@ -22,7 +22,7 @@ pub struct ProbeCommand {
     /// Also estimate the radiance by unbiased path tracing, with its standard error.
     #[arg(long)]
     pub reference: bool,
-    /// Paths per point for `--reference`.
+    /// Paths per point for `--reference` (rounded up to a multiple of 16).
     #[arg(long, default_value_t = 16384, value_name = "N")]
     pub spp: usize,
     /// Print JSON instead of the table.

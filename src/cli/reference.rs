@@ -4,7 +4,7 @@
 use super::args::{CameraArgs, SceneArgs};
 use crate::pipeline::{build_visibility, VisibilityKind};
 use crate::progress::Progress;
-use crate::reference::{render_reference, ReferenceSettings};
+use crate::reference::{render_reference, samples_taken, ReferenceSettings};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -21,10 +21,11 @@ pub struct ReferenceCommand {
     /// Output OpenEXR file of the mean radiance (linear).
     #[arg(long, value_name = "FILE")]
     pub hdr: PathBuf,
-    /// Paths per pixel (at least 2).
+    /// Paths per pixel (at least 2; rounded up to a multiple of 16, the independent batches the standard
+    /// error is estimated from).
     #[arg(long, default_value_t = 64, value_name = "N")]
     pub spp: usize,
-    /// Output OpenEXR file of the per-pixel standard error of the mean.
+    /// Output OpenEXR file of the per-pixel standard error of the mean (linear radiance).
     #[arg(long, value_name = "FILE")]
     pub stderr: Option<PathBuf>,
     /// Bounces before Russian roulette may end a path.
@@ -72,7 +73,7 @@ impl ReferenceCommand {
                 "reference: {name}, {}x{} at {} spp in {seconds:.2} s ({}); mean relative standard error {relative} over non-black pixels",
                 camera.width,
                 camera.height,
-                self.spp,
+                samples_taken(self.spp),
                 visibility.name()
             );
         }

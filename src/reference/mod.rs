@@ -9,8 +9,19 @@
 //! - Russian roulette after [`ReferenceSettings::roulette_depth`] bounces with survival probability
 //!   max(ρ) (unbiased: the surviving throughput is divided by it).
 //!
-//! Emission is counted where the camera ray (or the probed point) sees it and through next-event
-//! estimation only; bounce rays that hit an emitter add nothing, so nothing is counted twice.
+//! Emission seen by the camera ray (or at the probed point) is added directly. Light reaching a path
+//! vertex straight from an emitter is estimated twice, by next-event estimation and by the bounce ray when
+//! it hits an emitter, and the two are combined with the power-heuristic weights of multiple importance
+//! sampling (Veach–Guibas 1995), which sum to one: nothing is counted twice. Next-event estimation alone
+//! has infinite variance wherever emitters meet reflectors at a concave edge (area sampling's 1/r² near
+//! the edge; the white furnace is all such edges), so its sample standard errors would not be
+//! trustworthy; the weighted combination is bounded by ρ L_e per vertex.
+//!
+//! Each estimate is made of [`BATCHES`] independent batches. Within a batch the first vertex's emitter
+//! points and bounce directions are stratified (a randomly shifted (0, 2)-sequence, randomised quasi-Monte
+//! Carlo), which lowers the variance of the direct and first-bounce light; the batches' independent random
+//! shifts make their means independent and unbiased, and the standard error of the mean is estimated from
+//! their spread (an unbiased variance estimate with `BATCHES - 1` degrees of freedom).
 //!
 //! Every sample of a pixel goes through the pixel *centre* (no antialiasing): a pixel's value is an
 //! estimate of the radiance leaving the surface point seen through that centre, directly comparable with
@@ -26,7 +37,7 @@ use crate::output::image::Image;
 use crate::progress::Progress;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
-use rand::{Rng, SeedableRng};
+use rand::{Rng, RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -34,7 +45,8 @@ use std::f64::consts::PI;
 /// How the reference image is computed.
 #[derive(Clone, Copy, Debug)]
 pub struct ReferenceSettings {
-    /// Paths per pixel (at least 2, so that a standard error can be estimated).
+    /// Paths per pixel (at least 2, so that a standard error can be estimated); rounded up to a multiple
+    /// of [`BATCHES`] (see [`samples_taken`]).
     pub spp: usize,
     pub seed: u64,
     /// Bounces taken before Russian roulette may end a path.
@@ -51,8 +63,8 @@ impl Default for ReferenceSettings {
     }
 }
 
-/// A Monte Carlo estimate: the sample mean and its standard error (sample standard deviation / √n), per
-/// channel.
+/// A Monte Carlo estimate per channel: the mean and its standard error (the standard deviation of the
+/// independent batch means over √batches).
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Estimate {
     pub mean: Rgb,
@@ -111,6 +123,8 @@ pub struct PathTracer<'a> {
     emitters: Vec<EmitterSide>,
     /// Cumulative probabilities of `emitters` (last entry 1).
     emitter_cdf: Vec<f64>,
+    /// Index in `emitters` of each polygon's front and back side, when it emits.
+    emitter_sides: Vec<[Option<u32>; 2]>,
     /// Smallest accepted hit distance for rays leaving a surface, relative to the scene size.
     t_min: f64,
     roulette_depth: usize,
@@ -146,7 +160,8 @@ impl<'a> PathTracer<'a> {
             })
             .collect();
         let mut emitters = Vec::new();
-        for p in &scene.polygons {
+        let mut emitter_sides = vec![[None, None]; scene.polygons.len()];
+        for (index, p) in scene.polygons.iter().enumerate() {
             let emission = scene.material_of(p).emission;
             let area = p.shape.area();
             let power = emission.average() * PI * area;
@@ -156,6 +171,7 @@ impl<'a> PathTracer<'a> {
             let sides: &[bool] = if p.two_sided { &[true, false] } else { &[true] };
             for &front in sides {
                 let shape = if front { p.shape } else { p.shape.flipped() };
+                emitter_sides[index][usize::from(!front)] = Some(emitters.len() as u32);
                 emitters.push(EmitterSide {
                     shape,
                     normal: shape.normal(),
@@ -182,6 +198,7 @@ impl<'a> PathTracer<'a> {
             surfaces,
             emitters,
             emitter_cdf,
+            emitter_sides,
             t_min: SELF_HIT_EPSILON * if diagonal > 0.0 { diagonal } else { 1.0 },
             roulette_depth,
         }
@@ -206,8 +223,9 @@ impl<'a> PathTracer<'a> {
     }
 
     /// One sample of the reflected radiance ρ/π ∫ L_i cos θ dω leaving `start` (emission at `start` not
-    /// included).
-    fn sample_reflected(&self, start: Vertex, rng: &mut Pcg64Mcg) -> Rgb {
+    /// included). The first vertex's emitter point and bounce direction come from `first` (light, bounce:
+    /// uniform points of the unit square), every later number from `rng`.
+    fn sample_reflected(&self, start: Vertex, first: [DVec2; 2], rng: &mut Pcg64Mcg) -> Rgb {
         let mut radiance = Rgb::BLACK;
         let mut throughput = Rgb::WHITE;
         let mut vertex = start;
@@ -216,8 +234,16 @@ impl<'a> PathTracer<'a> {
             if vertex.reflectance.is_black() {
                 break;
             }
+            let (light_u, bounce_u) = if depth == 0 {
+                (first[0], first[1])
+            } else {
+                (
+                    DVec2::new(rng.random(), rng.random()),
+                    DVec2::new(rng.random(), rng.random()),
+                )
+            };
             // Next-event estimation: ρ/π L_e cos θx cos θy / r² · A / P(side).
-            if let Some(direct) = self.sample_emitter(&vertex, rng) {
+            if let Some(direct) = self.sample_emitter(&vertex, light_u, rng) {
                 radiance += throughput * vertex.reflectance * direct;
             }
             // Cosine-weighted bounce: pdf cos θ / π cancels the ρ/π cos θ of the integrand, leaving ρ.
@@ -230,12 +256,23 @@ impl<'a> PathTracer<'a> {
                 }
                 throughput *= 1.0 / survival;
             }
-            let direction = cosine_direction(vertex.normal, rng.random(), rng.random());
+            let direction = cosine_direction(vertex.normal, bounce_u.x, bounce_u.y);
             let ray = Ray::new(vertex.point, direction);
             let Some(hit) = self.visibility.intersect(&ray, self.t_min, f64::INFINITY) else {
                 break;
             };
-            // Emission at the hit is not counted: next-event estimation already has it.
+            // The bounce's share of the direct light: emission at the hit, MIS-weighted against
+            // next-event estimation (cosine pdf cos θx / π versus the emitter's solid-angle pdf).
+            if let Some(side) = self.emitter_sides[hit.polygon][usize::from(!hit.front)] {
+                let emitter = &self.emitters[side as usize];
+                let cos_y = -emitter.normal.dot(direction);
+                if cos_y > 0.0 {
+                    let light_pdf = emitter.probability * hit.t * hit.t / (emitter.area * cos_y);
+                    let bounce_pdf = vertex.normal.dot(direction) / PI;
+                    radiance +=
+                        throughput * emitter.emission * power_heuristic(bounce_pdf, light_pdf);
+                }
+            }
             match self.vertex(ray.at(hit.t), hit.polygon, hit.front) {
                 Some((next, _)) => vertex = next,
                 None => break,
@@ -245,8 +282,9 @@ impl<'a> PathTracer<'a> {
     }
 
     /// L_e cos θx cos θy / (π r²) / pdf for one emitter point (the BRDF's ρ is applied by the caller; the
-    /// 1/π here is the Lambertian BRDF's), or `None` when it contributes nothing.
-    fn sample_emitter(&self, vertex: &Vertex, rng: &mut Pcg64Mcg) -> Option<Rgb> {
+    /// 1/π here is the Lambertian BRDF's), MIS-weighted against the cosine-sampled bounce; `None` when it
+    /// contributes nothing.
+    fn sample_emitter(&self, vertex: &Vertex, point_u: DVec2, rng: &mut Pcg64Mcg) -> Option<Rgb> {
         if self.emitters.is_empty() {
             return None;
         }
@@ -256,9 +294,7 @@ impl<'a> PathTracer<'a> {
             .partition_point(|&c| c <= u)
             .min(self.emitters.len() - 1);
         let emitter = &self.emitters[index];
-        let y = emitter
-            .shape
-            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let y = emitter.shape.sample_uniform(point_u);
         let d = y - vertex.point;
         let r2 = d.length_squared();
         if r2 <= 0.0 {
@@ -272,29 +308,50 @@ impl<'a> PathTracer<'a> {
         if self.visibility.segment_occluded(vertex.point, y) {
             return None;
         }
-        let geometry = cos_x * cos_y / (r2 * r2);
-        Some(emitter.emission * (geometry * emitter.area / (PI * emitter.probability)))
+        // Both pdfs in solid angle at the vertex: P r² / (A cos θy) for the emitter point, cos θx / π for
+        // the bounce (d is not normalised: cos θx = n·d / r, and r² = |d|²).
+        let r = r2.sqrt();
+        let light_pdf = emitter.probability * r2 * r / (emitter.area * cos_y);
+        let bounce_pdf = cos_x / (PI * r);
+        let weight = power_heuristic(light_pdf, bounce_pdf);
+        Some(emitter.emission * (bounce_pdf * weight / light_pdf))
     }
 
-    /// `spp` samples of the radiance leaving `start` from one generator: (Σ x, Σ x²) of the reflected
-    /// part per channel.
-    fn accumulate(&self, start: Vertex, spp: usize, rng: &mut Pcg64Mcg) -> (Rgb, Rgb) {
+    /// Sum of `n` samples of the reflected radiance leaving `start`: one randomised quasi-Monte Carlo
+    /// batch. The first vertex's emitter points and bounce directions are a (0, 2)-sequence in base 2
+    /// (van der Corput and Sobol's second dimension), each randomised by its own random digital shift
+    /// (XOR), the light points indexed by i and the bounce points with their coordinates swapped, so that
+    /// both are stratified over the batch while every pair is uniform in the 4-cube: the batch mean is
+    /// unbiased, and batches with independent shifts are independent.
+    fn batch(&self, start: Vertex, n: usize, rng: &mut Pcg64Mcg) -> Rgb {
+        let light_shift = [rng.next_u32(), rng.next_u32()];
+        let bounce_shift = [rng.next_u32(), rng.next_u32()];
         let mut sum = Rgb::BLACK;
-        let mut sum_sq = Rgb::BLACK;
-        for _ in 0..spp {
-            let x = self.sample_reflected(start, rng);
-            sum += x;
-            sum_sq += x * x;
+        for i in 0..n as u32 {
+            let (a, b) = (i.reverse_bits(), sobol_second(i));
+            let light = unit_square(a ^ light_shift[0], b ^ light_shift[1]);
+            let bounce = unit_square(b ^ bounce_shift[0], a ^ bounce_shift[1]);
+            sum += self.sample_reflected(start, [light, bounce], rng);
         }
-        (sum, sum_sq)
+        sum
+    }
+
+    /// The estimate of the radiance leaving a vertex with emission `emission` (added exactly) from the sums
+    /// of its batches of `per_batch` samples each, combined in batch order.
+    fn combine(emission: Rgb, batch_sums: &[Rgb], per_batch: usize) -> Estimate {
+        let estimate = batch_statistics(batch_sums, per_batch);
+        Estimate {
+            mean: emission + estimate.mean,
+            stderr: estimate.stderr,
+        }
     }
 
     /// Radiance leaving `point` on side `front` of `polygon`, L_e + ρ/π ∫ L_i cos θ dω, from `spp`
-    /// independent paths (a path-traced final gather). `normal` orients the hemisphere; it should be the
+    /// paths (a path-traced final gather). `normal` orients the hemisphere; it should be the
     /// unit normal of that side. The back of a one-sided polygon leaves nothing (exactly zero).
     ///
-    /// Samples are drawn in fixed-size chunks, each with its own generator seeded from (seed, chunk), run
-    /// in parallel and summed in chunk order: the result does not depend on the thread count.
+    /// The batches, each with its own generator seeded from (seed, batch), run in parallel and are
+    /// combined in batch order: the result does not depend on the thread count.
     pub fn radiance_leaving(
         &self,
         point: DVec3,
@@ -308,23 +365,12 @@ impl<'a> PathTracer<'a> {
             return Estimate::default();
         };
         start.normal = normal.normalize_or(start.normal);
-        let chunks = spp.div_ceil(CHUNK);
-        let partial: Vec<(Rgb, Rgb)> = (0..chunks)
+        let (batches, per_batch) = batch_layout(spp);
+        let sums: Vec<Rgb> = (0..batches)
             .into_par_iter()
-            .map(|chunk| {
-                let n = CHUNK.min(spp - chunk * CHUNK);
-                let mut rng = stream(seed, chunk as u64);
-                self.accumulate(start, n, &mut rng)
-            })
+            .map(|b| self.batch(start, per_batch, &mut stream(seed, b as u64)))
             .collect();
-        let (sum, sum_sq) = partial
-            .iter()
-            .fold((Rgb::BLACK, Rgb::BLACK), |(s, q), (a, b)| (s + *a, q + *b));
-        let estimate = statistics(sum, sum_sq, spp);
-        Estimate {
-            mean: emission + estimate.mean,
-            stderr: estimate.stderr,
-        }
+        Self::combine(emission, &sums, per_batch)
     }
 
     /// The reference image seen by `camera`: per pixel, `settings.spp` paths from the surface point seen
@@ -377,18 +423,33 @@ impl<'a> PathTracer<'a> {
         let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front) else {
             return Estimate::default();
         };
-        let mut rng = stream(settings.seed, pixel);
-        let (sum, sum_sq) = self.accumulate(start, settings.spp, &mut rng);
-        let estimate = statistics(sum, sum_sq, settings.spp);
-        Estimate {
-            mean: emission + estimate.mean,
-            stderr: estimate.stderr,
+        let (batches, per_batch) = batch_layout(settings.spp);
+        let seed = derive_seed(settings.seed, pixel);
+        let mut sums = [Rgb::BLACK; BATCHES];
+        for (b, sum) in sums.iter_mut().enumerate().take(batches) {
+            *sum = self.batch(start, per_batch, &mut stream(seed, b as u64));
         }
+        Self::combine(emission, &sums[..batches], per_batch)
     }
 }
 
-/// Samples per independent generator in [`PathTracer::radiance_leaving`].
-const CHUNK: usize = 1024;
+/// Independent batches per estimate: the standard error comes from the spread of the batch means (each
+/// batch is a randomised quasi-Monte Carlo estimate, so its samples are not independent).
+pub const BATCHES: usize = 16;
+
+/// (batches, samples per batch) for `spp` samples: `BATCHES` batches (fewer, of one sample each, for
+/// smaller `spp`), so `spp` is rounded up to a multiple of `BATCHES`.
+fn batch_layout(spp: usize) -> (usize, usize) {
+    let batches = spp.clamp(1, BATCHES);
+    (batches, spp.div_ceil(batches))
+}
+
+/// The number of samples actually taken for a requested `spp` (rounded up to a multiple of
+/// [`BATCHES`]).
+pub fn samples_taken(spp: usize) -> usize {
+    let (batches, per_batch) = batch_layout(spp);
+    batches * per_batch
+}
 
 /// Upper bound of the Russian roulette survival probability, so that paths end even if a material's
 /// reflectance reaches 1.
@@ -426,19 +487,26 @@ pub fn radiance_leaving(
     .radiance_leaving(point, normal, polygon, front, spp, seed)
 }
 
-/// Sample mean and standard error of the mean from Σx and Σx² over `n` samples (unbiased sample
-/// variance; zero error for fewer than 2 samples).
-fn statistics(sum: Rgb, sum_sq: Rgb, n: usize) -> Estimate {
-    if n == 0 {
+/// Mean and standard error from the sums of equally sized independent batches: the standard error is
+/// the sample standard deviation of the batch means over √(batches) (zero for a single batch).
+fn batch_statistics(sums: &[Rgb], per_batch: usize) -> Estimate {
+    let k = sums.len();
+    if k == 0 || per_batch == 0 {
         return Estimate::default();
     }
-    let nf = n as f64;
-    let mean = sum / nf;
-    let stderr = if n < 2 {
+    let n = per_batch as f64;
+    let mean = sums.iter().copied().sum::<Rgb>() / (k as f64 * n);
+    let stderr = if k < 2 {
         Rgb::BLACK
     } else {
-        // Var = (Σx² - n m²) / (n - 1), clamped against rounding; stderr = √(Var / n).
-        (sum_sq - mean * mean * nf).map(|v| (v.max(0.0) / ((nf - 1.0) * nf)).sqrt())
+        let squares: Rgb = sums
+            .iter()
+            .map(|s| {
+                let d = *s / n - mean;
+                d * d
+            })
+            .sum();
+        (squares / (k as f64 * (k as f64 - 1.0))).map(f64::sqrt)
     };
     Estimate { mean, stderr }
 }
@@ -461,6 +529,37 @@ fn splitmix64(x: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// Veach's power heuristic (β = 2): the weight of the strategy with pdf `a` against one with pdf `b`.
+fn power_heuristic(a: f64, b: f64) -> f64 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 {
+        a2 / (a2 + b2)
+    } else {
+        0.0
+    }
+}
+
+/// Sobol's second dimension (generator matrix: Pascal's triangle mod 2) of point `i`, as 32-bit fraction;
+/// with the bit-reversed `i` (van der Corput) it makes a (0, 2)-sequence in base 2.
+fn sobol_second(mut i: u32) -> u32 {
+    let mut v: u32 = 1 << 31;
+    let mut r = 0;
+    while i != 0 {
+        if i & 1 != 0 {
+            r ^= v;
+        }
+        i >>= 1;
+        v ^= v >> 1;
+    }
+    r
+}
+
+/// A point of the unit square [0, 1)² from two 32-bit fractions.
+fn unit_square(a: u32, b: u32) -> DVec2 {
+    const SCALE: f64 = 1.0 / 4_294_967_296.0;
+    DVec2::new(a as f64 * SCALE, b as f64 * SCALE)
+}
+
 /// Cosine-weighted direction about the unit `normal` from two uniform numbers (Malley's method).
 fn cosine_direction(normal: DVec3, u1: f64, u2: f64) -> DVec3 {
     let r = u1.sqrt();
@@ -475,16 +574,32 @@ mod tests {
     use super::*;
 
     #[test]
-    fn statistics_match_the_textbook_formulas() {
-        let xs = [1.0, 2.0, 4.0, 7.0];
-        let (sum, sum_sq) = xs.iter().fold((Rgb::BLACK, Rgb::BLACK), |(s, q), &x| {
-            (s + Rgb::splat(x), q + Rgb::splat(x * x))
-        });
-        let e = statistics(sum, sum_sq, xs.len());
+    fn batch_statistics_match_the_textbook_formulas() {
+        let means = [1.0, 2.0, 4.0, 7.0];
+        let sums: Vec<Rgb> = means.iter().map(|m| Rgb::splat(m * 10.0)).collect();
+        let e = batch_statistics(&sums, 10);
         let mean = 3.5;
-        let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / 3.0;
+        let var = means.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / 3.0;
         assert!((e.mean.r - mean).abs() < 1e-12);
         assert!((e.stderr.g - (var / 4.0).sqrt()).abs() < 1e-12);
+        assert_eq!(samples_taken(100), 112);
+        assert_eq!(samples_taken(5), 5);
+    }
+
+    #[test]
+    fn the_first_points_stratify_the_unit_square() {
+        // Any 2^m consecutive points from 0 fill each of the 2^m elementary intervals of every shape once.
+        let m = 4;
+        for shape in 0..=m {
+            let mut seen = vec![false; 1 << m];
+            for i in 0..1u32 << m {
+                let (x, y) = (i.reverse_bits(), sobol_second(i));
+                let cell = (x.checked_shr(32 - shape).unwrap_or(0) << (m - shape)) as usize
+                    | (y.checked_shr(32 - (m - shape)).unwrap_or(0)) as usize;
+                assert!(!seen[cell], "shape {shape}, point {i}");
+                seen[cell] = true;
+            }
+        }
     }
 
     #[test]
