@@ -167,3 +167,24 @@ fn results_are_identical_for_one_and_two_threads() {
     let image = render_reference(&scene, visibility.as_ref(), &camera, &other, &quiet());
     assert_ne!(image.mean, one.0.mean);
 }
+
+/// The standard errors are honest: over many seeds, about 94% of the estimates (Student's t with 15
+/// degrees of freedom at ±2) fall within two standard errors of the exact value.
+#[test]
+fn standard_errors_cover_the_exact_value_at_the_nominal_rate() {
+    let (rho, e) = (0.5, 1.0);
+    let scene = generators::parallel_plates(1.0, 1.0, rho, e);
+    let visibility = build_visibility(&scene, VisibilityKind::BruteForce);
+    let centre = DVec3::new(0.3, 0.6, 0.0);
+    let exact = rho * e * point_to_polygon(centre, DVec3::Z, &scene.polygons[1].shape);
+    let tracer = radiosity::reference::PathTracer::new(&scene, visibility.as_ref(), 3);
+    let trials = 400;
+    let covered = (0..trials)
+        .filter(|&seed| {
+            let estimate = tracer.radiance_leaving(centre, DVec3::Z, 0, true, 32, seed);
+            (estimate.mean.g - exact).abs() <= 2.0 * estimate.stderr.g
+        })
+        .count();
+    let rate = covered as f64 / trials as f64;
+    assert!(rate > 0.88 && rate < 0.98, "coverage {rate}");
+}
