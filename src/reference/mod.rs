@@ -108,12 +108,29 @@ struct Surface {
 /// One emitting polygon side: its shape oriented so that the normal points out of the emitting side.
 #[derive(Clone, Copy, Debug)]
 struct EmitterSide {
-    shape: Shape,
+    /// The side as one or two triangles (a quad split along its 0-2 diagonal), so that sampling needs no
+    /// area computations.
+    triangles: [Shape; 2],
+    /// Fraction of the area in the first triangle (1 for a triangle).
+    split: f64,
     normal: DVec3,
     area: f64,
     emission: Rgb,
     /// Probability of choosing this side.
     probability: f64,
+}
+
+impl EmitterSide {
+    /// Area-uniform point from a point of the unit square (stratification preserved, as in
+    /// [`Shape::sample_uniform`]).
+    fn sample(&self, s: DVec2) -> DVec3 {
+        if s.x < self.split {
+            self.triangles[0].sample_uniform(DVec2::new(s.x / self.split, s.y))
+        } else {
+            let x = ((s.x - self.split) / (1.0 - self.split)).min(1.0 - f64::EPSILON);
+            self.triangles[1].sample_uniform(DVec2::new(x, s.y))
+        }
+    }
 }
 
 /// The path tracer over one scene and its ray-casting structure; cheap to share between threads.
@@ -172,8 +189,23 @@ impl<'a> PathTracer<'a> {
             for &front in sides {
                 let shape = if front { p.shape } else { p.shape.flipped() };
                 emitter_sides[index][usize::from(!front)] = Some(emitters.len() as u32);
+                let (triangles, split) = match shape {
+                    Shape::Triangle(_) => ([shape, shape], 1.0),
+                    Shape::Quad([a, b, c, d]) => {
+                        let (first, second) =
+                            (Shape::Triangle([a, b, c]), Shape::Triangle([a, c, d]));
+                        let total = first.area() + second.area();
+                        let split = if total > 0.0 {
+                            first.area() / total
+                        } else {
+                            0.5
+                        };
+                        ([first, second], split)
+                    }
+                };
                 emitters.push(EmitterSide {
-                    shape,
+                    triangles,
+                    split,
                     normal: shape.normal(),
                     area,
                     emission,
@@ -294,7 +326,7 @@ impl<'a> PathTracer<'a> {
             .partition_point(|&c| c <= u)
             .min(self.emitters.len() - 1);
         let emitter = &self.emitters[index];
-        let y = emitter.shape.sample_uniform(point_u);
+        let y = emitter.sample(point_u);
         let d = y - vertex.point;
         let r2 = d.length_squared();
         if r2 <= 0.0 {
