@@ -16,6 +16,7 @@ pub mod oracles;
 pub mod output;
 pub mod pipeline;
 pub mod progress;
+pub mod reference;
 pub mod scene;
 pub mod solvers;
 pub mod visibility;

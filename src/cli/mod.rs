@@ -5,6 +5,8 @@ mod args;
 mod bench;
 mod compare;
 mod info;
+mod probe;
+mod reference;
 mod render;
 
 pub use args::parse_vec3;
@@ -42,6 +44,10 @@ pub enum Command {
     Bench(bench::BenchCommand),
     /// Error metrics of an image against a reference, false-colour error image, feature-based error.
     Compare(compare::CompareCommand),
+    /// Render an unbiased path-traced reference image (radiance at pixel centres, with standard errors).
+    Reference(reference::ReferenceCommand),
+    /// Print the radiosity solution's radiance (and a path-traced reference) at given surface points.
+    Probe(probe::ProbeCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -78,5 +84,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(c) => c.run(),
         Command::Bench(c) => c.run(seed, &progress),
         Command::Compare(c) => c.run(),
+        Command::Reference(c) => c.run(seed, &progress),
+        Command::Probe(c) => c.run(seed, &progress),
     })
 }

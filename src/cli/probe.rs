@@ -1,0 +1,106 @@
+//! `radiosity probe [SCENE] --points pts.csv [--reference --spp N]`: the radiosity solution's radiance at
+//! given surface points, optionally beside the unbiased path-traced estimate.
+
+use super::args::{SceneArgs, SolveArgs};
+use crate::pipeline::simulate;
+use crate::progress::Progress;
+use crate::reference::probe::{probe_points, read_points, ProbeReference};
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ProbeCommand {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub solve: SolveArgs,
+    /// Points file: one `x y z nx ny nz` per line (whitespace or commas, `#` comments); the normal points
+    /// out of the probed side.
+    #[arg(long, value_name = "FILE")]
+    pub points: PathBuf,
+    /// Also estimate the radiance by unbiased path tracing, with its standard error.
+    #[arg(long)]
+    pub reference: bool,
+    /// Paths per point for `--reference` (rounded up to a multiple of 16).
+    #[arg(long, default_value_t = 16384, value_name = "N")]
+    pub spp: usize,
+    /// Print JSON instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl ProbeCommand {
+    pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
+        anyhow::ensure!(
+            !self.reference || self.spp >= 2,
+            "--spp must be at least 2 (the standard error needs two samples)"
+        );
+        let points = read_points(&self.points)?;
+        let (scene, name) = self.scene.load()?;
+        let settings = self.solve.settings(seed)?;
+        let solution = simulate(&scene, &settings, progress)?;
+        let reference = self.reference.then_some(ProbeReference {
+            spp: self.spp,
+            seed,
+        });
+        let results = probe_points(
+            &scene,
+            solution.visibility.as_ref(),
+            &solution.hierarchy,
+            &points,
+            reference,
+            &self.points,
+        )?;
+        if self.json {
+            println!("{}", serde_json::to_string_pretty(&results)?);
+            return Ok(());
+        }
+        println!("# {name}: {} points", results.len());
+        print!(
+            "{:>5} {:>30} {:>6} {:>35}",
+            "line", "point", "poly", "radiosity (r g b)"
+        );
+        if self.reference {
+            print!(
+                " {:>35} {:>35} {:>6}",
+                "reference (r g b)", "stderr (r g b)", "z"
+            );
+        }
+        println!();
+        let triple = |v: [f64; 3]| format!("{:>11.4e} {:>11.4e} {:>11.4e}", v[0], v[1], v[2]);
+        for r in &results {
+            let point = format!("{:.4} {:.4} {:.4}", r.point[0], r.point[1], r.point[2]);
+            let side = if r.front { "" } else { "b" };
+            print!(
+                "{:>5} {point:>30} {:>6} {}",
+                r.line,
+                format!("{}{side}", r.polygon),
+                triple(r.radiosity.to_array())
+            );
+            if let Some(e) = r.reference {
+                // Largest deviation of the radiosity value in standard errors of the reference.
+                let z = (0..3)
+                    .map(|c| {
+                        let d = r.radiosity.to_array()[c] - e.mean.to_array()[c];
+                        let s = e.stderr.to_array()[c];
+                        if s > 0.0 {
+                            d.abs() / s
+                        } else if d == 0.0 {
+                            0.0
+                        } else {
+                            f64::INFINITY
+                        }
+                    })
+                    .fold(0.0, f64::max);
+                print!(
+                    " {} {} {z:>6.2}",
+                    triple(e.mean.to_array()),
+                    triple(e.stderr.to_array())
+                );
+            }
+            println!();
+        }
+        Ok(())
+    }
+}

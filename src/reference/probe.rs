@@ -1,0 +1,260 @@
+//! Point probes: surface points given as `x y z nx ny nz` lines, located on the scene's polygons, where the
+//! radiosity solution and the unbiased path-traced estimate are compared.
+
+use super::{derive_seed, Estimate, PathTracer};
+use crate::color::Rgb;
+use crate::geometry::{convex_contains, DVec3, Ray};
+use crate::hierarchy::Hierarchy;
+use crate::scene::{Diagnostic, Scene};
+use crate::visibility::Visibility;
+use std::path::{Path, PathBuf};
+
+/// A point with the normal of the surface side it probes, from line `line` of the points file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbePoint {
+    pub line: usize,
+    pub point: DVec3,
+    /// Unit normal pointing out of the probed side.
+    pub normal: DVec3,
+}
+
+/// A malformed points file: file, line and reason.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct PointsError(pub Diagnostic);
+
+/// Parses points, one `x y z nx ny nz` per line separated by whitespace and/or commas; `#` starts a
+/// comment, blank lines are skipped. `file` names the source in errors.
+pub fn parse_points(text: &str, file: &Path) -> Result<Vec<ProbePoint>, PointsError> {
+    let error = |line: usize, message: String| {
+        PointsError(Diagnostic {
+            file: file.to_path_buf(),
+            line,
+            message,
+        })
+    };
+    let mut points = Vec::new();
+    for (index, raw) in text.lines().enumerate() {
+        let line = index + 1;
+        let content = raw.split('#').next().unwrap_or("");
+        let fields: Vec<&str> = content
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .collect();
+        if fields.is_empty() {
+            continue;
+        }
+        if fields.len() != 6 {
+            return Err(error(
+                line,
+                format!(
+                    "expected 6 numbers 'x y z nx ny nz', found {}",
+                    fields.len()
+                ),
+            ));
+        }
+        let mut values = [0.0; 6];
+        for (value, field) in values.iter_mut().zip(&fields) {
+            *value = field
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| error(line, format!("'{field}' is not a finite number")))?;
+        }
+        let normal = DVec3::new(values[3], values[4], values[5]);
+        let length = normal.length();
+        if length.is_nan() || length <= 1e-12 {
+            return Err(error(line, "the normal has zero length".to_string()));
+        }
+        points.push(ProbePoint {
+            line,
+            point: DVec3::new(values[0], values[1], values[2]),
+            normal: normal / length,
+        });
+    }
+    Ok(points)
+}
+
+/// Reads and parses a points file.
+pub fn read_points(path: &Path) -> anyhow::Result<Vec<ProbePoint>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    Ok(parse_points(&text, path)?)
+}
+
+/// A probe point placed on a radiating polygon side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub polygon: usize,
+    pub front: bool,
+    /// The point moved onto the polygon's plane.
+    pub point: DVec3,
+    /// Unit normal of the side.
+    pub normal: DVec3,
+}
+
+/// Distance (relative to the scene diagonal) a probe point may lie off its surface.
+const SURFACE_TOLERANCE: f64 = 1e-3;
+
+/// Smallest cosine between a probe's normal and its surface's normal.
+const NORMAL_AGREEMENT: f64 = 0.5;
+
+/// Finds the polygon side a probe lies on: first by a ray from `point + δ normal` back along `-normal`
+/// (δ = 10⁻³ of the scene diagonal), then, for points on a crack between polygons, the nearest polygon
+/// whose plane is within δ, whose normal agrees and which contains the point's projection. Fails for points
+/// on no surface and for the black back of one-sided polygons.
+pub fn find_surface(
+    scene: &Scene,
+    visibility: &dyn Visibility,
+    probe: &ProbePoint,
+) -> Result<SurfacePoint, String> {
+    let delta = SURFACE_TOLERANCE * scene.bounds().diagonal().max(f64::MIN_POSITIVE);
+    let n = probe.normal;
+    let ray = Ray::new(probe.point + delta * n, -n);
+    let found = match visibility.intersect(&ray, 0.0, 2.0 * delta) {
+        Some(hit) => Some((hit.polygon, hit.front, ray.at(hit.t))),
+        None => nearest_containing(scene, probe, delta),
+    };
+    let Some((polygon, front, point)) = found else {
+        return Err(format!(
+            "no surface within {delta:.3e} of the point ({}, {}, {}) facing ({}, {}, {})",
+            probe.point.x, probe.point.y, probe.point.z, n.x, n.y, n.z
+        ));
+    };
+    let p = &scene.polygons[polygon];
+    let normal = if front {
+        p.shape.normal()
+    } else {
+        -p.shape.normal()
+    };
+    if !front && !p.two_sided {
+        return Err(format!(
+            "the point is on the back of one-sided polygon {polygon} (an opaque black side); \
+             flip the normal to probe its front"
+        ));
+    }
+    if normal.dot(n) < NORMAL_AGREEMENT {
+        return Err(format!(
+            "the normal does not match polygon {polygon}'s ({:.3}, {:.3}, {:.3})",
+            normal.x, normal.y, normal.z
+        ));
+    }
+    Ok(SurfacePoint {
+        polygon,
+        front,
+        point,
+        normal,
+    })
+}
+
+/// The polygon nearest to the probe (by plane distance, at most `delta`) containing its projection, with a
+/// normal agreeing with the probe's on either side.
+fn nearest_containing(
+    scene: &Scene,
+    probe: &ProbePoint,
+    delta: f64,
+) -> Option<(usize, bool, DVec3)> {
+    let mut best: Option<(f64, usize, bool, DVec3)> = None;
+    for (index, polygon) in scene.polygons.iter().enumerate() {
+        let shape = &polygon.shape;
+        let normal = shape.normal();
+        let cos = normal.dot(probe.normal);
+        if cos.abs() < NORMAL_AGREEMENT {
+            continue;
+        }
+        let distance = normal.dot(probe.point - shape.vertices()[0]);
+        if distance.abs() > delta || best.is_some_and(|b| b.0 <= distance.abs()) {
+            continue;
+        }
+        let projected = probe.point - distance * normal;
+        let uv = shape.parameters_of(projected);
+        if convex_contains(shape.parameter_corners(), uv, 1e-9) {
+            best = Some((distance.abs(), index, cos > 0.0, projected));
+        }
+    }
+    best.map(|(_, index, front, point)| (index, front, point))
+}
+
+/// The radiosity solution's radiance at a surface point: the average radiance of the leaf element
+/// containing it.
+pub fn solution_radiance(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Rgb {
+    match hierarchy.patch_for_side(surface.polygon, surface.front) {
+        Some(patch) => {
+            let leaf = hierarchy.locate(patch, surface.point);
+            hierarchy.element(leaf).average_radiance()
+        }
+        None => Rgb::BLACK,
+    }
+}
+
+/// One probe's results.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ProbeResult {
+    /// Line of the points file.
+    pub line: usize,
+    /// The point on the surface.
+    pub point: [f64; 3],
+    pub normal: [f64; 3],
+    pub polygon: usize,
+    pub front: bool,
+    /// Radiance of the radiosity solution there.
+    pub radiosity: Rgb,
+    /// Unbiased path-traced radiance with its standard error, when asked for.
+    pub reference: Option<Estimate>,
+}
+
+/// How many paths per probe point the reference estimate uses, and their seed.
+#[derive(Clone, Copy, Debug)]
+pub struct ProbeReference {
+    pub spp: usize,
+    pub seed: u64,
+}
+
+/// Locates every probe and evaluates the solution (and the reference) there; the first probe on no
+/// surface is an error naming its line.
+pub fn probe_points(
+    scene: &Scene,
+    visibility: &dyn Visibility,
+    hierarchy: &Hierarchy,
+    points: &[ProbePoint],
+    reference: Option<ProbeReference>,
+    file: &Path,
+) -> Result<Vec<ProbeResult>, PointsError> {
+    let tracer = PathTracer::new(
+        scene,
+        visibility,
+        super::ReferenceSettings::default().roulette_depth,
+    );
+    points
+        .iter()
+        .enumerate()
+        .map(|(index, probe)| {
+            let surface = find_surface(scene, visibility, probe).map_err(|message| {
+                PointsError(Diagnostic {
+                    file: PathBuf::from(file),
+                    line: probe.line,
+                    message,
+                })
+            })?;
+            let reference = reference.map(|r| {
+                tracer.radiance_leaving(
+                    surface.point,
+                    surface.normal,
+                    surface.polygon,
+                    surface.front,
+                    r.spp,
+                    derive_seed(r.seed, index as u64),
+                )
+            });
+            Ok(ProbeResult {
+                line: probe.line,
+                point: surface.point.to_array(),
+                normal: surface.normal.to_array(),
+                polygon: surface.polygon,
+                front: surface.front,
+                radiosity: solution_radiance(hierarchy, &surface),
+                reference,
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,128 @@
+//! Probe points: file parsing with line numbers, locating points on surfaces, and the radiosity solution
+//! against the path-traced reference there.
+
+use radiosity::geometry::form_factor::point_to_polygon;
+use radiosity::geometry::DVec3;
+use radiosity::pipeline::{simulate, SimulationSettings};
+use radiosity::progress::Progress;
+use radiosity::reference::probe::{parse_points, probe_points, ProbeReference};
+use radiosity::scene::generators;
+use std::path::Path;
+
+fn error_of(text: &str) -> String {
+    parse_points(text, Path::new("pts.csv"))
+        .expect_err("malformed input")
+        .to_string()
+}
+
+#[test]
+fn points_parse_with_commas_spaces_and_comments() {
+    let text = "# probes\n0.5, 0.5, 0 0 0 2\n\n  1 2 3,1,0,0   # trailing comment\n";
+    let points = parse_points(text, Path::new("pts.csv")).expect("valid");
+    assert_eq!(points.len(), 2);
+    assert_eq!(points[0].line, 2);
+    assert_eq!(points[0].point, DVec3::new(0.5, 0.5, 0.0));
+    assert_eq!(points[0].normal, DVec3::Z);
+    assert_eq!(points[1].line, 4);
+    assert_eq!(points[1].normal, DVec3::X);
+}
+
+#[test]
+fn malformed_points_report_their_line() {
+    let e = error_of("0 0 0 0 0 1\n# ok\n1 2 3 4 5\n");
+    assert!(
+        e.starts_with("pts.csv:3:") && e.contains("6 numbers"),
+        "{e}"
+    );
+    let e = error_of("0 0 0 0 0 1\n0 0 x 0 0 1\n");
+    assert!(e.starts_with("pts.csv:2:") && e.contains("'x'"), "{e}");
+    let e = error_of("\n\n\n0 0 0 0 0 0\n");
+    assert!(
+        e.starts_with("pts.csv:4:") && e.contains("zero length"),
+        "{e}"
+    );
+    let e = error_of("0 0 0 0 0 1 7\n");
+    assert!(e.starts_with("pts.csv:1:"), "{e}");
+    let e = error_of("0 0 nan 0 0 1\n");
+    assert!(e.starts_with("pts.csv:1:") && e.contains("finite"), "{e}");
+}
+
+#[test]
+fn probes_compare_the_solution_with_the_reference_on_parallel_plates() {
+    let (rho, e) = (0.5, 1.0);
+    let scene = generators::parallel_plates(1.0, 1.0, rho, e);
+    let settings = SimulationSettings {
+        eps: 1e-4,
+        min_area: 1e-6,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+    let file = Path::new("pts.csv");
+    // The receiver's centre slightly above the surface, and the emitter's centre seen from below.
+    let text = "0.5 0.5 0.0001 0 0 1\n0.5 0.5 1 0 0 -1\n";
+    let points = parse_points(text, file).expect("valid");
+    let reference = Some(ProbeReference {
+        spp: 20_000,
+        seed: 2,
+    });
+    let results = probe_points(
+        &scene,
+        solution.visibility.as_ref(),
+        &solution.hierarchy,
+        &points,
+        reference,
+        file,
+    )
+    .expect("points on surfaces");
+    let centre = DVec3::new(0.5, 0.5, 0.0);
+    let exact = rho * e * point_to_polygon(centre, DVec3::Z, &scene.polygons[1].shape);
+    let receiver = &results[0];
+    assert_eq!((receiver.polygon, receiver.front), (0, true));
+    assert!((DVec3::from_array(receiver.point) - centre).length() < 1e-9);
+    let estimate = receiver.reference.expect("reference asked for");
+    assert!((estimate.mean.g - exact).abs() <= 3.0 * estimate.stderr.g);
+    // The solution's leaf average near the centre is close to the point value.
+    assert!(
+        (receiver.radiosity.g - exact).abs() < 0.03 * exact,
+        "{} vs {exact}",
+        receiver.radiosity.g
+    );
+    // The emitter reflects nothing: its radiance is exactly its emission in both.
+    let emitter = &results[1];
+    assert_eq!(emitter.polygon, 1);
+    assert_eq!(emitter.reference.expect("reference").mean.g, e);
+    assert_eq!(emitter.reference.expect("reference").stderr.g, 0.0);
+    assert!((emitter.radiosity.g - e).abs() < 1e-12);
+
+    // A point in mid-air, and the black back of the receiver, are errors naming the line.
+    let bad = parse_points("0.5 0.5 0 0 0 1\n0.5 0.5 0.5 0 0 1\n", file).expect("valid");
+    let error = probe_points(
+        &scene,
+        solution.visibility.as_ref(),
+        &solution.hierarchy,
+        &bad,
+        None,
+        file,
+    )
+    .expect_err("mid-air point")
+    .to_string();
+    assert!(
+        error.starts_with("pts.csv:2:") && error.contains("no surface"),
+        "{error}"
+    );
+    let back = parse_points("# back\n0.5 0.5 0 0 0 -1\n", file).expect("valid");
+    let error = probe_points(
+        &scene,
+        solution.visibility.as_ref(),
+        &solution.hierarchy,
+        &back,
+        None,
+        file,
+    )
+    .expect_err("back side")
+    .to_string();
+    assert!(
+        error.starts_with("pts.csv:2:") && error.contains("back"),
+        "{error}"
+    );
+}
