@@ -34,7 +34,7 @@ fn object_means(scene: &Scene, h: &Hierarchy, names: &[&str]) -> Vec<Rgb> {
 fn cornell_wall_radiance_converges_as_eps_halves() {
     let scene = cornell_box();
     let walls = ["floor", "ceiling", "back_wall", "left_wall", "right_wall"];
-    let means: Vec<Vec<Rgb>> = [4e-4, 2e-4, 1e-4]
+    let means: Vec<Vec<Rgb>> = [1e-4, 5e-5, 2.5e-5]
         .iter()
         .map(|&eps| {
             let settings = SimulationSettings {

@@ -35,6 +35,10 @@ pub struct Link {
     pub source: ElementId,
     /// Receiver-area-averaged form factor F_ij from the receiver i to the source j, visibility included.
     pub form_factor: f64,
+    /// The refinement oracle's radiance-independent factor for this link (its error estimate divided by
+    /// ρ_i B_j), kept so that re-refinement after a solve needs no new kernel samples; `None` when the
+    /// source was dark when the link was judged.
+    pub oracle_factor: Option<f64>,
 }
 
 /// A node of a patch's quadtree.

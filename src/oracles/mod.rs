@@ -53,6 +53,11 @@ pub trait RefinementOracle: Sync + Send {
 
     /// Error estimate for the link `source` → `receiver`; `rng` is seeded from the link's identity, so the
     /// estimate does not depend on thread scheduling.
+    ///
+    /// Contract: the estimate is [`reflected_source_radiance`] times a factor that does not depend on
+    /// radiance (true of eqs. (1), (2) and (15)). Refinement caches that factor on the link and, after
+    /// each solve pass, re-judges the link from the new radiance without calling the oracle again; since
+    /// the samples come from the link's own seed, this gives the same answer as a fresh estimate.
     fn estimate(
         &self,
         context: &OracleContext,

@@ -1,17 +1,17 @@
 //! The power-based oracle of Hanrahan et al., Feixas et al. eq. (1): `ρ_i A_i F̃_ij B_j < ε`, with the
-//! cheap unoccluded point-to-polygon form factor estimate F̃ (no rays).
+//! cheap unoccluded point-to-polygon form factor estimate F̃ the paper uses (§4: no rays).
 //!
-//! F̃_ij is the largest exact point-to-polygon form factor from the receiver's centre and vertices to the
-//! source, and, as in Hanrahan et al., the transported power A_i F_ij is estimated from both ends
-//! (A_i F̃_ij and A_j F̃_ji, equal by reciprocity for exact form factors) keeping the larger. A centre-only
-//! estimate misses the case that matters most: a large receiver whose corner touches a small source gets a
-//! tiny centre value, the link is accepted, and the power it carries is spread evenly over the receiver
-//! instead of landing at the corner (in a closed furnace box this leaves corner elements 20-30% too
-//! bright however small ε is). Five evaluations per end instead of one keep the oracle ray-free.
+//! F̃_ij is the exact point-to-polygon form factor from the receiver's centre to the source. As in
+//! Hanrahan et al. the transported power A_i F_ij is estimated from both ends (A_i F̃_ij and A_j F̃_ji,
+//! equal by reciprocity for exact form factors) and the larger is kept: a centre-only estimate is zero
+//! when that centre lies behind the other element's plane although part of the element does not.
+//! Taking the largest value over the element's vertices as well was tried: it costs five times more and
+//! does not cure the known weakness of eq. (1) (coarse links whose power is pushed evenly over a receiver
+//! across which the kernel varies strongly: corner elements of a closed furnace box stay 10-20% off; see
+//! BENCHMARKS.md), which is what the smoothness and MI oracles address.
 
 use super::{reflected_source_radiance, Estimate, OracleContext, RefinementOracle};
 use crate::geometry::form_factor::point_to_polygon;
-use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::ElementId;
 use rand_pcg::Pcg64Mcg;
 
@@ -33,21 +33,12 @@ impl RefinementOracle for PowerOracle {
     ) -> Estimate {
         let h = context.hierarchy;
         let (r, s) = (h.element(receiver), h.element(source));
-        let f_ij = largest_point_form_factor(&r.shape, h.patch_of(receiver).normal, &s.shape);
-        let f_ji = largest_point_form_factor(&s.shape, h.patch_of(source).normal, &r.shape);
+        let f_ij = point_to_polygon(r.shape.centroid(), h.patch_of(receiver).normal, &s.shape);
+        let f_ji = point_to_polygon(s.shape.centroid(), h.patch_of(source).normal, &r.shape);
         let transport = (r.area * f_ij).max(s.area * f_ji);
         Estimate {
             error: reflected_source_radiance(h, receiver, source) * transport,
             rays: 0,
         }
     }
-}
-
-/// Largest unoccluded form factor from the centre and the vertices of `from` (normal `normal`) to `to`.
-fn largest_point_form_factor(from: &Shape, normal: DVec3, to: &Shape) -> f64 {
-    from.vertices()
-        .iter()
-        .chain(std::iter::once(&from.centroid()))
-        .map(|x| point_to_polygon(*x, normal, to))
-        .fold(0.0, f64::max)
 }

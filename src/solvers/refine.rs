@@ -8,16 +8,18 @@ use super::coupling::{form_factor, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
 use crate::hierarchy::{ElementId, Hierarchy, Link};
-use crate::oracles::{Decision, OracleContext, RefinementOracle};
+use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
 use crate::visibility::Visibility;
 use rayon::prelude::*;
 
-/// A link under consideration; `form_factor` is cached for links that were already computed.
+/// A link under consideration; `form_factor` and `oracle_factor` are cached for links that were already
+/// computed and judged.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Candidate {
     pub receiver: ElementId,
     pub source: ElementId,
     pub form_factor: Option<f64>,
+    pub oracle_factor: Option<f64>,
 }
 
 /// Refinement parameters.
@@ -74,6 +76,7 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
                     receiver: receiver.root,
                     source: source.root,
                     form_factor: None,
+                    oracle_factor: None,
                 })
             })
         })
@@ -90,6 +93,7 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
                 receiver: id as ElementId,
                 source: link.source,
                 form_factor: Some(link.form_factor),
+                oracle_factor: link.oracle_factor,
             });
         }
     }
@@ -114,7 +118,7 @@ pub fn refine(
     while !candidates.is_empty() {
         round += 1;
         on_round(round, candidates.len());
-        let decisions: Vec<(Decision, u64)> = {
+        let decisions: Vec<Verdict> = {
             let context = OracleContext {
                 hierarchy,
                 visibility,
@@ -125,10 +129,13 @@ pub fn refine(
                 .collect()
         };
         let mut next = Vec::new();
-        for (c, (decision, rays)) in candidates.iter().zip(decisions) {
-            outcome.oracle_rays += rays;
-            match decision {
-                Decision::Admissible => admissible.push(*c),
+        for (c, verdict) in candidates.iter().zip(decisions) {
+            outcome.oracle_rays += verdict.rays;
+            match verdict.decision {
+                Decision::Admissible => admissible.push(Candidate {
+                    oracle_factor: verdict.oracle_factor,
+                    ..*c
+                }),
                 Decision::SubdivideReceiver => {
                     outcome.refined_links += 1;
                     if hierarchy.element(c.receiver).is_leaf() {
@@ -159,6 +166,7 @@ pub fn refine(
                 Some(Link {
                     source: c.source,
                     form_factor: f,
+                    oracle_factor: c.oracle_factor,
                 }),
                 0,
             ),
@@ -175,6 +183,7 @@ pub fn refine(
                 let link = (k.unoccluded > 0.0).then_some(Link {
                     source: c.source,
                     form_factor: k.form_factor,
+                    oracle_factor: c.oracle_factor,
                 });
                 (link, k.rays)
             }
@@ -200,32 +209,62 @@ fn push_if_interacting(
             receiver,
             source,
             form_factor: None,
+            oracle_factor: None,
         });
     }
 }
 
+/// An oracle verdict on one candidate.
+struct Verdict {
+    decision: Decision,
+    rays: u64,
+    /// Radiance-independent factor of the estimate, to cache on the link.
+    oracle_factor: Option<f64>,
+}
+
 /// The oracle's verdict, with the minimum-area rule: if the element it wants to split is too small the
-/// other one is split instead, and if both are too small the link is admissible.
+/// other one is split instead, and if both are too small the link is admissible. A cached oracle factor
+/// is reused (see the contract of [`RefinementOracle::estimate`]).
 fn decide(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
     c: &Candidate,
-) -> (Decision, u64) {
+) -> Verdict {
     let h = context.hierarchy;
     let splittable = |id: ElementId| h.element(id).area > settings.min_area;
     if !splittable(c.receiver) && !splittable(c.source) {
-        return (Decision::Admissible, 0);
+        return Verdict {
+            decision: Decision::Admissible,
+            rays: 0,
+            oracle_factor: c.oracle_factor,
+        };
     }
-    let mut rng = link_rng(settings.seed, c.receiver, c.source, ORACLE_STREAM);
-    let estimate = oracle.estimate(context, c.receiver, c.source, &mut rng);
-    if estimate.error <= settings.threshold {
-        return (Decision::Admissible, estimate.rays);
+    let weight = reflected_source_radiance(h, c.receiver, c.source);
+    let (error, rays, oracle_factor) = match c.oracle_factor {
+        Some(factor) => (weight * factor, 0, Some(factor)),
+        None => {
+            let mut rng = link_rng(settings.seed, c.receiver, c.source, ORACLE_STREAM);
+            let estimate = oracle.estimate(context, c.receiver, c.source, &mut rng);
+            let factor = (weight > 0.0).then(|| estimate.error / weight);
+            (estimate.error, estimate.rays, factor)
+        }
+    };
+    if error <= settings.threshold {
+        return Verdict {
+            decision: Decision::Admissible,
+            rays,
+            oracle_factor,
+        };
     }
     let decision = match oracle.element_to_split(context, c.receiver, c.source) {
         Decision::SubdivideReceiver if !splittable(c.receiver) => Decision::SubdivideSource,
         Decision::SubdivideSource if !splittable(c.source) => Decision::SubdivideReceiver,
         other => other,
     };
-    (decision, estimate.rays)
+    Verdict {
+        decision,
+        rays,
+        oracle_factor,
+    }
 }
