@@ -8,6 +8,7 @@
 
 pub mod cli;
 pub mod color;
+pub mod experiments;
 pub mod geometry;
 pub mod hierarchy;
 pub mod measures;

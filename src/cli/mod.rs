@@ -4,6 +4,7 @@
 mod args;
 mod bench;
 mod compare;
+mod experiment;
 mod info;
 mod probe;
 mod reference;
@@ -42,6 +43,8 @@ pub enum Command {
     Info(info::InfoCommand),
     /// Measure BVH build time, ray throughput and full render times.
     Bench(bench::BenchCommand),
+    /// Reproduce a paper's experiment with tables and images.
+    Experiment(experiment::ExperimentCommand),
     /// Error metrics of an image against a reference, false-colour error image, feature-based error.
     Compare(compare::CompareCommand),
     /// Render an unbiased path-traced reference image (radiance at pixel centres, with standard errors).
@@ -84,6 +87,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(c) => c.run(),
         Command::Bench(c) => c.run(seed, &progress),
         Command::Compare(c) => c.run(),
+        Command::Experiment(c) => c.run(seed, &progress),
         Command::Reference(c) => c.run(seed, &progress),
         Command::Probe(c) => c.run(seed, &progress),
     })

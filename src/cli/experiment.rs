@@ -1,0 +1,207 @@
+//! `radiosity experiment oracles [SCENE]`: the experiment of Feixas et al. §4 (see
+//! `experiments::oracles`): tables in Markdown and JSON, and the meshes and smooth-shaded images side by
+//! side as one PNG per target and sample count.
+
+use super::args::{SceneArgs, SolveArgs};
+use crate::experiments::oracles::{
+    markdown_table, oracle_name, reference_features, run_one, tile, OracleExperiment, OracleRun,
+    Yardstick,
+};
+use crate::output::camera::Camera;
+use crate::output::image::Image;
+use crate::output::tonemap::{write_png, ToneMap};
+use crate::pipeline::{build_visibility, OracleKind};
+use crate::progress::Progress;
+use crate::reference::{render_reference, ReferenceSettings};
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ExperimentCommand {
+    #[command(subcommand)]
+    pub which: Experiment,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Experiment {
+    /// Power, smoothness and MI oracles at equal element counts (Feixas et al. §4, figures 1-5).
+    Oracles(OraclesExperiment),
+}
+
+#[derive(Args, Debug)]
+pub struct OraclesExperiment {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub solve: SolveArgs,
+    /// Target leaf-element counts (the paper: 1000 and 2000 on the Cornell box, 14000 on the cube room).
+    #[arg(long, value_delimiter = ',', default_values_t = [1000, 2000])]
+    pub targets: Vec<usize>,
+    /// Oracles to compare.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [OracleKind::Power, OracleKind::Smoothness, OracleKind::MutualInformation])]
+    pub oracles: Vec<OracleKind>,
+    /// Oracle sample counts: the main run (the paper's 10) and the robustness run (4).
+    #[arg(long, value_delimiter = ',', default_values_t = [10, 4])]
+    pub samples: Vec<usize>,
+    /// Accept an element count within this fraction of the target.
+    #[arg(long, default_value_t = 0.05)]
+    pub count_tolerance: f64,
+    /// Most solves per ε search.
+    #[arg(long, default_value_t = 14)]
+    pub max_solves: usize,
+    /// Feature sizes (pixels) for the FBEM columns.
+    #[arg(long, value_delimiter = ',', default_values_t = [2, 4, 8, 16])]
+    pub fbem_sizes: Vec<usize>,
+    /// Reference image (linear EXR at this view and size); computed and written there when missing.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Paths per pixel when the reference is computed.
+    #[arg(long, default_value_t = 1024)]
+    pub reference_spp: usize,
+    #[arg(long, default_value_t = 256)]
+    pub width: usize,
+    #[arg(long, default_value_t = 256)]
+    pub height: usize,
+    /// Folder for table.md, table.json and the images.
+    #[arg(short, long, default_value = "experiment-oracles")]
+    pub out: PathBuf,
+}
+
+impl ExperimentCommand {
+    pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
+        match &self.which {
+            Experiment::Oracles(e) => e.run(seed, progress),
+        }
+    }
+}
+
+impl OraclesExperiment {
+    fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
+        anyhow::ensure!(
+            !self.targets.is_empty() && self.targets.iter().all(|&t| t > 0),
+            "--targets must be positive"
+        );
+        anyhow::ensure!(
+            self.samples.iter().all(|&s| s >= 2),
+            "--samples must be at least 2"
+        );
+        anyhow::ensure!(
+            self.width > 0 && self.height > 0,
+            "--width and --height must be positive"
+        );
+        let (scene, name) = self.scene.load()?;
+        std::fs::create_dir_all(&self.out)
+            .with_context(|| format!("creating {}", self.out.display()))?;
+        let spec = scene
+            .camera
+            .unwrap_or_else(|| Camera::framing(&scene.bounds(), 45.0));
+        let camera = Camera::new(&spec, self.width, self.height);
+        let base = self.solve.settings(seed)?;
+        let reference = self.reference(&scene, &camera, seed, progress)?;
+        let features = reference_features(&reference)?;
+        let yardstick = Yardstick {
+            camera: &camera,
+            reference: &reference,
+            features: &features,
+        };
+        let experiment = OracleExperiment {
+            oracles: self.oracles.clone(),
+            targets: self.targets.clone(),
+            samples: self.samples.clone(),
+            base,
+            tolerance: self.count_tolerance,
+            max_solves: self.max_solves,
+            fbem_sizes: self.fbem_sizes.clone(),
+        };
+        let tone = ToneMap::default();
+        let mut runs: Vec<OracleRun> = Vec::new();
+        for &samples in &experiment.samples {
+            for &target in &experiment.targets {
+                let mut meshes = Vec::new();
+                let mut smooth = Vec::new();
+                for &oracle in &experiment.oracles {
+                    // The power oracle takes no samples: run it once, with the main sample count.
+                    if oracle == OracleKind::Power && samples != experiment.samples[0] {
+                        continue;
+                    }
+                    let (run, images) = run_one(
+                        &scene,
+                        &experiment,
+                        oracle,
+                        samples,
+                        target,
+                        &yardstick,
+                        progress,
+                    )?;
+                    if !progress.quiet {
+                        eprintln!(
+                            "{name}: {} ({samples} samples) target {target}: {} leaves at eps {:.3e}, rel. RMSE {:.2}%",
+                            oracle_name(oracle),
+                            run.leaf_elements,
+                            run.eps,
+                            run.relative_rmse * 100.0
+                        );
+                    }
+                    runs.push(run);
+                    meshes.push(images.mesh);
+                    smooth.push(images.smooth);
+                }
+                let columns = meshes.len();
+                let all: Vec<&Image> = meshes.iter().chain(smooth.iter()).collect();
+                let path = self.out.join(format!("oracles-{target}-s{samples}.png"));
+                write_png(&path, &tile(&all, columns), &tone)?;
+            }
+        }
+        let table = markdown_table(&runs);
+        let header = format!(
+            "Scene: {name}. Columns of oracles-TARGET-sSAMPLES.png, left to right: {}; top row mesh, bottom row \
+             smooth shading.\n\n",
+            self.oracles.iter().map(|&o| oracle_name(o)).collect::<Vec<_>>().join(", ")
+        );
+        std::fs::write(self.out.join("table.md"), header + &table)?;
+        std::fs::write(
+            self.out.join("table.json"),
+            serde_json::to_string_pretty(&runs)? + "\n",
+        )?;
+        print!("{table}");
+        Ok(())
+    }
+
+    /// Reads the reference, or renders it with the path tracer and writes it where asked (or into the output
+    /// folder).
+    fn reference(
+        &self,
+        scene: &crate::scene::Scene,
+        camera: &Camera,
+        seed: u64,
+        progress: &Progress,
+    ) -> Result<Image> {
+        let path = self
+            .reference
+            .clone()
+            .unwrap_or_else(|| self.out.join("reference.exr"));
+        if path.exists() {
+            let image = Image::read_exr(&path)?;
+            anyhow::ensure!(
+                image.width == self.width && image.height == self.height,
+                "{} is {}x{}, not the requested {}x{}",
+                path.display(),
+                image.width,
+                image.height,
+                self.width,
+                self.height
+            );
+            return Ok(image);
+        }
+        let visibility = build_visibility(scene, self.solve.visibility)?;
+        let settings = ReferenceSettings {
+            spp: self.reference_spp.max(2),
+            seed,
+            ..Default::default()
+        };
+        let reference = render_reference(scene, visibility.as_ref(), camera, &settings, progress);
+        reference.mean.write_exr(&path)?;
+        Ok(reference.mean)
+    }
+}
