@@ -5,6 +5,7 @@ mod args;
 mod bench;
 mod compare;
 mod info;
+mod measure;
 mod render;
 
 pub use args::parse_vec3;
@@ -42,6 +43,8 @@ pub enum Command {
     Bench(bench::BenchCommand),
     /// Error metrics of an image against a reference, false-colour error image, feature-based error.
     Compare(compare::CompareCommand),
+    /// Information-theoretic scene measures: discrete and continuous mutual information, Δ (Feixas et al.).
+    Measure(measure::MeasureCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -78,5 +81,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(c) => c.run(),
         Command::Bench(c) => c.run(seed, &progress),
         Command::Compare(c) => c.run(),
+        Command::Measure(c) => c.run(seed, &progress),
     })
 }
