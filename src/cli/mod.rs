@@ -8,6 +8,7 @@ mod experiment;
 mod info;
 mod probe;
 mod reference;
+mod measure;
 mod render;
 
 pub use args::parse_vec3;
@@ -51,6 +52,8 @@ pub enum Command {
     Reference(reference::ReferenceCommand),
     /// Print the radiosity solution's radiance (and a path-traced reference) at given surface points.
     Probe(probe::ProbeCommand),
+    /// Information-theoretic scene measures: discrete and continuous mutual information, Δ (Feixas et al.).
+    Measure(measure::MeasureCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -90,5 +93,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Experiment(c) => c.run(seed, &progress),
         Command::Reference(c) => c.run(seed, &progress),
         Command::Probe(c) => c.run(seed, &progress),
+        Command::Measure(c) => c.run(seed, &progress),
     })
 }

@@ -1,5 +1,7 @@
 //! Measures: run statistics, and later error metrics and information-theoretic scene measures.
 
 pub mod fbem;
+pub mod global_lines;
 pub mod image_metrics;
+pub mod information;
 pub mod stats;

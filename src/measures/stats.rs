@@ -1,6 +1,7 @@
 //! Run statistics written by `--stats out.json`.
 
 use crate::color::Rgb;
+use crate::measures::information::InformationMeasures;
 use crate::pipeline::{SimulationSettings, Solution};
 use serde::Serialize;
 
@@ -37,6 +38,9 @@ pub struct RunStats {
     pub absorbed_power: Rgb,
     pub threads: usize,
     pub settings: SimulationSettings,
+    /// Information-theoretic measures (`radiosity measure`), Feixas et al. eqs. (3), (10).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub information: Option<InformationMeasures>,
 }
 
 impl RunStats {
@@ -71,6 +75,7 @@ impl RunStats {
             absorbed_power: r.absorbed_power,
             threads: rayon::current_num_threads(),
             settings: *settings,
+            information: None,
         }
     }
 
