@@ -1,5 +1,6 @@
 //! From a scene to a solved hierarchy: builds the visibility structure and the hierarchy, picks the
-//! oracle and solver named in the settings, and runs the hierarchical solve. The command line and the
+//! oracle and solver named in the settings, and runs the hierarchical solve (deterministic, or
+//! hierarchical Monte Carlo radiosity). The command line and the
 //! tests share this one path.
 
 use crate::hierarchy::Hierarchy;
@@ -11,6 +12,7 @@ use crate::scene::Scene;
 use crate::solvers::coupling::CouplingSettings;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi};
 use crate::solvers::refine::RefineSettings;
+use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, SolveReport, SolveSettings};
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
@@ -27,6 +29,17 @@ pub enum OracleKind {
     #[value(name = "mi", alias = "mutual-information")]
     #[serde(rename = "mi")]
     MutualInformation,
+}
+
+/// Solution method (`--method`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MethodKind {
+    /// Hierarchical radiosity: oracle-driven link refinement and gathering sweeps.
+    Deterministic,
+    /// Hierarchical Monte Carlo radiosity (Bekaert et al. 1998): stochastic Jacobi with local lines and
+    /// per-ray refinement by the oracle.
+    StochasticJacobi,
 }
 
 /// Linear solver (`--solver`).
@@ -53,6 +66,7 @@ pub enum VisibilityKind {
 /// Everything that determines a solution.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct SimulationSettings {
+    pub method: MethodKind,
     pub oracle: OracleKind,
     pub solver: SolverKind,
     pub visibility: VisibilityKind,
@@ -66,16 +80,22 @@ pub struct SimulationSettings {
     pub visibility_rays: usize,
     /// Random point pairs per evaluation of the sampling oracles (eqs. (2) and (15); the paper uses 10).
     pub oracle_samples: usize,
-    /// Relative change of total power at which sweeps stop.
+    /// Relative change of total power at which sweeps stop; for stochastic Jacobi, the fraction of the
+    /// emitted power left unshot at which iterations stop.
     pub tolerance: f64,
     pub max_iterations: usize,
     pub max_passes: usize,
+    /// Stochastic Jacobi: lines shot in the first iteration (later ones in proportion to their power).
+    pub rays_per_iteration: u64,
+    /// Stochastic Jacobi: most iterations.
+    pub stochastic_iterations: usize,
     pub seed: u64,
 }
 
 impl Default for SimulationSettings {
     fn default() -> Self {
         SimulationSettings {
+            method: MethodKind::Deterministic,
             oracle: OracleKind::Power,
             solver: SolverKind::GaussSeidel,
             visibility: VisibilityKind::Bvh,
@@ -87,6 +107,8 @@ impl Default for SimulationSettings {
             tolerance: 1e-5,
             max_iterations: 200,
             max_passes: 12,
+            rays_per_iteration: 100_000,
+            stochastic_iterations: 100,
             seed: 1,
         }
     }
@@ -155,10 +177,36 @@ pub fn simulate(
         .iter()
         .map(|p| hierarchy.element(p.root).area)
         .sum();
+    let threshold = settings.eps * total_emission;
+    let min_area = settings.min_area * total_area;
+    let oracle = make_oracle(settings, &hierarchy);
+    if settings.method == MethodKind::StochasticJacobi {
+        let stochastic = StochasticSettings {
+            threshold,
+            min_area,
+            rays_per_iteration: settings.rays_per_iteration,
+            max_iterations: settings.stochastic_iterations,
+            tolerance: settings.tolerance,
+            seed: settings.seed,
+        };
+        let report = solve_stochastic(
+            &mut hierarchy,
+            visibility.as_ref(),
+            oracle.as_ref(),
+            &stochastic,
+            progress,
+        );
+        return Ok(Solution {
+            hierarchy,
+            visibility,
+            report,
+            visibility_seconds,
+        });
+    }
     let solve_settings = SolveSettings {
         refine: RefineSettings {
-            threshold: settings.eps * total_emission,
-            min_area: settings.min_area * total_area,
+            threshold,
+            min_area,
             coupling: CouplingSettings {
                 receiver_order: settings.receiver_order,
                 visibility_rays: settings.visibility_rays,
@@ -169,7 +217,6 @@ pub fn simulate(
         max_iterations: settings.max_iterations,
         max_passes: settings.max_passes,
     };
-    let oracle = make_oracle(settings, &hierarchy);
     let solver = make_solver(settings.solver);
     let report = solve(
         &mut hierarchy,

@@ -1,7 +1,7 @@
 //! Argument groups shared by several subcommands.
 
 use crate::geometry::DVec3;
-use crate::pipeline::{OracleKind, SimulationSettings, SolverKind, VisibilityKind};
+use crate::pipeline::{MethodKind, OracleKind, SimulationSettings, SolverKind, VisibilityKind};
 use crate::scene::{self, LoadOptions, Scene};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -46,6 +46,9 @@ impl SceneArgs {
 /// How the radiosity solution is computed.
 #[derive(Args, Debug, Clone)]
 pub struct SolveArgs {
+    /// Solution method: deterministic hierarchical radiosity, or hierarchical Monte Carlo radiosity.
+    #[arg(long, value_enum, default_value_t = MethodKind::Deterministic)]
+    pub method: MethodKind,
     /// Refinement oracle.
     #[arg(long, value_enum, default_value_t = OracleKind::Power)]
     pub oracle: OracleKind,
@@ -79,6 +82,14 @@ pub struct SolveArgs {
     /// Most refine/solve passes.
     #[arg(long, default_value_t = 12)]
     pub max_passes: usize,
+    /// Stochastic Jacobi: rays shot in the first iteration; later iterations get a share proportional
+    /// to the power they shoot.
+    #[arg(long, default_value_t = 100_000, value_name = "N")]
+    pub rays: u64,
+    /// Stochastic Jacobi: most iterations (they also stop when the unshot power falls below
+    /// --tolerance times the emitted power).
+    #[arg(long, default_value_t = 100, value_name = "N")]
+    pub iterations: usize,
 }
 
 impl SolveArgs {
@@ -96,7 +107,9 @@ impl SolveArgs {
             self.oracle_samples >= 2,
             "--oracle-samples must be at least 2 (a kernel variation needs two samples)"
         );
+        anyhow::ensure!(self.rays >= 1, "--rays must be at least 1");
         Ok(SimulationSettings {
+            method: self.method,
             oracle: self.oracle,
             solver: self.solver,
             visibility: self.visibility,
@@ -108,6 +121,8 @@ impl SolveArgs {
             tolerance: self.tolerance,
             max_iterations: self.max_iterations,
             max_passes: self.max_passes,
+            rays_per_iteration: self.rays,
+            stochastic_iterations: self.iterations,
             seed,
         })
     }

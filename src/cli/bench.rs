@@ -132,7 +132,7 @@ impl RenderBench {
                 h.elements.len(),
                 h.leaf_count(),
                 h.link_count(),
-                r.form_factor_rays + r.oracle_rays,
+                r.form_factor_rays + r.oracle_rays + r.shooting_rays,
                 start.elapsed().as_secs_f64()
             );
         }

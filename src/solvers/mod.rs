@@ -1,11 +1,13 @@
 //! Solvers: hierarchical radiosity as alternating refinement ([`refine`], driven by an oracle) and
 //! gathering sweeps ([`gathering`]: Jacobi or Gauss–Seidel, with [`push_pull`]) until the refinement
-//! is stable and the total power has converged. Link form factors come from [`coupling`].
+//! is stable and the total power has converged. Link form factors come from [`coupling`]. Hierarchical
+//! Monte Carlo radiosity ([`stochastic`]) replaces links by power-carrying random lines.
 
 pub mod coupling;
 pub mod gathering;
 pub mod push_pull;
 pub mod refine;
+pub mod stochastic;
 
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -54,6 +56,8 @@ pub struct SolveReport {
     pub iterations: usize,
     pub oracle_rays: u64,
     pub form_factor_rays: u64,
+    /// Power-carrying lines of Monte Carlo radiosity ([`stochastic`]).
+    pub shooting_rays: u64,
     pub emitted_power: Rgb,
     pub absorbed_power: Rgb,
     pub exitant_power: Rgb,
