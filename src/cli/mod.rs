@@ -5,7 +5,9 @@ mod args;
 mod bench;
 mod compare;
 mod info;
+mod plot;
 mod render;
+mod scene;
 
 pub use args::parse_vec3;
 
@@ -42,6 +44,10 @@ pub enum Command {
     Bench(bench::BenchCommand),
     /// Error metrics of an image against a reference, false-colour error image, feature-based error.
     Compare(compare::CompareCommand),
+    /// Write a test scene with a known answer (plates, furnace, Cornell box, shadow groups) as MGF.
+    Scene(scene::SceneCommand),
+    /// Chart one field of run statistics against another (error vs time or elements) as SVG.
+    Plot(plot::PlotCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -78,5 +84,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(c) => c.run(),
         Command::Bench(c) => c.run(seed, &progress),
         Command::Compare(c) => c.run(),
+        Command::Scene(c) => c.run(),
+        Command::Plot(c) => c.run(),
     })
 }
