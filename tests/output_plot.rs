@@ -94,7 +94,7 @@ fn plot_writes_an_svg_with_one_series_per_label() {
     for needle in [
         "power",
         "mi",
-        "log10 error.relative_rmse",
+        "error.relative_rmse",
         "seconds.refine+seconds.solve",
     ] {
         assert!(
@@ -102,16 +102,26 @@ fn plot_writes_an_svg_with_one_series_per_label() {
             "missing {needle}: {labels:?}"
         );
     }
-    // Each series: one 2-pixel line and its legend sample; one marker per run.
+    // The power series (two runs) is a 2-pixel line, the mi series a lone marker; each legend entry
+    // is a 2-pixel line with a marker.
     let thick = text
         .lines()
         .filter(|l| l.starts_with("<polyline") && l.contains("stroke-width=\"2\""))
         .count();
-    assert_eq!(thick, 4, "{text}");
-    assert_eq!(text.matches("<circle").count(), 3, "{text}");
+    assert_eq!(thick, 1 + 2, "{text}");
+    assert_eq!(text.matches("<circle").count(), 3 + 2, "{text}");
 
     // Without --label: one series per file, named by the file.
+    // A file may hold an array of runs: each is a point of that file's series.
+    let sweep = dir.0.join("d.json");
+    let runs = format!(
+        "[{}, {}]",
+        stats("power", 50, 0.2, 0.3),
+        stats("power", 90, 0.4, 0.25)
+    );
+    std::fs::write(&sweep, runs).unwrap();
     let mut per_file = args.clone();
+    per_file.push(sweep.display().to_string());
     per_file.extend(["--x", "elements", "-o"].map(String::from));
     per_file.push(svg.display().to_string());
     let refs: Vec<&str> = per_file.iter().map(String::as_str).collect();

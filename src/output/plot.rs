@@ -3,10 +3,11 @@
 //!
 //! Fields are named by JSON paths with dots (`seconds.solve`, `error.relative_rmse`, `settings.eps`);
 //! `a+b` sums fields (`seconds.refine+seconds.solve`). A file holds one run (an object) or several (an
-//! array of objects); every run is one point. Charts are SVG: its text needs no font files, whereas
+//! array of objects); every run is one point. Either axis may be logarithmic. Charts are SVG: its text needs no font files, whereas
 //! plotters' PNG backend needs system font libraries to draw labels, so PNG is not offered.
 
 use anyhow::{bail, ensure, Context, Result};
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -135,11 +136,16 @@ const PALETTE: [(u8, u8, u8); 10] = [
     (23, 190, 207),
 ];
 
-/// A padded axis range over `values` (log10 values when `log`).
-fn axis_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+/// The data range over `values`, padded by 5% of its width (a factor on log axes); a single value gets
+/// a range around it.
+fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> std::ops::Range<f64> {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
     });
+    if log {
+        let pad = if hi > lo { (hi / lo).powf(0.05) } else { 2.0 };
+        return (lo / pad)..(hi * pad);
+    }
     let pad = if hi > lo {
         0.05 * (hi - lo)
     } else {
@@ -148,70 +154,93 @@ fn axis_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     (lo - pad)..(hi + pad)
 }
 
-/// The chart as SVG text. Log axes show log10 of the value (the axis title says so).
+/// The chart as SVG text.
 pub fn svg(series: &[Series], spec: &PlotSpec) -> Result<String> {
     ensure!(
         series.iter().any(|s| !s.points.is_empty()),
         "no points to plot"
     );
-    let tx = |v: f64| if spec.log_x { v.log10() } else { v };
-    let ty = |v: f64| if spec.log_y { v.log10() } else { v };
     let all = || series.iter().flat_map(|s| s.points.iter().copied());
-    let xr = axis_range(all().map(|p| tx(p.0)));
-    let yr = axis_range(all().map(|p| ty(p.1)));
-    let axis_name = |path: &str, log: bool| {
-        if log {
-            format!("log10 {path}")
-        } else {
-            path.to_string()
-        }
-    };
+    let xr = axis_range(all().map(|p| p.0), spec.log_x);
+    let yr = axis_range(all().map(|p| p.1), spec.log_y);
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, (800, 560)).into_drawing_area();
-        root.fill(&WHITE).map_err(draw_error)?;
-        let title = spec
-            .title
-            .clone()
-            .unwrap_or_else(|| format!("{} vs {}", spec.y, spec.x));
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 22))
-            .margin(16)
-            .x_label_area_size(48)
-            .y_label_area_size(72)
-            .build_cartesian_2d(xr, yr)
-            .map_err(draw_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(axis_name(&spec.x, spec.log_x))
-            .y_desc(axis_name(&spec.y, spec.log_y))
-            .draw()
-            .map_err(draw_error)?;
-        for (i, s) in series.iter().enumerate() {
-            let (r, g, b) = PALETTE[i % PALETTE.len()];
-            let colour = RGBColor(r, g, b);
-            let pts: Vec<(f64, f64)> = s.points.iter().map(|&(x, y)| (tx(x), ty(y))).collect();
-            chart
-                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(draw_error)?
-                .label(s.label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-            chart
-                .draw_series(pts.into_iter().map(|p| Circle::new(p, 4, colour.filled())))
-                .map_err(draw_error)?;
+        match (spec.log_x, spec.log_y) {
+            (false, false) => draw(&root, series, spec, xr, yr)?,
+            (true, false) => draw(&root, series, spec, xr.log_scale(), yr)?,
+            (false, true) => draw(&root, series, spec, xr, yr.log_scale())?,
+            (true, true) => draw(&root, series, spec, xr.log_scale(), yr.log_scale())?,
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(draw_error)?;
         root.present().map_err(draw_error)?;
     }
     Ok(out)
+}
+
+/// Draws axes, one line with markers per series, and the legend, on linear or log coordinates.
+fn draw<X, Y>(
+    root: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    series: &[Series],
+    spec: &PlotSpec,
+    x: X,
+    y: Y,
+) -> Result<()>
+where
+    X: AsRangedCoord<Value = f64>,
+    Y: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    root.fill(&WHITE).map_err(draw_error)?;
+    let title = spec
+        .title
+        .clone()
+        .unwrap_or_else(|| format!("{} vs {}", spec.y, spec.x));
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(16)
+        .x_label_area_size(52)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x, y)
+        .map_err(draw_error)?;
+    chart
+        .configure_mesh()
+        .x_desc(spec.x.as_str())
+        .y_desc(spec.y.as_str())
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 15))
+        .draw()
+        .map_err(draw_error)?;
+    for (i, s) in series.iter().enumerate() {
+        let (r, g, b) = PALETTE[i % PALETTE.len()];
+        let colour = RGBColor(r, g, b);
+        if s.points.len() > 1 {
+            chart
+                .draw_series(LineSeries::new(
+                    s.points.iter().copied(),
+                    colour.stroke_width(2),
+                ))
+                .map_err(draw_error)?;
+        }
+        chart
+            .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, colour.filled())))
+            .map_err(draw_error)?
+            .label(s.label.clone())
+            .legend(move |(x, y)| {
+                EmptyElement::at((x, y))
+                    + PathElement::new(vec![(0, 0), (20, 0)], colour.stroke_width(2))
+                    + Circle::new((10, 0), 4, colour.filled())
+            });
+    }
+    chart
+        .configure_series_labels()
+        .label_font(("sans-serif", 14))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(draw_error)?;
+    Ok(())
 }
 
 fn draw_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
