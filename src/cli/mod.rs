@@ -6,10 +6,12 @@ mod bench;
 mod compare;
 mod experiment;
 mod info;
+mod measure;
+mod plot;
 mod probe;
 mod reference;
-mod measure;
 mod render;
+mod scene;
 
 pub use args::parse_vec3;
 
@@ -54,6 +56,10 @@ pub enum Command {
     Probe(probe::ProbeCommand),
     /// Information-theoretic scene measures: discrete and continuous mutual information, Δ (Feixas et al.).
     Measure(measure::MeasureCommand),
+    /// Write a test scene with a known answer (plates, furnace, Cornell box, shadow groups) as MGF.
+    Scene(scene::SceneCommand),
+    /// Chart one field of run statistics against another (error vs time or elements) as SVG.
+    Plot(plot::PlotCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -94,5 +100,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Reference(c) => c.run(seed, &progress),
         Command::Probe(c) => c.run(seed, &progress),
         Command::Measure(c) => c.run(seed, &progress),
+        Command::Scene(c) => c.run(),
+        Command::Plot(c) => c.run(),
     })
 }

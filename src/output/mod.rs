@@ -6,6 +6,7 @@ pub mod export;
 pub mod false_colour;
 pub mod image;
 pub mod mesh_values;
+pub mod plot;
 pub mod render;
 pub mod tonemap;
 

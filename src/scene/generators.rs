@@ -1,6 +1,7 @@
-//! Test scenes with known answers: the analytic form factor configurations and the closed "furnace" box.
+//! Test scenes with known answers: the analytic form factor configurations, the closed "furnace" box, and
+//! the shadow-group scene of Sillion & Drettakis (Figures 1 and 9) for the feature-based error metric.
 
-use super::{Material, Object, Polygon, Scene};
+use super::{CameraSpec, Material, Object, Polygon, Scene};
 use crate::color::Rgb;
 use crate::geometry::{DVec3, Shape};
 
@@ -127,6 +128,264 @@ pub fn lit_box(size: DVec3, reflectance: Rgb, emission: f64) -> Scene {
     )
 }
 
+/// The scene of Sillion & Drettakis, Figures 1 and 9 (§2.1, §5): a wall lit by a small square source
+/// through four groups of cubes, each group made of cubes of one size. Every group covers the same square
+/// footprint with the same fraction of cube (its cubes sit on a regular grid of pitch ≈ `spacing` × size),
+/// so the groups block the same average light — the configuration in which the four L² errors of an
+/// averaged approximation are alike while the shadow sizes differ (§2.1 and Appendix A).
+///
+/// Frame: the wall lies in the plane z = 0 facing +z, centred on the origin; the groups lie side by side
+/// along x, smallest cubes first (left, at −x), their centres at height z = `cube_distance`; the source
+/// faces the wall at z = `light_distance` above the origin. The first [`wall_tiles`](Self::wall_tiles)
+/// polygons are the wall, the next one is the source, then come the cubes group by group (six outward
+/// faces each; one object per group), then the floor if any.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShadowGroups {
+    /// Edge length of the cubes of each group, left to right.
+    pub cube_sizes: Vec<f64>,
+    /// Grid pitch over cube size: 2 leaves a gap of one cube between neighbours (a quarter covered).
+    pub spacing: f64,
+    /// Side of the square footprint of every group.
+    pub group_width: f64,
+    /// Gap between the footprints of neighbouring groups.
+    pub group_gap: f64,
+    /// Distance of the cube centres from the wall.
+    pub cube_distance: f64,
+    /// Distance of the source from the wall.
+    pub light_distance: f64,
+    /// Side of the square source.
+    pub light_size: f64,
+    /// Emitted radiance of the source, W/(m² sr).
+    pub emission: f64,
+    /// Reflectance of the wall (and floor).
+    pub wall_reflectance: f64,
+    /// Reflectance of the cubes.
+    pub cube_reflectance: f64,
+    /// Adds a floor under the wall, from the wall to below the source, facing up.
+    pub floor: bool,
+}
+
+impl Default for ShadowGroups {
+    /// Four groups of 16×16, 8×8, 4×4 and 2×2 cubes (sizes 0.03 to 0.24, a factor 2 apart, like the four
+    /// clusters of Figure 1), 0.4 from the wall, the source 3 away: shadows of about 0.035 to 0.29 with
+    /// penumbrae of 0.008, and a wall radiance of order 1.
+    fn default() -> Self {
+        ShadowGroups {
+            cube_sizes: vec![0.03, 0.06, 0.12, 0.24],
+            spacing: 2.0,
+            group_width: 0.96,
+            group_gap: 0.3,
+            cube_distance: 0.4,
+            light_distance: 3.0,
+            light_size: 0.05,
+            emission: 8000.0,
+            wall_reflectance: 0.5,
+            cube_reflectance: 0.5,
+            floor: false,
+        }
+    }
+}
+
+impl ShadowGroups {
+    /// Checks that the layout is a valid scene: positive sizes, cubes between wall and source.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("spacing", self.spacing),
+            ("group width", self.group_width),
+            ("cube distance", self.cube_distance),
+            ("light distance", self.light_distance),
+            ("light size", self.light_size),
+        ];
+        for (what, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{what} must be positive, not {v}"));
+            }
+        }
+        if self.cube_sizes.is_empty() {
+            return Err("at least one cube size is needed".into());
+        }
+        if !(self.group_gap.is_finite() && self.group_gap >= 0.0) {
+            return Err(format!("group gap must be >= 0, not {}", self.group_gap));
+        }
+        if self.spacing < 1.0 {
+            return Err(format!(
+                "spacing {} < 1 would overlap the cubes",
+                self.spacing
+            ));
+        }
+        for &s in &self.cube_sizes {
+            if !(s.is_finite() && s > 0.0 && s <= self.group_width) {
+                return Err(format!(
+                    "cube size {s} must be positive and at most the group width {}",
+                    self.group_width
+                ));
+            }
+            if self.cube_distance - s / 2.0 <= 0.0
+                || self.cube_distance + s / 2.0 >= self.light_distance
+            {
+                return Err(format!(
+                    "cubes of size {s} at distance {} must lie between the wall and the source at {}",
+                    self.cube_distance, self.light_distance
+                ));
+            }
+        }
+        for (what, v) in [
+            ("emission", self.emission),
+            ("wall reflectance", self.wall_reflectance),
+            ("cube reflectance", self.cube_reflectance),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{what} must be >= 0, not {v}"));
+            }
+        }
+        if self.wall_reflectance >= 1.0 || self.cube_reflectance >= 1.0 {
+            return Err("reflectances must be below 1".into());
+        }
+        Ok(())
+    }
+
+    /// Cubes per side of group `k`: as many as fit at pitch `spacing` × size (at least one).
+    pub fn cubes_per_side(&self, k: usize) -> usize {
+        ((self.group_width / (self.spacing * self.cube_sizes[k]) + 1e-9).floor() as usize).max(1)
+    }
+
+    /// Centre (x) of the footprint of group `k`; the groups are centred on the origin.
+    pub fn group_centre(&self, k: usize) -> f64 {
+        let n = self.cube_sizes.len() as f64;
+        (k as f64 - (n - 1.0) / 2.0) * (self.group_width + self.group_gap)
+    }
+
+    /// Central projection from the source centre onto the wall of a point at height z: the factor that
+    /// scales its (x, y).
+    fn magnification(&self, z: f64) -> f64 {
+        self.light_distance / (self.light_distance - z)
+    }
+
+    /// The rectangle of the wall, [x0, x1] × [y0, y1], that holds the shadow (umbra and penumbra) of
+    /// group `k`: its footprint projected from the source centre, grown by the penumbra width.
+    pub fn shadow_region(&self, k: usize) -> [f64; 4] {
+        let s = self.cube_sizes[k];
+        let top = self.cube_distance + s / 2.0;
+        let m = self.magnification(top);
+        let penumbra = self.light_size * top / (self.light_distance - top);
+        let c = self.group_centre(k);
+        let half = self.group_width / 2.0;
+        [
+            (c - half) * m - penumbra,
+            (c + half) * m + penumbra,
+            -half * m - penumbra,
+            half * m + penumbra,
+        ]
+    }
+
+    /// Half extents (x, y) of the wall: every shadow region with a margin of a quarter group width.
+    pub fn wall_half_extent(&self) -> (f64, f64) {
+        let margin = 0.25 * self.group_width;
+        let (mut hx, mut hy) = (0.0f64, 0.0f64);
+        for k in 0..self.cube_sizes.len() {
+            let [x0, x1, _, y1] = self.shadow_region(k);
+            hx = hx.max(x0.abs()).max(x1.abs());
+            hy = hy.max(y1);
+        }
+        (hx + margin, hy + margin)
+    }
+
+    /// The wall is made of this many tiles side by side along x, each about square, so that the element
+    /// quadtrees refine it into square elements.
+    pub fn wall_tiles(&self) -> usize {
+        let (hx, hy) = self.wall_half_extent();
+        ((hx / hy).round() as usize).max(1)
+    }
+
+    /// The scene (call [`validate`](Self::validate) first on user input).
+    pub fn scene(&self) -> Scene {
+        let p = DVec3::new;
+        let (hx, hy) = self.wall_half_extent();
+        let d = self.light_distance;
+        let l = self.light_size / 2.0;
+        let tiles = self.wall_tiles();
+        let w = 2.0 * hx / tiles as f64;
+        let mut faces: Vec<_> = (0..tiles)
+            .map(|i| {
+                let (x0, x1) = (-hx + i as f64 * w, -hx + (i + 1) as f64 * w);
+                let tile = quad(p(x0, -hy, 0.), p(x1, -hy, 0.), p(x1, hy, 0.), p(x0, hy, 0.));
+                (tile, 0, "wall".to_string())
+            })
+            .collect();
+        faces.push((
+            quad(p(-l, -l, d), p(-l, l, d), p(l, l, d), p(l, -l, d)),
+            1,
+            "light".to_string(),
+        ));
+        for (k, &s) in self.cube_sizes.iter().enumerate() {
+            let n = self.cubes_per_side(k);
+            let pitch = self.group_width / n as f64;
+            let x0 = self.group_centre(k) - self.group_width / 2.0;
+            let y0 = -self.group_width / 2.0;
+            let name = format!("group{}-cubes-{s}", k + 1);
+            for i in 0..n {
+                for j in 0..n {
+                    let centre = p(
+                        x0 + (i as f64 + 0.5) * pitch,
+                        y0 + (j as f64 + 0.5) * pitch,
+                        self.cube_distance,
+                    );
+                    let corner = centre - DVec3::splat(s / 2.0);
+                    for f in box_faces(DVec3::splat(s)) {
+                        let v = f.vertices();
+                        let outward =
+                            quad(v[3] + corner, v[2] + corner, v[1] + corner, v[0] + corner);
+                        faces.push((outward, 2, name.clone()));
+                    }
+                }
+            }
+        }
+        if self.floor {
+            faces.push((
+                quad(
+                    p(-hx, -hy, 0.),
+                    p(-hx, -hy, d),
+                    p(hx, -hy, d),
+                    p(hx, -hy, 0.),
+                ),
+                0,
+                "floor".to_string(),
+            ));
+        }
+        let mut scene = Scene {
+            materials: vec![
+                Material::diffuse("wall", Rgb::splat(self.wall_reflectance)),
+                Material::emitter("light", Rgb::BLACK, Rgb::splat(self.emission)),
+                Material::diffuse("cubes", Rgb::splat(self.cube_reflectance)),
+            ],
+            // An oblique view from above and in front, like the left image of Figure 9.
+            camera: Some(CameraSpec {
+                eye: p(0.6 * hx, 2.2 * hy, 1.3 * d),
+                look_at: p(0.0, 0.0, 0.5 * self.cube_distance),
+                up: DVec3::Y,
+                fov_degrees: 50.0,
+            }),
+            ..Default::default()
+        };
+        for (shape, material, name) in faces {
+            let object = match scene.objects.iter().position(|o| o.name == name) {
+                Some(i) => i,
+                None => {
+                    scene.objects.push(Object { name });
+                    scene.objects.len() - 1
+                }
+            };
+            scene.polygons.push(Polygon {
+                shape,
+                material,
+                object,
+                two_sided: false,
+            });
+        }
+        scene
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,5 +398,60 @@ mod tests {
             assert!(f.normal().dot(centre - f.centroid()) > 0.0);
             assert!(f.area() > 0.0);
         }
+    }
+
+    #[test]
+    fn shadow_groups_layout() {
+        let g = ShadowGroups::default();
+        g.validate().unwrap();
+        let scene = g.scene();
+        let counts: Vec<usize> = (0..4).map(|k| g.cubes_per_side(k)).collect();
+        assert_eq!(counts, [16, 8, 4, 2]);
+        let t = g.wall_tiles();
+        assert_eq!(t, 4);
+        assert_eq!(scene.polygons.len(), t + 1 + 6 * (256 + 64 + 16 + 4));
+        assert_eq!(scene.objects.len(), 6);
+        let (hx, hy) = g.wall_half_extent();
+        let wall: f64 = scene.polygons[..t].iter().map(|p| p.shape.area()).sum();
+        assert!((wall - 4.0 * hx * hy).abs() < 1e-12);
+        for p in &scene.polygons[..t] {
+            assert_eq!(p.shape.normal(), DVec3::Z);
+        }
+        assert_eq!(scene.polygons[t].shape.normal(), -DVec3::Z);
+        let light = scene.polygons[t].shape.centroid();
+        // Cube faces point away from their cube, and every cube lies between wall and source.
+        for p in &scene.polygons[t + 1..] {
+            let c = p.shape.centroid();
+            assert!(c.z > 0.0 && c.z < light.z);
+            let cube_size = p.shape.area().sqrt();
+            let cube_centre = c - p.shape.normal() * (cube_size / 2.0);
+            assert!((cube_centre.z - g.cube_distance).abs() < 1e-12);
+        }
+        // Every group blocks the same fraction of its footprint.
+        for k in 0..4 {
+            let n = g.cubes_per_side(k) as f64;
+            let cover = (n * g.cube_sizes[k] / g.group_width).powi(2);
+            assert!((cover - 0.25).abs() < 1e-12);
+        }
+        // Shadow regions are disjoint and on the wall.
+        for k in 0..4 {
+            let [x0, x1, y0, y1] = g.shadow_region(k);
+            assert!(x0 > -hx && x1 < hx && y0 > -hy && y1 < hy);
+            if k > 0 {
+                assert!(x0 > g.shadow_region(k - 1)[1]);
+            }
+        }
+        let with_floor = ShadowGroups {
+            floor: true,
+            ..g.clone()
+        };
+        let floor = with_floor.scene().polygons.last().unwrap().shape;
+        assert_eq!(floor.normal(), DVec3::Y);
+        assert!(ShadowGroups {
+            cube_distance: 3.5,
+            ..g
+        }
+        .validate()
+        .is_err());
     }
 }

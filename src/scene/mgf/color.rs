@@ -84,6 +84,12 @@ pub fn to_linear_srgb(xyz: Xyz) -> Rgb {
     Rgb::new(rgb.x, rgb.y, rgb.z)
 }
 
+/// The colour whose [`to_linear_srgb`] is `rgb` (the exact inverse, used by the MGF writer); its Y is the
+/// luminance.
+pub fn from_linear_srgb(rgb: Rgb) -> Xyz {
+    xyz_to_rgb().inverse() * DVec3::new(rgb.r, rgb.g, rgb.b)
+}
+
 fn rows(m: [[f64; 3]; 3]) -> DMat3 {
     DMat3::from_cols_array_2d(&m).transpose()
 }

@@ -18,6 +18,7 @@
 pub mod color;
 pub mod solids;
 pub mod transform;
+pub mod writer;
 
 use self::color::Xyz;
 use self::transform::XfSpec;

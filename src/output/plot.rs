@@ -1,0 +1,284 @@
+//! Charts of run statistics (`radiosity plot`): any numeric field of the stats JSON against any other,
+//! e.g. error against time or element count, one series per label (e.g. the oracle) or per file.
+//!
+//! Fields are named by JSON paths with dots (`seconds.solve`, `error.relative_rmse`, `settings.eps`);
+//! `a+b` sums fields (`seconds.refine+seconds.solve`). A file holds one run (an object) or several (an
+//! array of objects); every run is one point. Either axis may be logarithmic. Charts are SVG: its text needs no font files, whereas
+//! plotters' PNG backend needs system font libraries to draw labels, so PNG is not offered.
+
+use anyhow::{bail, ensure, Context, Result};
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::prelude::*;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What to plot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlotSpec {
+    /// Path of the x value (`elements`, `seconds.solve`, `a+b`).
+    pub x: String,
+    /// Path of the y value (`error.relative_rmse`).
+    pub y: String,
+    /// Path of the series label (`settings.oracle`); the file name when `None`.
+    pub label: Option<String>,
+    pub log_x: bool,
+    pub log_y: bool,
+    pub title: Option<String>,
+}
+
+/// One series: its label and its points sorted by x.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Series {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// The value at a dotted path, if present.
+fn lookup<'a>(value: &'a Value, path: &str) -> Option<&'a Value> {
+    path.split('.').try_fold(value, |v, key| match v {
+        Value::Object(map) => map.get(key),
+        Value::Array(items) => key.parse::<usize>().ok().and_then(|i| items.get(i)),
+        _ => None,
+    })
+}
+
+/// The number at `path` (a sum for `a+b`), or a message naming the missing or non-numeric field.
+pub fn json_number(value: &Value, path: &str) -> std::result::Result<f64, String> {
+    let mut total = 0.0;
+    for part in path.split('+') {
+        let part = part.trim();
+        let v = lookup(value, part).ok_or_else(|| format!("no field '{part}'"))?;
+        let n = v
+            .as_f64()
+            .ok_or_else(|| format!("field '{part}' is not a number ({v})"))?;
+        total += n;
+    }
+    Ok(total)
+}
+
+/// The label at `path`: a string as is, any other value in its JSON form.
+pub fn json_label(value: &Value, path: &str) -> Option<String> {
+    lookup(value, path).map(|v| match v {
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    })
+}
+
+/// Reads the runs of every file and groups their points into series (in order of first appearance).
+pub fn collect_series(files: &[PathBuf], spec: &PlotSpec) -> Result<Vec<Series>> {
+    ensure!(!files.is_empty(), "no stats files to plot");
+    let mut order: Vec<String> = Vec::new();
+    let mut points: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    for file in files {
+        let text = std::fs::read_to_string(file)
+            .with_context(|| format!("{}: cannot read", file.display()))?;
+        let json: Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not valid JSON", file.display()))?;
+        let runs: Vec<&Value> = match &json {
+            Value::Array(items) => items.iter().collect(),
+            other => vec![other],
+        };
+        for (i, run) in runs.into_iter().enumerate() {
+            let at = if matches!(json, Value::Array(_)) {
+                format!("{} (run {i})", file.display())
+            } else {
+                file.display().to_string()
+            };
+            let x = json_number(run, &spec.x).map_err(|e| anyhow::anyhow!("{at}: x: {e}"))?;
+            let y = json_number(run, &spec.y).map_err(|e| anyhow::anyhow!("{at}: y: {e}"))?;
+            for (axis, v, log) in [("x", x, spec.log_x), ("y", y, spec.log_y)] {
+                ensure!(v.is_finite(), "{at}: {axis} value {v} is not finite");
+                ensure!(
+                    !log || v > 0.0,
+                    "{at}: {axis} value {v} cannot be shown on a log scale"
+                );
+            }
+            let label = match &spec.label {
+                Some(path) => json_label(run, path)
+                    .ok_or_else(|| anyhow::anyhow!("{at}: label: no field '{path}'"))?,
+                None => file_label(file),
+            };
+            if !points.contains_key(&label) {
+                order.push(label.clone());
+            }
+            points.entry(label).or_default().push((x, y));
+        }
+    }
+    Ok(order
+        .into_iter()
+        .map(|label| {
+            let mut p = points.remove(&label).unwrap_or_default();
+            p.sort_by(|a, b| a.0.total_cmp(&b.0));
+            Series { label, points: p }
+        })
+        .collect())
+}
+
+fn file_label(file: &Path) -> String {
+    file.file_stem().map_or_else(
+        || file.display().to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    )
+}
+
+/// Series colours: the Tableau 10 palette, distinct and legible on white.
+const PALETTE: [(u8, u8, u8); 10] = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+];
+
+/// The data range over `values`, padded by 5% of its width (a factor on log axes); a single value gets
+/// a range around it.
+fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> std::ops::Range<f64> {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if log {
+        let pad = if hi > lo { (hi / lo).powf(0.05) } else { 2.0 };
+        return (lo / pad)..(hi * pad);
+    }
+    let pad = if hi > lo {
+        0.05 * (hi - lo)
+    } else {
+        0.5 * lo.abs().max(1.0)
+    };
+    (lo - pad)..(hi + pad)
+}
+
+/// The chart as SVG text.
+pub fn svg(series: &[Series], spec: &PlotSpec) -> Result<String> {
+    ensure!(
+        series.iter().any(|s| !s.points.is_empty()),
+        "no points to plot"
+    );
+    let all = || series.iter().flat_map(|s| s.points.iter().copied());
+    let xr = axis_range(all().map(|p| p.0), spec.log_x);
+    let yr = axis_range(all().map(|p| p.1), spec.log_y);
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, (800, 560)).into_drawing_area();
+        match (spec.log_x, spec.log_y) {
+            (false, false) => draw(&root, series, spec, xr, yr)?,
+            (true, false) => draw(&root, series, spec, xr.log_scale(), yr)?,
+            (false, true) => draw(&root, series, spec, xr, yr.log_scale())?,
+            (true, true) => draw(&root, series, spec, xr.log_scale(), yr.log_scale())?,
+        }
+        root.present().map_err(draw_error)?;
+    }
+    Ok(out)
+}
+
+/// Draws axes, one line with markers per series, and the legend, on linear or log coordinates.
+fn draw<X, Y>(
+    root: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    series: &[Series],
+    spec: &PlotSpec,
+    x: X,
+    y: Y,
+) -> Result<()>
+where
+    X: AsRangedCoord<Value = f64>,
+    Y: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    root.fill(&WHITE).map_err(draw_error)?;
+    let title = spec
+        .title
+        .clone()
+        .unwrap_or_else(|| format!("{} vs {}", spec.y, spec.x));
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(16)
+        .x_label_area_size(52)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x, y)
+        .map_err(draw_error)?;
+    chart
+        .configure_mesh()
+        .x_desc(spec.x.as_str())
+        .y_desc(spec.y.as_str())
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 15))
+        .draw()
+        .map_err(draw_error)?;
+    for (i, s) in series.iter().enumerate() {
+        let (r, g, b) = PALETTE[i % PALETTE.len()];
+        let colour = RGBColor(r, g, b);
+        if s.points.len() > 1 {
+            chart
+                .draw_series(LineSeries::new(
+                    s.points.iter().copied(),
+                    colour.stroke_width(2),
+                ))
+                .map_err(draw_error)?;
+        }
+        chart
+            .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, colour.filled())))
+            .map_err(draw_error)?
+            .label(s.label.clone())
+            .legend(move |(x, y)| {
+                EmptyElement::at((x, y))
+                    + PathElement::new(vec![(0, 0), (20, 0)], colour.stroke_width(2))
+                    + Circle::new((10, 0), 4, colour.filled())
+            });
+    }
+    chart
+        .configure_series_labels()
+        .label_font(("sans-serif", 14))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(draw_error)?;
+    Ok(())
+}
+
+fn draw_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow::anyhow!("drawing the chart: {e:?}")
+}
+
+/// Reads the stats files and writes the chart; the output must be `.svg`.
+pub fn plot(files: &[PathBuf], spec: &PlotSpec, output: &Path) -> Result<Vec<Series>> {
+    let extension = output
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if extension != "svg" {
+        bail!(
+            "{}: charts are written as SVG only (PNG would need system fonts); use a .svg name",
+            output.display()
+        );
+    }
+    let series = collect_series(files, spec)?;
+    let text = svg(&series, spec)?;
+    std::fs::write(output, text).with_context(|| format!("{}: cannot write", output.display()))?;
+    Ok(series)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_and_sums() {
+        let v: Value = serde_json::json!({"a": 1, "b": {"c": 2.5, "d": "x"}, "e": [4, 5]});
+        assert_eq!(json_number(&v, "a"), Ok(1.0));
+        assert_eq!(json_number(&v, "a+b.c"), Ok(3.5));
+        assert_eq!(json_number(&v, "e.1"), Ok(5.0));
+        assert!(json_number(&v, "b.z").unwrap_err().contains("'b.z'"));
+        assert!(json_number(&v, "b.d").unwrap_err().contains("not a number"));
+        assert_eq!(json_label(&v, "b.d").as_deref(), Some("x"));
+        assert_eq!(json_label(&v, "a").as_deref(), Some("1"));
+    }
+}
