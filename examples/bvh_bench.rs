@@ -1,12 +1,16 @@
 //! Ray-casting benchmark on synthetic scenes: build time and occlusion rays/s of our BVH (and Embree with
 //! `--features embree`) on the segments radiosity casts.
 //!
-//! `cargo run --release --example bvh_bench [-- small|large|both] [rays]`: `small` is a room of ~12k
-//! quads (walls tessellated, random boxes inside), `large` ~2.6M triangles (a tessellated room with many
-//! small tessellated boxes).
+//! `cargo run --release --example bvh_bench [-- small|large|both|SCENE_FILE] [rays]`: `small` is a room
+//! of ~12k quads (walls tessellated, random boxes inside), `large` ~2.6M triangles (a tessellated room
+//! with many small tessellated boxes); any other argument is a scene file (.mgf / .obj). Occlusion
+//! ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, back ends interleaved per run.
 
 use radiosity::geometry::{DVec3, Shape};
-use radiosity::visibility::bench::{occlusion_rate, random_segments, timed};
+use radiosity::scene::{self, LoadOptions};
+use radiosity::visibility::bench::{
+    closest_hit_rate, occlusion_rate, random_segments, timed, BenchResult,
+};
 use radiosity::visibility::bvh::Bvh;
 use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
@@ -81,35 +85,54 @@ fn report(name: &str, shapes: &[Shape], rays: usize) {
     );
     let segments = random_segments(shapes, rays, 1);
     let (bvh, seconds) = timed(|| Bvh::new(shapes));
-    println!("bvh build {seconds:.3} s ({} nodes)", bvh.node_count());
-    run(&bvh, &segments);
-    #[cfg(feature = "embree")]
-    {
-        use radiosity::visibility::embree::EmbreeScene;
-        match timed(|| EmbreeScene::new(shapes)) {
-            (Ok(embree), seconds) => {
-                println!("embree build {seconds:.3} s");
-                run(&embree, &segments);
+    println!("bvh build {seconds:.3} s ({} wide nodes)", bvh.node_count());
+    let mut backends: Vec<Box<dyn Visibility>> = vec![Box::new(bvh)];
+    backends.extend(embree(shapes));
+    // Back ends back to back for each measurement, so that load from other processes hits both alike.
+    type Rate = fn(
+        &dyn Visibility,
+        &[(DVec3, DVec3)],
+        usize,
+    ) -> Result<BenchResult, rayon::ThreadPoolBuildError>;
+    let modes: [(&str, Rate); 2] = [("occluded", occlusion_rate), ("closest", closest_hit_rate)];
+    for (mode, rate) in modes {
+        for threads in [1, 2] {
+            for vis in &backends {
+                match rate(vis.as_ref(), &segments, threads) {
+                    Ok(r) => println!(
+                        "{:>8} {mode:>8} {} thread(s): {:.2} M rays/s, {} of {} blocked/hit",
+                        vis.name(),
+                        r.threads,
+                        r.rays_per_second / 1e6,
+                        r.blocked,
+                        r.rays
+                    ),
+                    Err(e) => println!("thread pool: {e}"),
+                }
             }
-            (Err(e), _) => println!("embree: {e:#}"),
         }
     }
 }
 
-fn run(vis: &dyn Visibility, segments: &[(DVec3, DVec3)]) {
-    for threads in [1, 2] {
-        match occlusion_rate(vis, segments, threads) {
-            Ok(r) => println!(
-                "{:>8} {} thread(s): {:.2} M rays/s, {} of {} blocked",
-                vis.name(),
-                r.threads,
-                r.rays_per_second / 1e6,
-                r.blocked,
-                r.rays
-            ),
-            Err(e) => println!("thread pool: {e}"),
+/// Embree over the shapes, when the `embree` feature is on and the scene builds.
+#[cfg(feature = "embree")]
+fn embree(shapes: &[Shape]) -> Option<Box<dyn Visibility>> {
+    use radiosity::visibility::embree::EmbreeScene;
+    match timed(|| EmbreeScene::new(shapes)) {
+        (Ok(embree), seconds) => {
+            println!("embree build {seconds:.3} s");
+            Some(Box::new(embree))
+        }
+        (Err(e), _) => {
+            println!("embree: {e:#}");
+            None
         }
     }
+}
+
+#[cfg(not(feature = "embree"))]
+fn embree(_: &[Shape]) -> Option<Box<dyn Visibility>> {
+    None
 }
 
 fn main() {
@@ -126,5 +149,14 @@ fn main() {
     if which == "large" || which == "both" {
         // 6·100²·2 wall triangles + 26k boxes · 6·8²·2 triangles ≈ 2.6M triangles.
         report("room, ~2.6M triangles", &room(100, 3370, 8, true, 8), rays);
+    }
+    if !["small", "large", "both"].contains(&which) {
+        match scene::load(std::path::Path::new(which), &LoadOptions::default()) {
+            Ok(scene) => {
+                let shapes: Vec<Shape> = scene.polygons.iter().map(|p| p.shape).collect();
+                report(which, &shapes, rays);
+            }
+            Err(e) => println!("{which}: {e}"),
+        }
     }
 }

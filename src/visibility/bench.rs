@@ -1,8 +1,8 @@
 //! Benchmark helpers: the occlusion rays radiosity casts (segments between area-uniform points on
 //! area-weighted random polygons), their throughput on a fixed thread pool, and build timing.
 
-use super::Visibility;
-use crate::geometry::{DVec2, DVec3, Shape};
+use super::{Visibility, SEGMENT_EPSILON};
+use crate::geometry::{DVec2, DVec3, Ray, Shape};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
@@ -15,7 +15,8 @@ pub struct BenchResult {
     pub threads: usize,
     pub seconds: f64,
     pub rays_per_second: f64,
-    /// Blocked segments: equal across implementations and thread counts for the same segments.
+    /// Blocked segments (occlusion) or rays that hit (closest hit): independent of thread count, and
+    /// the BVH's equal the exhaustive reference's.
     pub blocked: usize,
 }
 
@@ -49,11 +50,35 @@ pub fn random_segments(shapes: &[Shape], count: usize, seed: u64) -> Vec<(DVec3,
 }
 
 /// Occlusion throughput of `vis` over `segments` (via [`Visibility::segment_occluded`]) on a rayon pool
-/// of `threads` threads (0: rayon's default).
+/// of `threads` threads (0: rayon's default). `blocked` counts the blocked segments.
 pub fn occlusion_rate(
     vis: &dyn Visibility,
     segments: &[(DVec3, DVec3)],
     threads: usize,
+) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
+    rate(segments, threads, |a, b| vis.segment_occluded(a, b))
+}
+
+/// Closest-hit throughput of `vis` (the query of rendering and of hit-point lookups): per segment the ray
+/// from its start through its end, `t` in `(SEGMENT_EPSILON, inf)`. `blocked` counts the rays that hit.
+pub fn closest_hit_rate(
+    vis: &dyn Visibility,
+    segments: &[(DVec3, DVec3)],
+    threads: usize,
+) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
+    rate(segments, threads, |a, b| {
+        vis.intersect(&Ray::new(a, b - a), SEGMENT_EPSILON, f64::INFINITY)
+            .is_some()
+    })
+}
+
+/// Runs `query` over `segments` on a fresh pool of `threads` threads and counts its `true` answers. The
+/// pool is built before the clock starts; chunks of 1024 segments keep scheduling overhead negligible,
+/// and each chunk only returns a count, so threads share no written memory.
+fn rate(
+    segments: &[(DVec3, DVec3)],
+    threads: usize,
+    query: impl Fn(DVec3, DVec3) -> bool + Sync,
 ) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -61,13 +86,8 @@ pub fn occlusion_rate(
     let start = Instant::now();
     let blocked = pool.install(|| {
         segments
-            .par_chunks(256)
-            .map(|chunk| {
-                chunk
-                    .iter()
-                    .filter(|(a, b)| vis.segment_occluded(*a, *b))
-                    .count()
-            })
+            .par_chunks(1024)
+            .map(|chunk| chunk.iter().filter(|(a, b)| query(*a, *b)).count())
             .sum()
     });
     let seconds = start.elapsed().as_secs_f64();

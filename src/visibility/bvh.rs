@@ -1,9 +1,14 @@
 //! Our bounding volume hierarchy: surface-area-heuristic build over the input polygons (quads kept as
-//! quads), fast occlusion and closest-hit traversal.
+//! quads), collapsed into a 4-wide tree for fast occlusion and closest-hit traversal.
 //!
-//! Precision split: node boxes and traversal are `f32` (SSE through `glam::Vec3A`), but every box is padded
-//! by a margin far above `f32` rounding, so culling is conservative; the primitive tests are the exact
-//! double precision test of the exhaustive reference ([`super::brute_force::ray_triangle`]). Answers are
+//! The binary SAH tree is built first (binned, subtrees in parallel), then collapsed into 4-wide nodes
+//! whose children's boxes are stored as structure-of-arrays `f32` lanes, so one visit tests four boxes in
+//! one SIMD pass (SSE through `glam::Vec4`). Leaf primitives are stored contiguously in leaf order with
+//! their edge vectors precomputed.
+//!
+//! Precision split: node boxes and traversal are `f32`, but every box is padded by a margin far above
+//! `f32` rounding, so culling is conservative; the primitive tests are the exact double precision test of
+//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers. Answers are
 //! therefore the reference's answers (up to ties between polygons at the same `t`), including its
 //! robustness: a segment between two points on scene polygons is not blocked by those polygons, nor by
 //! polygons coplanar with its start.
@@ -11,7 +16,8 @@
 use super::brute_force::ray_triangle as triangle;
 use super::{Hit, Visibility};
 use crate::geometry::{DVec2, DVec3, Ray, Shape};
-use glam::{Vec3A, Vec4, Vec4Swizzles};
+use glam::{Vec3A, Vec4};
+use std::mem::MaybeUninit;
 
 /// SAH cost of one ray–triangle test, relative to one ray–box test pair in a node.
 const TRIANGLE_COST: f32 = 1.0;
@@ -19,39 +25,114 @@ const TRIANGLE_COST: f32 = 1.0;
 const QUAD_COST: f32 = 1.5;
 /// Cost of visiting an interior node (two box tests).
 const NODE_COST: f32 = 1.0;
-/// Leaves hold at most this many primitives (unless their centroids coincide).
+/// Leaves hold at most this many primitives: larger sets are always split.
 const MAX_LEAF: usize = 8;
 const BINS: usize = 16;
 /// Subtrees larger than this are built in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
-/// Beyond this depth splits are median splits, so the tree depth stays below [`STACK_SIZE`].
-const MAX_SAH_DEPTH: usize = 96;
-const STACK_SIZE: usize = 192;
+/// Beyond this depth splits are median splits. With at most 2^27 primitives (see [`LEAF_FLAG`]) the
+/// binary depth is then below `MAX_SAH_DEPTH + 28`, the 4-wide depth is no larger, and a traversal
+/// pushes at most 3 entries per level: the bound behind [`STACK_SIZE`].
+const MAX_SAH_DEPTH: usize = 64;
+const STACK_SIZE: usize = 3 * (MAX_SAH_DEPTH + 28) + 1;
 /// Box padding relative to the largest coordinate magnitude of the scene: 2^-18, far above the `f32`
 /// rounding of coordinates (2^-24) and of slab distances, and it also gives flat boxes a thickness.
 const RELATIVE_PAD: f64 = 1.0 / 262_144.0;
-/// High bit of a child reference marks a leaf; the low bits are then the first primitive.
+/// High bit of a binary child reference marks a leaf; the low bits are then the first primitive.
 const LEAF_FLAG: u32 = 1 << 31;
+/// Most primitives a tree can hold (first-primitive indices must fit below [`LEAF_FLAG`] and vertex
+/// offsets below [`QUAD_FLAG`]).
+const MAX_PRIMS: usize = 1 << 27;
 /// High bit of a primitive's vertex offset marks a quad.
 const QUAD_FLAG: u32 = 1 << 31;
+/// Children per wide node.
+const WIDTH: usize = 4;
 
-/// Interior node: both children's boxes, so one visit decides which children to enter (64 bytes). Per
-/// axis the lanes are (min left, min right, max left, max right): both slab tests are one SIMD pass.
+/// 4-wide node (128 bytes, two cache lines): per axis the children's box minima and maxima as SIMD lanes,
+/// then where each child lives.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node {
-    bounds: [Vec4; 3],
-    /// Interior node index, or `LEAF_FLAG | first primitive`.
-    child: [u32; 2],
-    /// Primitive count of leaf children (0 for interior children).
-    count: [u32; 2],
+    /// `[min x, max x, min y, max y, min z, max z]`, lane `k` for child `k` (zero for unused slots).
+    bounds: [Vec4; 6],
+    /// Wide node index of an interior child, or the first primitive of a leaf child.
+    child: [u32; WIDTH],
+    /// Primitive count of leaf children (0 for interior children and unused slots).
+    count: [u8; WIDTH],
+    /// Bit `k` set when slot `k` holds a child.
+    valid: u8,
+    /// Bit `k` set when child `k` is a leaf.
+    leaves: u8,
 }
 
-/// The root: an interior node index, or a leaf (`LEAF_FLAG | 0`, count) for tiny scenes.
+/// The root: wide node 0, or a single leaf (first primitive 0, `count`) for tiny scenes.
 #[derive(Clone, Copy, Debug)]
 struct Root {
-    child: u32,
+    /// Primitive count when the root is a leaf, 0 when it is node 0 (or the tree is empty).
     count: u32,
+}
+
+/// One primitive in leaf order: the reference test's inputs, precomputed (`e1 = v1 - v0`, `e2 = v2 - v0`,
+/// and `e3 = v3 - v0` for quads), so the test runs on bit-identical numbers without gathering vertices.
+#[derive(Clone, Copy, Debug)]
+struct Prim {
+    a: DVec3,
+    e1: DVec3,
+    e2: DVec3,
+    e3: DVec3,
+    /// Offset of its first vertex in `Bvh::vertices`, with `QUAD_FLAG` for quads.
+    vertex: u32,
+    polygon: u32,
+}
+
+impl Prim {
+    /// Ray parameter in `(t_min, t_max)`, with the triangle's barycentric (u, v). The same test, on the
+    /// same numbers, as `brute_force::intersect_shape`.
+    #[inline(always)]
+    fn hit(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
+        let s = ray.origin - self.a;
+        if may_hit(ray.direction, s, self.e1, self.e2) {
+            if let Some(hit) = triangle(ray, s, self.e1, self.e2, t_min, t_max) {
+                return Some(hit);
+            }
+        }
+        if self.vertex & QUAD_FLAG != 0 && may_hit(ray.direction, s, self.e2, self.e3) {
+            return triangle(ray, s, self.e2, self.e3, t_min, t_max);
+        }
+        None
+    }
+}
+
+/// 2^900: `|x| * 2^900 > |det|` means `x / det` is far from underflowing to zero.
+const TWO_POW_900: f64 = f64::from_bits((1023 + 900) << 52);
+
+/// Whether [`triangle`] (`ray_triangle(ray, s, e1, e2, ..)`, with direction `d`) can return a hit: the
+/// same determinant and barycentric numerators, compared against `det` without its division, so most
+/// misses skip the division's latency. It answers `false` only where the reference surely rejects:
+/// `u = U * (1 / det)` is negative when `U` and `det` have opposite signs and `U` is too large for the
+/// product to underflow to `-0`, and exceeds 1 when `|U| > |det| (1 + 1e-14)`, far beyond the two
+/// roundings (2^-52); likewise for `w` and `u + w`.
+#[inline(always)]
+fn may_hit(d: DVec3, s: DVec3, e1: DVec3, e2: DVec3) -> bool {
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    let a = det.abs();
+    // The reference's `det.abs() < 1e-300` (and a NaN determinant, whose u fails every test).
+    if a.is_nan() || a < 1e-300 {
+        return false;
+    }
+    let sign = if det < 0.0 { -1.0 } else { 1.0 };
+    let far = a * (1.0 + 1e-14);
+    let negative = |x: f64| x < 0.0 && x.abs() * TWO_POW_900 > a;
+    let u = sign * s.dot(p);
+    if negative(u) || u > far {
+        return false;
+    }
+    let w = sign * d.dot(s.cross(e1));
+    if negative(w) {
+        return false;
+    }
+    !(u >= 0.0 && w >= 0.0 && u + w > far)
 }
 
 /// SAH bounding volume hierarchy over the scene's polygons.
@@ -61,10 +142,8 @@ pub struct Bvh {
     /// Root box in double precision (padded), used to clip rays before going to `f32`.
     root_min: DVec3,
     root_max: DVec3,
-    /// Per primitive in leaf order: offset of its first vertex in `vertices` (`QUAD_FLAG` for quads).
-    prim_vertex: Vec<u32>,
-    /// Per primitive in leaf order: its polygon index.
-    prim_polygon: Vec<u32>,
+    prims: Vec<Prim>,
+    /// The polygons' vertices in leaf order, for the parameters and side of the final closest hit.
     vertices: Vec<DVec3>,
 }
 
@@ -100,6 +179,41 @@ impl Bounds {
     }
 }
 
+/// The build records of the shapes: boxes padded by [`RELATIVE_PAD`] of the scene's largest coordinate.
+fn build_prims(shapes: &[Shape]) -> Vec<BuildPrim> {
+    use rayon::prelude::*;
+    let max_abs = shapes
+        .par_iter()
+        .map(|s| {
+            s.vertices()
+                .iter()
+                .map(|v| v.abs().max_element())
+                .fold(0.0, f64::max)
+        })
+        .reduce(|| 0.0, f64::max);
+    let pad = (max_abs * RELATIVE_PAD).max(f64::MIN_POSITIVE * 1e10);
+    shapes
+        .par_iter()
+        .enumerate()
+        .map(|(index, shape)| {
+            let b = shape.bounds();
+            let min = (b.min - pad).as_vec3a();
+            let max = (b.max + pad).as_vec3a();
+            BuildPrim {
+                min,
+                max,
+                centroid: (min + max) * 0.5,
+                cost: if shape.vertex_count() == 4 {
+                    QUAD_COST
+                } else {
+                    TRIANGLE_COST
+                },
+                index: index as u32,
+            }
+        })
+        .collect()
+}
+
 fn bounds_of(prims: &[BuildPrim]) -> Bounds {
     let mut b = Bounds::EMPTY;
     for p in prims {
@@ -111,85 +225,63 @@ fn bounds_of(prims: &[BuildPrim]) -> Bounds {
 impl Bvh {
     /// Builds the hierarchy (binned SAH, subtrees in parallel; the tree does not depend on thread count).
     pub fn new(shapes: &[Shape]) -> Bvh {
-        use rayon::prelude::*;
         assert!(
-            shapes.len() < (LEAF_FLAG as usize) && 4 * shapes.len() < QUAD_FLAG as usize,
+            shapes.len() < MAX_PRIMS,
             "too many polygons for a BVH: {}",
             shapes.len()
         );
-        let max_abs = shapes
-            .par_iter()
-            .map(|s| {
-                s.vertices()
-                    .iter()
-                    .map(|v| v.abs().max_element())
-                    .fold(0.0, f64::max)
-            })
-            .reduce(|| 0.0, f64::max);
-        let pad = (max_abs * RELATIVE_PAD).max(f64::MIN_POSITIVE * 1e10);
-        let mut prims: Vec<BuildPrim> = shapes
-            .par_iter()
-            .enumerate()
-            .map(|(index, shape)| {
-                let b = shape.bounds();
-                let min = (b.min - pad).as_vec3a();
-                let max = (b.max + pad).as_vec3a();
-                BuildPrim {
-                    min,
-                    max,
-                    centroid: (min + max) * 0.5,
-                    cost: if shape.vertex_count() == 4 {
-                        QUAD_COST
-                    } else {
-                        TRIANGLE_COST
-                    },
-                    index: index as u32,
+        let mut prims = build_prims(shapes);
+        let bounds = bounds_of(&prims);
+        let (nodes, root) = if prims.len() <= MAX_LEAF {
+            (
+                Vec::new(),
+                Root {
+                    count: prims.len() as u32,
+                },
+            )
+        } else {
+            let binary = build(&mut prims, 0, 0);
+            let mut nodes = Vec::with_capacity(binary.len() / 2 + 1);
+            collapse(&binary, 0, &mut nodes);
+            (nodes, Root { count: 0 })
+        };
+        let mut vertices = Vec::with_capacity(prims.len() * 3);
+        let prims = prims
+            .iter()
+            .map(|p| {
+                let shape = &shapes[p.index as usize];
+                let v = shape.vertices();
+                let offset = vertices.len() as u32;
+                vertices.extend_from_slice(v);
+                let quad = v.len() == 4;
+                Prim {
+                    a: v[0],
+                    e1: v[1] - v[0],
+                    e2: v[2] - v[0],
+                    e3: if quad { v[3] - v[0] } else { DVec3::ZERO },
+                    vertex: if quad { offset | QUAD_FLAG } else { offset },
+                    polygon: p.index,
                 }
             })
             .collect();
-        let bounds = bounds_of(&prims);
-        let (nodes, root_child, root_count) = if prims.len() <= MAX_LEAF {
-            (Vec::new(), LEAF_FLAG, prims.len() as u32)
-        } else {
-            (build(&mut prims, 0, 0), 0, 0)
-        };
-        let root = Root {
-            child: root_child,
-            count: root_count,
-        };
-        let mut prim_vertex = Vec::with_capacity(prims.len());
-        let mut prim_polygon = Vec::with_capacity(prims.len());
-        let mut vertices = Vec::with_capacity(prims.len() * 3);
-        for p in &prims {
-            let shape = &shapes[p.index as usize];
-            let offset = vertices.len() as u32;
-            prim_vertex.push(if shape.vertex_count() == 4 {
-                offset | QUAD_FLAG
-            } else {
-                offset
-            });
-            prim_polygon.push(p.index);
-            vertices.extend_from_slice(shape.vertices());
-        }
         Bvh {
             nodes,
             root,
             root_min: bounds.min.as_dvec3(),
             root_max: bounds.max.as_dvec3(),
-            prim_vertex,
-            prim_polygon,
+            prims,
             vertices,
         }
     }
 
-    /// Number of interior nodes (for statistics).
+    /// Number of (4-wide) interior nodes (for statistics).
     pub fn node_count(&self) -> usize {
         self.nodes.len()
     }
 
     /// The shape of primitive `k` (leaf order), rebuilt bit-exactly from the stored vertices.
     fn shape(&self, k: usize) -> Shape {
-        let tagged = self.prim_vertex[k];
+        let tagged = self.prims[k].vertex;
         let o = (tagged & !QUAD_FLAG) as usize;
         let v = &self.vertices;
         if tagged & QUAD_FLAG != 0 {
@@ -199,29 +291,18 @@ impl Bvh {
         }
     }
 
-    /// Ray parameter of primitive `k` in `(t_min, t_max)`, with the triangle's barycentric (u, v) for
-    /// triangles. The same test, on the same numbers, as `brute_force::intersect_shape`.
+    /// The primitives of a leaf.
     #[inline(always)]
-    fn hit_prim(&self, k: usize, ray: &Ray, t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
-        let tagged = self.prim_vertex[k];
-        let o = (tagged & !QUAD_FLAG) as usize;
-        let v = &self.vertices;
-        let a = v[o];
-        let s = ray.origin - a;
-        let e2 = v[o + 2] - a;
-        if let Some(hit) = triangle(ray, s, v[o + 1] - a, e2, t_min, t_max) {
-            return Some(hit);
-        }
-        if tagged & QUAD_FLAG != 0 {
-            return triangle(ray, s, e2, v[o + 3] - a, t_min, t_max);
-        }
-        None
+    fn leaf(&self, first: u32, count: u32) -> &[Prim] {
+        let first = first as usize;
+        &self.prims[first..first + count as usize]
     }
 
     /// Clips the ray to the root box in double precision and prepares the `f32` traversal ray. Traversal
     /// parameters are `t' = (t - t0) * scale`.
+    #[inline(always)]
     fn setup(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<TravRay> {
-        if t_max.is_nan() || t_min.is_nan() || t_max <= t_min || self.prim_polygon.is_empty() {
+        if t_max.is_nan() || t_min.is_nan() || t_max <= t_min || self.prims.is_empty() {
             return None;
         }
         let (mut lo, mut hi) = (t_min, t_max);
@@ -233,7 +314,8 @@ impl Bvh {
                     return None;
                 }
             } else {
-                let (a, b) = ((bmin - o) / d, (bmax - o) / d);
+                let inv = 1.0 / d;
+                let (a, b) = ((bmin - o) * inv, (bmax - o) * inv);
                 lo = lo.max(a.min(b));
                 hi = hi.min(a.max(b));
             }
@@ -243,31 +325,13 @@ impl Bvh {
         }
         let scale = ray.direction.abs().max_element();
         let dir = ray.direction / scale;
-        let origin = ray.origin + lo * ray.direction;
+        let origin = (ray.origin + lo * ray.direction).as_vec3a();
         let tiny = 1e-20;
-        let inv = DVec3::new(
-            1.0 / if dir.x.abs() < tiny {
-                tiny.copysign(dir.x)
-            } else {
-                dir.x
-            },
-            1.0 / if dir.y.abs() < tiny {
-                tiny.copysign(dir.y)
-            } else {
-                dir.y
-            },
-            1.0 / if dir.z.abs() < tiny {
-                tiny.copysign(dir.z)
-            } else {
-                dir.z
-            },
-        );
-        let origin = origin.as_vec3a();
+        let inv = dir.map(|d| 1.0 / if d.abs() < tiny { tiny.copysign(d) } else { d });
         let inv = inv.as_vec3a();
-        let neg_origin_inv = -origin * inv;
         let mut trav = TravRay {
+            origin: [0, 1, 2].map(|a| Vec4::splat(origin[a])),
             inv: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
-            neg_origin_inv: [0, 1, 2].map(|a| Vec4::splat(neg_origin_inv[a])),
             t_far: 0.0,
             t0: lo,
             scale,
@@ -280,51 +344,54 @@ impl Bvh {
         let Some(trav) = self.setup(ray, t_min, t_max) else {
             return false;
         };
-        let leaf = |first: u32, count: u32| -> bool {
-            let first = (first & !LEAF_FLAG) as usize;
-            (first..first + count as usize).any(|k| self.hit_prim(k, ray, t_min, t_max).is_some())
+        let leaf_hit = |first: u32, count: u32| {
+            self.leaf(first, count)
+                .iter()
+                .any(|p| p.hit(ray, t_min, t_max).is_some())
         };
         if self.root.count > 0 {
-            return leaf(self.root.child, self.root.count);
+            return leaf_hit(0, self.root.count);
         }
-        let mut stack = [0u32; STACK_SIZE];
-        let mut top = 0;
-        let mut current = self.root.child;
+        let mut stack = Stack::new();
+        let mut current = 0u32;
         loop {
             let node = &self.nodes[current as usize];
             let (mask, enter) = trav.slab(node);
-            // Nearer child first: rays from a surface find nearby blockers soonest.
-            let order = if enter.x <= enter.y { [0, 1] } else { [1, 0] };
-            let mut next = [0u32; 2];
-            let mut n = 0;
-            for side in order {
-                if mask & (1 << side) == 0 {
-                    continue;
+            let enter = enter.to_array();
+            // Leaves right away: a blocker ends the ray.
+            let mut leaves = mask & node.leaves as u32;
+            while leaves != 0 {
+                let k = leaves.trailing_zeros() as usize;
+                leaves &= leaves - 1;
+                if leaf_hit(node.child[k], node.count[k] as u32) {
+                    return true;
                 }
-                if node.count[side] > 0 {
-                    if leaf(node.child[side], node.count[side]) {
-                        return true;
-                    }
+            }
+            // Then the nearest interior child, the others pushed: rays from a surface find nearby
+            // blockers soonest.
+            let mut inner = mask & !(node.leaves as u32);
+            if inner == 0 {
+                match stack.pop() {
+                    Some((next, _)) => current = next,
+                    None => return false,
+                }
+                continue;
+            }
+            let k = inner.trailing_zeros() as usize;
+            inner &= inner - 1;
+            let (mut best, mut best_t) = (node.child[k], enter[k]);
+            while inner != 0 {
+                let k = inner.trailing_zeros() as usize;
+                inner &= inner - 1;
+                let (c, t) = (node.child[k], enter[k]);
+                if t < best_t {
+                    stack.push(best, best_t);
+                    (best, best_t) = (c, t);
                 } else {
-                    next[n] = node.child[side];
-                    n += 1;
+                    stack.push(c, t);
                 }
             }
-            match n {
-                0 => {
-                    if top == 0 {
-                        return false;
-                    }
-                    top -= 1;
-                    current = stack[top];
-                }
-                1 => current = next[0],
-                _ => {
-                    stack[top] = next[1];
-                    top += 1;
-                    current = next[0];
-                }
-            }
+            current = best;
         }
     }
 
@@ -334,70 +401,76 @@ impl Bvh {
         let mut best: Option<(f64, usize, f64, f64)> = None;
         let mut limit = t_max;
         let mut leaf = |first: u32, count: u32, trav: &mut TravRay| {
-            let first = (first & !LEAF_FLAG) as usize;
-            for k in first..first + count as usize {
-                if let Some((t, u, v)) = self.hit_prim(k, ray, t_min, limit) {
-                    best = Some((t, k, u, v));
+            for (k, p) in self.leaf(first, count).iter().enumerate() {
+                if let Some((t, u, v)) = p.hit(ray, t_min, limit) {
+                    best = Some((t, first as usize + k, u, v));
                     limit = t;
                     trav.set_far(t);
                 }
             }
         };
         if self.root.count > 0 {
-            leaf(self.root.child, self.root.count, &mut trav);
+            leaf(0, self.root.count, &mut trav);
         } else {
-            let mut stack = [(0u32, 0f32); STACK_SIZE];
-            let mut top = 0;
-            let mut current = self.root.child;
-            'done: loop {
+            let mut stack = Stack::new();
+            let mut current = 0u32;
+            loop {
                 let node = &self.nodes[current as usize];
                 let (mask, enter) = trav.slab(node);
-                let (mut hit_l, mut hit_r) = (mask & 1 != 0, mask & 2 != 0);
-                let (t_l, t_r) = (enter.x, enter.y);
-                // Leaves first, nearer one first, so that the far side is culled by their hits.
-                let near_first = t_l <= t_r;
-                for side in if near_first { [0, 1] } else { [1, 0] } {
-                    let hit = if side == 0 { hit_l } else { hit_r };
-                    let t_enter = if side == 0 { t_l } else { t_r };
-                    if hit && node.count[side] > 0 && t_enter <= trav.t_far {
-                        leaf(node.child[side], node.count[side], &mut trav);
+                let enter = enter.to_array();
+                // Hit children sorted by entry distance (insertion sort of at most four).
+                let mut order = [(0f32, 0usize); WIDTH];
+                let mut n = 0;
+                let mut bits = mask;
+                while bits != 0 {
+                    let k = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let mut j = n;
+                    while j > 0 && order[j - 1].0 > enter[k] {
+                        order[j] = order[j - 1];
+                        j -= 1;
+                    }
+                    order[j] = (enter[k], k);
+                    n += 1;
+                }
+                // Leaves first, nearer first, so that their hits cull the interior children.
+                for &(t, k) in &order[..n] {
+                    if node.leaves & (1 << k) != 0 && t <= trav.t_far {
+                        leaf(node.child[k], node.count[k] as u32, &mut trav);
                     }
                 }
-                if node.count[0] > 0 {
-                    hit_l = false;
-                }
-                if node.count[1] > 0 {
-                    hit_r = false;
-                }
-                hit_l &= t_l <= trav.t_far;
-                hit_r &= t_r <= trav.t_far;
-                match (hit_l, hit_r) {
-                    (true, true) => {
-                        let (near, far, t_far_child) = if near_first {
-                            (node.child[0], node.child[1], t_r)
-                        } else {
-                            (node.child[1], node.child[0], t_l)
-                        };
-                        stack[top] = (far, t_far_child);
-                        top += 1;
-                        current = near;
-                    }
-                    (true, false) => current = node.child[0],
-                    (false, true) => current = node.child[1],
-                    (false, false) => loop {
-                        if top == 0 {
-                            break 'done;
+                // Interior children: far ones pushed first, the nearest visited next.
+                let mut next = None;
+                for &(t, k) in order[..n].iter().rev() {
+                    if node.leaves & (1 << k) == 0 && t <= trav.t_far {
+                        if let Some((c, tc)) = next {
+                            stack.push(c, tc);
                         }
-                        top -= 1;
-                        let (node, t_enter) = stack[top];
-                        if t_enter <= trav.t_far {
-                            current = node;
+                        next = Some((node.child[k], t));
+                    }
+                }
+                if let Some((c, _)) = next {
+                    current = c;
+                    continue;
+                }
+                // Pop the nearest pending child still within reach.
+                loop {
+                    match stack.pop() {
+                        Some((c, t)) if t <= trav.t_far => {
+                            current = c;
                             break;
                         }
-                    },
+                        Some(_) => {}
+                        None => return self.finish(ray, best),
+                    }
                 }
             }
         }
+        self.finish(ray, best)
+    }
+
+    /// The hit record of the closest primitive found.
+    fn finish(&self, ray: &Ray, best: Option<(f64, usize, f64, f64)>) -> Option<Hit> {
         let (t, k, u, v) = best?;
         let shape = self.shape(k);
         let uv = match shape {
@@ -406,18 +479,53 @@ impl Bvh {
         };
         Some(Hit {
             t,
-            polygon: self.prim_polygon[k] as usize,
+            polygon: self.prims[k].polygon as usize,
             uv,
             front: ray.direction.dot(shape.vector_area()) < 0.0,
         })
     }
 }
 
+/// Traversal stack of (node, entry parameter): a fixed array, left uninitialised so that each ray does
+/// not pay for clearing it.
+struct Stack {
+    entries: [MaybeUninit<(u32, f32)>; STACK_SIZE],
+    top: usize,
+}
+
+impl Stack {
+    #[inline(always)]
+    fn new() -> Stack {
+        Stack {
+            entries: [const { MaybeUninit::uninit() }; STACK_SIZE],
+            top: 0,
+        }
+    }
+
+    /// Pushes an entry; the depth bound of the tree (see [`STACK_SIZE`]) keeps `top` in range, and the
+    /// indexing checks it anyway.
+    #[inline(always)]
+    fn push(&mut self, node: u32, t: f32) {
+        self.entries[self.top] = MaybeUninit::new((node, t));
+        self.top += 1;
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<(u32, f32)> {
+        if self.top == 0 {
+            return None;
+        }
+        self.top -= 1;
+        // SAFETY: every entry below `top` was written by `push`.
+        Some(unsafe { self.entries[self.top].assume_init() })
+    }
+}
+
 /// The ray in `f32` traversal coordinates (origin moved to the root box entry, direction scaled to unit
-/// maximum component).
+/// maximum component), each component splatted over the four child lanes.
 struct TravRay {
+    origin: [Vec4; 3],
     inv: [Vec4; 3],
-    neg_origin_inv: [Vec4; 3],
     /// Conservative far end of the interval, in traversal parameters.
     t_far: f32,
     t0: f64,
@@ -432,35 +540,111 @@ impl TravRay {
         self.t_far = t * (1.0 + 1e-5) + 1e-30;
     }
 
-    /// Slab tests of both children of `node` against `[0, t_far]`: bit 0 (left) and 1 (right) of the
-    /// mask are set for hit children; lanes x and y of the vector are their entry parameters.
+    /// Slab tests of the four children of `node` against `[0, t_far]`: bit `k` of the mask is set when
+    /// child `k` exists and is hit; lane `k` of the vector is its entry parameter.
     #[inline(always)]
     fn slab(&self, node: &Node) -> (u32, Vec4) {
         let mut enter = Vec4::ZERO;
         let mut exit = Vec4::splat(self.t_far);
         for axis in 0..3 {
-            let t = node.bounds[axis] * self.inv[axis] + self.neg_origin_inv[axis];
-            let swapped = t.zwxy();
-            enter = enter.max(t.min(swapped));
-            exit = exit.min(t.max(swapped));
+            let t0 = (node.bounds[2 * axis] - self.origin[axis]) * self.inv[axis];
+            let t1 = (node.bounds[2 * axis + 1] - self.origin[axis]) * self.inv[axis];
+            enter = enter.max(t0.min(t1));
+            exit = exit.min(t0.max(t1));
         }
-        (enter.cmple(exit).bitmask() & 3, enter)
+        (enter.cmple(exit).bitmask() & node.valid as u32, enter)
     }
+}
+
+/// A child of a binary node: interior node index (count 0) or leaf (`LEAF_FLAG | first`, count), with
+/// its box.
+#[derive(Clone, Copy)]
+struct ChildRef {
+    child: u32,
+    count: u32,
+    bounds: Bounds,
+}
+
+fn binary_children(node: &BinNode) -> [ChildRef; 2] {
+    [0, 1].map(|side| ChildRef {
+        child: node.child[side],
+        count: node.count[side],
+        bounds: Bounds {
+            min: Vec3A::from_array([0, 1, 2].map(|a| node.bounds[a][side])),
+            max: Vec3A::from_array([0, 1, 2].map(|a| node.bounds[a][side + 2])),
+        },
+    })
+}
+
+/// Collapses the binary subtree at `index` into 4-wide nodes appended to `out` (parent before children)
+/// and returns its wide index: starting from the binary node's two children, the interior child with the
+/// largest surface area is replaced by its own two children until there are four or only leaves.
+fn collapse(binary: &[BinNode], index: u32, out: &mut Vec<Node>) -> u32 {
+    let [l, r] = binary_children(&binary[index as usize]);
+    let mut refs = [l, r, l, r];
+    let mut n = 2;
+    while n < WIDTH {
+        let widest = (0..n)
+            .filter(|&k| refs[k].count == 0)
+            .max_by(|&a, &b| refs[a].bounds.area().total_cmp(&refs[b].bounds.area()));
+        let Some(k) = widest else { break };
+        let [cl, cr] = binary_children(&binary[refs[k].child as usize]);
+        refs.copy_within(k + 1..n, k + 2);
+        refs[k] = cl;
+        refs[k + 1] = cr;
+        n += 1;
+    }
+    let wide = out.len();
+    out.push(Node {
+        bounds: [Vec4::ZERO; 6],
+        child: [0; WIDTH],
+        count: [0; WIDTH],
+        valid: 0,
+        leaves: 0,
+    });
+    let mut node = out[wide];
+    for (k, r) in refs[..n].iter().enumerate() {
+        for axis in 0..3 {
+            node.bounds[2 * axis][k] = r.bounds.min[axis];
+            node.bounds[2 * axis + 1][k] = r.bounds.max[axis];
+        }
+        node.valid |= 1 << k;
+        if r.count > 0 {
+            node.leaves |= 1 << k;
+            node.child[k] = r.child & !LEAF_FLAG;
+            node.count[k] = r.count as u8;
+        } else {
+            node.child[k] = collapse(binary, r.child, out);
+        }
+    }
+    out[wide] = node;
+    wide as u32
+}
+
+/// Binary interior node of the SAH build: both children's boxes; per axis the lanes are (min left,
+/// min right, max left, max right).
+#[derive(Clone, Copy, Debug)]
+struct BinNode {
+    bounds: [Vec4; 3],
+    /// Interior node index, or `LEAF_FLAG | first primitive`.
+    child: [u32; 2],
+    /// Primitive count of leaf children (0 for interior children).
+    count: [u32; 2],
 }
 
 /// Builds the subtree over `prims` (which sit at offset `base` of the whole primitive array) and returns
 /// its nodes, root first; child indices are local to the returned vector.
-fn build(prims: &mut [BuildPrim], base: usize, depth: usize) -> Vec<Node> {
+fn build(prims: &mut [BuildPrim], base: usize, depth: usize) -> Vec<BinNode> {
     let mut nodes = Vec::new();
     build_into(prims, base, depth, &mut nodes);
     nodes
 }
 
 /// Appends the subtree's nodes to `nodes` (root first) and returns the root's index.
-fn build_into(prims: &mut [BuildPrim], base: usize, depth: usize, nodes: &mut Vec<Node>) -> u32 {
+fn build_into(prims: &mut [BuildPrim], base: usize, depth: usize, nodes: &mut Vec<BinNode>) -> u32 {
     let index = nodes.len();
     let mid = split(prims, depth);
-    nodes.push(Node {
+    nodes.push(BinNode {
         bounds: [Vec4::ZERO; 3],
         child: [0; 2],
         count: [0; 2],
@@ -513,7 +697,7 @@ fn build_into(prims: &mut [BuildPrim], base: usize, depth: usize, nodes: &mut Ve
 
 enum Subtree {
     Leaf(u32, u32),
-    Nodes(Vec<Node>),
+    Nodes(Vec<BinNode>),
 }
 
 fn child_subtree(prims: &mut [BuildPrim], base: usize, depth: usize) -> Subtree {
@@ -677,41 +861,115 @@ mod tests {
             .collect()
     }
 
-    /// Visits the leaves under `child`, checking that each box contains its primitives' vertices.
-    fn check(bvh: &Bvh, child: u32, count: u32, min: Vec3A, max: Vec3A, seen: &mut [u32]) {
-        if count > 0 {
-            let first = (child & !LEAF_FLAG) as usize;
-            for k in first..first + count as usize {
-                seen[bvh.prim_polygon[k] as usize] += 1;
-                for v in bvh.shape(k).vertices() {
-                    let v = v.as_vec3a();
-                    assert!(v.cmpge(min).all() && v.cmple(max).all(), "{v} outside box");
-                }
+    /// Child `k` of a wide node as (min, max).
+    fn child_box(node: &Node, k: usize) -> (Vec3A, Vec3A) {
+        let lane = |i: usize| Vec3A::from_array([0, 1, 2].map(|a| node.bounds[2 * a + i][k]));
+        (lane(0), lane(1))
+    }
+
+    /// Visits the wide subtree at `index`, checking that each child box lies in its parent's, that each
+    /// leaf's box contains its primitives' vertices and that leaves are non-empty and small; returns the
+    /// subtree's depth.
+    fn check(bvh: &Bvh, index: u32, min: Vec3A, max: Vec3A, seen: &mut [u32]) -> usize {
+        let node = &bvh.nodes[index as usize];
+        assert!(
+            node.valid.count_ones() >= 2,
+            "a wide node has 2 to 4 children"
+        );
+        assert_eq!(
+            node.valid & (node.valid + 1),
+            0,
+            "children fill the first slots"
+        );
+        assert_eq!(node.leaves & !node.valid, 0);
+        let mut depth = 0;
+        for k in 0..WIDTH {
+            if node.valid & (1 << k) == 0 {
+                continue;
             }
-            return;
-        }
-        let node = &bvh.nodes[child as usize];
-        for side in 0..2 {
-            let b = |lane: usize| Vec3A::from_array([0, 1, 2].map(|a| node.bounds[a][lane]));
-            let (cmin, cmax) = (b(side), b(side + 2));
+            let (cmin, cmax) = child_box(node, k);
             assert!(
                 cmin.cmpge(min).all() && cmax.cmple(max).all(),
                 "child outside parent"
             );
-            check(bvh, node.child[side], node.count[side], cmin, cmax, seen);
+            if node.leaves & (1 << k) != 0 {
+                let count = node.count[k] as usize;
+                assert!((1..=MAX_LEAF).contains(&count));
+                let first = node.child[k] as usize;
+                for p in first..first + count {
+                    seen[bvh.prims[p].polygon as usize] += 1;
+                    for v in bvh.shape(p).vertices() {
+                        let v = v.as_vec3a();
+                        assert!(
+                            v.cmpge(cmin).all() && v.cmple(cmax).all(),
+                            "{v} outside box"
+                        );
+                    }
+                }
+            } else {
+                assert_eq!(node.count[k], 0);
+                assert!(node.child[k] > index, "children after their parent");
+                depth = depth.max(check(bvh, node.child[k], cmin, cmax, seen));
+            }
         }
+        depth + 1
     }
 
     #[test]
     fn every_primitive_is_in_exactly_one_leaf_inside_its_boxes() {
-        for count in [1, 5, 100, 5000] {
+        for count in [1, 5, 9, 100, 5000] {
             let shapes = random_triangles(count, count as u64);
             let bvh = Bvh::new(&shapes);
             let mut seen = vec![0; count];
-            let inf = Vec3A::splat(f32::INFINITY);
-            check(&bvh, bvh.root.child, bvh.root.count, -inf, inf, &mut seen);
+            if bvh.root.count > 0 {
+                assert!(bvh.nodes.is_empty() && bvh.root.count as usize == count);
+                seen.iter_mut().for_each(|s| *s += 1);
+            } else {
+                let inf = Vec3A::splat(f32::INFINITY);
+                let depth = check(&bvh, 0, -inf, inf, &mut seen);
+                assert!(3 * depth < STACK_SIZE);
+            }
             assert!(seen.iter().all(|&n| n == 1));
         }
+    }
+
+    #[test]
+    fn collapse_fills_wide_nodes() {
+        let shapes = random_triangles(20_000, 3);
+        let bvh = Bvh::new(&shapes);
+        let mut prims = build_prims(&shapes);
+        let binary = build(&mut prims, 0, 0);
+        // A wide node with n children absorbs n - 1 binary nodes (itself and n - 2 expanded children),
+        // so every binary node lands in exactly one wide node.
+        let absorbed: usize = bvh
+            .nodes
+            .iter()
+            .map(|n| n.valid.count_ones() as usize - 1)
+            .sum();
+        assert_eq!(absorbed, binary.len());
+        // Random triangles split well: on average at least three children per wide node.
+        assert!(
+            absorbed >= 2 * bvh.nodes.len(),
+            "{absorbed} of {}",
+            bvh.nodes.len()
+        );
+    }
+
+    #[test]
+    fn median_splits_bound_the_depth() {
+        // Identical triangles: no SAH split exists, every split is a median split.
+        let t = Shape::Triangle([DVec3::ZERO, DVec3::X, DVec3::Y]);
+        let shapes = vec![t; 3000];
+        let bvh = Bvh::new(&shapes);
+        let mut seen = vec![0; shapes.len()];
+        let inf = Vec3A::splat(f32::INFINITY);
+        let depth = check(&bvh, 0, -inf, inf, &mut seen);
+        assert!(3 * depth < STACK_SIZE && depth <= 12, "depth {depth}");
+        assert!(seen.iter().all(|&n| n == 1));
+        let ray = Ray::new(DVec3::new(0.2, 0.2, 1.0), -DVec3::Z);
+        let hit = bvh.intersect(&ray, 0.0, f64::INFINITY).expect("hit");
+        assert_eq!(hit.t, 1.0);
+        assert!(bvh.occluded(&ray, 0.0, 2.0));
     }
 
     #[test]
@@ -727,11 +985,48 @@ mod tests {
             })
             .collect();
         let bvh = Bvh::new(&shapes);
+        assert!(!bvh.nodes.is_empty());
         for node in &bvh.nodes {
-            for side in 0..2 {
-                assert!(node.bounds[2][side] < 0.0 && node.bounds[2][side + 2] > 0.0);
+            for k in 0..WIDTH {
+                if node.valid & (1 << k) != 0 {
+                    let (min, max) = child_box(node, k);
+                    assert!(min.z < 0.0 && max.z > 0.0);
+                }
             }
         }
+    }
+
+    /// The division-free filter never rejects what the reference test accepts, also at the triangle's
+    /// edges and vertices and for nearly parallel rays.
+    #[test]
+    fn hit_filter_is_conservative() {
+        let mut rng = Pcg64Mcg::seed_from_u64(5);
+        let mut rejected = 0;
+        for i in 0..200_000 {
+            let mut v = || DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
+            let (e1, e2, o) = (v(), v(), v() * 3.0);
+            // Targets on the triangle's edges and corners (barycentrics 0 or 1) or near them.
+            let (bu, bw) = match i % 4 {
+                0 => (0.0, 0.5),
+                1 => (0.5, 0.5),
+                2 => (1.0, 0.0),
+                _ => (1e-9 * (i % 7) as f64, 1.0 - 1e-9),
+            };
+            let target = bu * e1 + bw * e2;
+            let mut d = target - o;
+            if i % 5 == 0 {
+                // Nearly in the plane: tiny determinant.
+                let n = e1.cross(e2).normalize();
+                d -= n * n.dot(d) * (1.0 - 1e-12);
+            }
+            let ray = Ray::new(o, d);
+            let reference = triangle(&ray, o, e1, e2, 0.0, f64::INFINITY);
+            if !may_hit(d, o, e1, e2) {
+                rejected += 1;
+                assert!(reference.is_none(), "ray {i}: {reference:?}");
+            }
+        }
+        assert!(rejected > 1000, "the filter rejects misses: {rejected}");
     }
 
     #[test]
