@@ -157,6 +157,29 @@ pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
     }
 }
 
+/// The deterministic solver's settings for absolute refinement `threshold` and `min_area` (`simulate`
+/// derives both from the relative `eps` and `min_area` of `settings`).
+pub fn deterministic_settings(
+    settings: &SimulationSettings,
+    threshold: f64,
+    min_area: f64,
+) -> SolveSettings {
+    SolveSettings {
+        refine: RefineSettings {
+            threshold,
+            min_area,
+            coupling: CouplingSettings {
+                receiver_order: settings.receiver_order,
+                visibility_rays: settings.visibility_rays,
+            },
+            seed: settings.seed,
+        },
+        tolerance: settings.tolerance,
+        max_iterations: settings.max_iterations,
+        max_passes: settings.max_passes,
+    }
+}
+
 /// Runs hierarchical radiosity on `scene`.
 pub fn simulate(
     scene: &Scene,
@@ -203,20 +226,7 @@ pub fn simulate(
             visibility_seconds,
         });
     }
-    let solve_settings = SolveSettings {
-        refine: RefineSettings {
-            threshold,
-            min_area,
-            coupling: CouplingSettings {
-                receiver_order: settings.receiver_order,
-                visibility_rays: settings.visibility_rays,
-            },
-            seed: settings.seed,
-        },
-        tolerance: settings.tolerance,
-        max_iterations: settings.max_iterations,
-        max_passes: settings.max_passes,
-    };
+    let solve_settings = deterministic_settings(settings, threshold, min_area);
     let solver = make_solver(settings.solver);
     let report = solve(
         &mut hierarchy,

@@ -16,13 +16,11 @@ use radiosity::measures::fbem::{self, Mask};
 use radiosity::output::camera::Camera;
 use radiosity::output::image::Image;
 use radiosity::output::render::{render, RenderOptions, Shading};
-use radiosity::pipeline::{make_oracle, make_solver, SimulationSettings};
+use radiosity::pipeline::{deterministic_settings, make_oracle, make_solver, SimulationSettings};
 use radiosity::progress::Progress;
 use radiosity::scene::generators::ShadowGroups;
 use radiosity::scene::{CameraSpec, Scene};
-use radiosity::solvers::coupling::CouplingSettings;
-use radiosity::solvers::refine::RefineSettings;
-use radiosity::solvers::{solve, SolveSettings};
+use radiosity::solvers::solve;
 use radiosity::visibility::bvh::Bvh;
 
 /// Image pixel size on the wall.
@@ -48,22 +46,10 @@ fn solve_wall(receivers: &Scene, occluders: &[Shape], tile_area: f64) -> Hierarc
         .iter()
         .map(|p| p.emission.max_channel() * h.element(p.root).area)
         .sum();
-    let solve_settings = SolveSettings {
-        refine: RefineSettings {
-            threshold: settings.eps * total_emission,
-            // Wall elements stop at quadtree level 7 (side 1/128 of a tile, about 0.012, a third of the
-            // smallest shadow): level-6 elements are still splittable, level-7 ones not.
-            min_area: 0.5 * tile_area / 4f64.powi(6),
-            coupling: CouplingSettings {
-                receiver_order: settings.receiver_order,
-                visibility_rays: settings.visibility_rays,
-            },
-            seed: settings.seed,
-        },
-        tolerance: settings.tolerance,
-        max_iterations: settings.max_iterations,
-        max_passes: settings.max_passes,
-    };
+    // Wall elements stop at quadtree level 7 (side 1/128 of a tile, about 0.012, a third of the smallest
+    // shadow): level-6 elements are still splittable, level-7 ones not.
+    let min_area = 0.5 * tile_area / 4f64.powi(6);
+    let solve_settings = deterministic_settings(&settings, settings.eps * total_emission, min_area);
     let oracle = make_oracle(&settings, &h);
     let solver = make_solver(settings.solver);
     solve(

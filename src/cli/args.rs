@@ -21,6 +21,25 @@ pub struct SceneArgs {
 }
 
 impl SceneArgs {
+    /// Loads a scene to be solved: prints the loader's warnings (file:line: reason) unless quiet, and
+    /// refuses a scene without polygons.
+    pub fn load_for_solving(
+        &self,
+        progress: &crate::progress::Progress,
+    ) -> Result<(Scene, String)> {
+        let (scene, name) = self.load()?;
+        if !progress.quiet {
+            for warning in &scene.warnings {
+                eprintln!("warning: {warning}");
+            }
+        }
+        anyhow::ensure!(
+            !scene.polygons.is_empty(),
+            "{name}: the scene has no polygons"
+        );
+        Ok((scene, name))
+    }
+
     /// Loads the scene (or builds the Cornell box) and returns it with a display name.
     pub fn load(&self) -> Result<(Scene, String)> {
         let options = LoadOptions {

@@ -90,7 +90,7 @@ impl OraclesExperiment {
             self.width > 0 && self.height > 0,
             "--width and --height must be positive"
         );
-        let (scene, name) = self.scene.load()?;
+        let (scene, name) = self.scene.load_for_solving(progress)?;
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("creating {}", self.out.display()))?;
         let spec = scene

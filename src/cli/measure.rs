@@ -45,16 +45,7 @@ struct Level {
 impl MeasureCommand {
     pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
         anyhow::ensure!(self.lines >= 2, "--lines must be at least 2");
-        let (scene, name) = self.scene.load()?;
-        if !progress.quiet {
-            for warning in &scene.warnings {
-                eprintln!("warning: {warning}");
-            }
-        }
-        anyhow::ensure!(
-            !scene.polygons.is_empty(),
-            "{name}: the scene has no polygons"
-        );
+        let (scene, name) = self.scene.load_for_solving(progress)?;
         let settings = self.solve.settings(seed)?;
         let eps_levels = match &self.sweep {
             None => vec![settings.eps],

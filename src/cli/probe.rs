@@ -37,7 +37,7 @@ impl ProbeCommand {
             "--spp must be at least 2 (the standard error needs two samples)"
         );
         let points = read_points(&self.points)?;
-        let (scene, name) = self.scene.load()?;
+        let (scene, name) = self.scene.load_for_solving(progress)?;
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
         let reference = self.reference.then_some(ProbeReference {

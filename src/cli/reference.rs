@@ -42,7 +42,7 @@ impl ReferenceCommand {
             self.spp >= 2,
             "--spp must be at least 2 (the standard error needs two samples)"
         );
-        let (scene, name) = self.scene.load()?;
+        let (scene, name) = self.scene.load_for_solving(progress)?;
         if !progress.quiet {
             for warning in &scene.warnings {
                 eprintln!("warning: {warning}");

@@ -67,17 +67,8 @@ impl RenderCommand {
             );
         }
         let start = Instant::now();
-        let (scene, name) = self.scene.load()?;
+        let (scene, name) = self.scene.load_for_solving(progress)?;
         let load_seconds = start.elapsed().as_secs_f64();
-        if !progress.quiet {
-            for warning in &scene.warnings {
-                eprintln!("warning: {warning}");
-            }
-        }
-        anyhow::ensure!(
-            !scene.polygons.is_empty(),
-            "{name}: the scene has no polygons"
-        );
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene)?;
         let solution = simulate(&scene, &settings, progress)?;
