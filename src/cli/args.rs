@@ -147,8 +147,8 @@ impl SolveArgs {
     }
 }
 
-/// Pinhole camera; without `--eye` the scene's own camera (the Cornell box has one) or an automatic view of
-/// the scene bounds.
+/// Pinhole camera; without `--eye` the scene's own camera (the Cornell box has one) or an automatic view
+/// (`Camera::auto_view`: from outside, or from inside a closed room).
 #[derive(Args, Debug, Clone)]
 pub struct CameraArgs {
     /// Eye position "x,y,z".
@@ -163,30 +163,41 @@ pub struct CameraArgs {
     /// Vertical field of view in degrees.
     #[arg(long)]
     pub fov: Option<f64>,
-    #[arg(long, default_value_t = 512)]
-    pub width: usize,
-    #[arg(long, default_value_t = 512)]
-    pub height: usize,
+    /// Image width in pixels (default 512, 256 for experiments).
+    #[arg(long)]
+    pub width: Option<usize>,
+    /// Image height in pixels (default 512, 256 for experiments).
+    #[arg(long)]
+    pub height: Option<usize>,
 }
 
 impl CameraArgs {
-    pub fn camera(&self, scene: &Scene) -> Result<crate::output::camera::Camera> {
+    /// The camera for `scene`, `default_size` pixels square unless `--width`/`--height` say otherwise.
+    pub fn camera(
+        &self,
+        scene: &Scene,
+        default_size: usize,
+    ) -> Result<crate::output::camera::Camera> {
         use crate::output::camera::Camera;
+        let (width, height) = (
+            self.width.unwrap_or(default_size),
+            self.height.unwrap_or(default_size),
+        );
         anyhow::ensure!(
-            self.width > 0 && self.height > 0,
+            width > 0 && height > 0,
             "--width and --height must be positive"
         );
-        anyhow::ensure!(self.width * self.height <= 1 << 28, "image too large");
+        anyhow::ensure!(width * height <= 1 << 28, "image too large");
         let fov = self
             .fov
-            .unwrap_or(scene.camera.map_or(45.0, |c| c.fov_degrees));
+            .unwrap_or(scene.camera.map_or(50.0, |c| c.fov_degrees));
         anyhow::ensure!(
             fov > 0.0 && fov < 180.0,
             "--fov must be between 0 and 180 degrees"
         );
-        let mut spec = match (self.eye, scene.camera) {
-            (None, Some(c)) => c,
-            _ => Camera::framing(&scene.bounds(), fov),
+        let mut spec = match self.eye {
+            None => Camera::auto_view(scene, fov),
+            Some(_) => Camera::framing(&scene.bounds(), fov),
         };
         spec.fov_degrees = fov;
         if let Some(eye) = self.eye {
@@ -202,7 +213,7 @@ impl CameraArgs {
             (spec.look_at - spec.eye).length() > 0.0,
             "--eye and --look-at must differ"
         );
-        Ok(Camera::new(&spec, self.width, self.height))
+        Ok(Camera::new(&spec, width, height))
     }
 }
 

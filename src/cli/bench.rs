@@ -110,7 +110,7 @@ impl RenderBench {
             let solve = start.elapsed().as_secs_f64() - load;
             let spec = scene
                 .camera
-                .unwrap_or_else(|| Camera::framing(&scene.bounds(), 45.0));
+                .unwrap_or_else(|| Camera::auto_view(&scene, 50.0));
             let camera = Camera::new(&spec, self.width, self.height);
             let options = RenderOptions {
                 shading: Shading::Smooth,

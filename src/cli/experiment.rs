@@ -2,7 +2,7 @@
 //! `experiments::oracles`): tables in Markdown and JSON, and the meshes and smooth-shaded images side by
 //! side as one PNG per target and sample count.
 
-use super::args::{SceneArgs, SolveArgs};
+use super::args::{CameraArgs, SceneArgs, SolveArgs};
 use crate::experiments::oracles::{
     markdown_table, oracle_name, reference_features, run_one, tile, OracleExperiment, OracleRun,
     Yardstick,
@@ -59,10 +59,8 @@ pub struct OraclesExperiment {
     /// Paths per pixel when the reference is computed.
     #[arg(long, default_value_t = 1024)]
     pub reference_spp: usize,
-    #[arg(long, default_value_t = 256)]
-    pub width: usize,
-    #[arg(long, default_value_t = 256)]
-    pub height: usize,
+    #[command(flatten)]
+    pub camera: CameraArgs,
     /// Folder for table.md, table.json and the images.
     #[arg(short, long, default_value = "experiment-oracles")]
     pub out: PathBuf,
@@ -86,17 +84,10 @@ impl OraclesExperiment {
             self.samples.iter().all(|&s| s >= 2),
             "--samples must be at least 2"
         );
-        anyhow::ensure!(
-            self.width > 0 && self.height > 0,
-            "--width and --height must be positive"
-        );
         let (scene, name) = self.scene.load_for_solving(progress)?;
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("creating {}", self.out.display()))?;
-        let spec = scene
-            .camera
-            .unwrap_or_else(|| Camera::framing(&scene.bounds(), 45.0));
-        let camera = Camera::new(&spec, self.width, self.height);
+        let camera = self.camera.camera(&scene, 256)?;
         let base = self.solve.settings(seed)?;
         let reference = self.reference(&scene, &camera, seed, progress)?;
         let features = reference_features(&reference)?;
@@ -184,13 +175,13 @@ impl OraclesExperiment {
         if path.exists() {
             let image = Image::read_exr(&path)?;
             anyhow::ensure!(
-                image.width == self.width && image.height == self.height,
+                image.width == camera.width && image.height == camera.height,
                 "{} is {}x{}, not the requested {}x{}",
                 path.display(),
                 image.width,
                 image.height,
-                self.width,
-                self.height
+                camera.width,
+                camera.height
             );
             return Ok(image);
         }

@@ -20,12 +20,7 @@ impl InfoCommand {
             eprintln!("warning: {warning}");
         }
         println!("scene: {name}");
-        println!(
-            "{} polygons, {} objects, {} materials",
-            scene.polygons.len(),
-            scene.objects.len(),
-            scene.materials.len()
-        );
+        println!("{}", crate::scene::summary(&scene));
         if self.materials {
             for m in &scene.materials {
                 let r = m.reflectance;

@@ -49,7 +49,7 @@ impl ReferenceCommand {
             }
         }
         anyhow::ensure!(scene.emitter_count() > 0, "{name} has no emitting surface");
-        let camera = self.camera.camera(&scene)?;
+        let camera = self.camera.camera(&scene, 512)?;
         let settings = ReferenceSettings {
             spp: self.spp,
             seed,

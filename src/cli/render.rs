@@ -70,7 +70,7 @@ impl RenderCommand {
         let (scene, name) = self.scene.load_for_solving(progress)?;
         let load_seconds = start.elapsed().as_secs_f64();
         let settings = self.solve.settings(seed)?;
-        let camera = self.camera.camera(&scene)?;
+        let camera = self.camera.camera(&scene, 512)?;
         let solution = simulate(&scene, &settings, progress)?;
 
         let start = Instant::now();

@@ -2,7 +2,8 @@
 //! radiance at the same pixel centres.
 
 use crate::geometry::{Aabb, DVec3, Ray};
-use crate::scene::CameraSpec;
+use crate::scene::{CameraSpec, Scene};
+use crate::visibility::{bvh::Bvh, Visibility};
 
 /// A pinhole camera producing primary rays for a `width` x `height` image.
 #[derive(Clone, Copy, Debug)]
@@ -55,6 +56,52 @@ impl Camera {
         }
     }
 
+    /// The view used when neither the user nor the scene gives one: the scene's own camera if it has one;
+    /// otherwise [`Camera::framing`] from outside, unless the scene is a closed room (most rays from
+    /// outside stop on polygons lying in the faces of its bounding box, as with RenderPark's rooms), in
+    /// which case the eye stands inside, near one wall, a little above mid-height, looking across the
+    /// room. "Up" is the axis of smallest extent, z when the extents are within 10% of each other (the
+    /// MGF rooms are z-up or y-up).
+    pub fn auto_view(scene: &Scene, fov_degrees: f64) -> CameraSpec {
+        if let Some(camera) = scene.camera {
+            return CameraSpec {
+                fov_degrees,
+                ..camera
+            };
+        }
+        let bounds = scene.bounds();
+        let outside = Camera::framing(&bounds, fov_degrees);
+        if !is_enclosure(scene, &bounds, &outside) {
+            return outside;
+        }
+        let extent = bounds.extent();
+        let axes = [DVec3::X, DVec3::Y, DVec3::Z];
+        let size = |a: usize| extent[a];
+        let min_size = size(0).min(size(1)).min(size(2));
+        let up = if size(2) <= 1.1 * min_size {
+            2
+        } else if size(1) <= size(0) {
+            1
+        } else {
+            0
+        };
+        let (a, b) = match up {
+            0 => (1, 2),
+            1 => (0, 2),
+            _ => (0, 1),
+        };
+        let across = if size(a) >= size(b) { a } else { b };
+        let centre = bounds.center();
+        let eye = centre - axes[across] * (0.4 * size(across)) + axes[up] * (0.1 * size(up));
+        let look_at = centre - axes[up] * (0.1 * size(up));
+        CameraSpec {
+            eye,
+            look_at,
+            up: axes[up],
+            fov_degrees,
+        }
+    }
+
     /// The ray through image position (x, y) in pixels, (0, 0) the top-left corner of the image; pixel
     /// (i, j) has its centre at (i + 0.5, j + 0.5).
     pub fn ray(&self, x: f64, y: f64) -> Ray {
@@ -76,9 +123,77 @@ impl Camera {
     }
 }
 
+/// Whether the scene is a room seen from outside: polygons lie in at least five of the six faces of the
+/// bounding box, and most primary rays of a small view from `outside` stop on them.
+fn is_enclosure(scene: &Scene, bounds: &Aabb, outside: &CameraSpec) -> bool {
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    let visibility = Bvh::new(&shapes);
+    let camera = Camera::new(outside, 16, 16);
+    let tolerance = 1e-6 * bounds.diagonal().max(1e-300);
+    let on_box_face = |polygon: usize| {
+        (0..3).any(|axis| {
+            [bounds.min[axis], bounds.max[axis]].iter().any(|&plane| {
+                scene.polygons[polygon]
+                    .shape
+                    .vertices()
+                    .iter()
+                    .all(|v| (v[axis] - plane).abs() <= tolerance)
+            })
+        })
+    };
+    let faces_covered = (0..3)
+        .flat_map(|axis| [(axis, bounds.min[axis]), (axis, bounds.max[axis])])
+        .filter(|&(axis, plane)| {
+            scene.polygons.iter().any(|p| {
+                p.shape
+                    .vertices()
+                    .iter()
+                    .all(|v| (v[axis] - plane).abs() <= tolerance)
+            })
+        })
+        .count();
+    if faces_covered < 5 {
+        return false;
+    }
+    let (mut hits, mut walls) = (0, 0);
+    for j in 0..16 {
+        for i in 0..16 {
+            if let Some(hit) = visibility.intersect(
+                &camera.ray(i as f64 + 0.5, j as f64 + 0.5),
+                0.0,
+                f64::INFINITY,
+            ) {
+                hits += 1;
+                walls += usize::from(on_box_face(hit.polygon));
+            }
+        }
+    }
+    hits > 0 && 2 * walls > hits
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_closed_room_is_viewed_from_inside_and_an_object_from_outside() {
+        use crate::scene::generators::{furnace, parallel_plates};
+        let room = furnace(DVec3::new(4.0, 3.0, 2.0), 0.5, 1.0);
+        let view = Camera::auto_view(&room, 60.0);
+        let bounds = room.bounds();
+        assert!(
+            (0..3).all(|a| view.eye[a] > bounds.min[a] && view.eye[a] < bounds.max[a]),
+            "{view:?}"
+        );
+        assert_eq!(view.up, DVec3::Z);
+        let plates = parallel_plates(1.0, 1.0, 0.5, 1.0);
+        let view = Camera::auto_view(&plates, 45.0);
+        let bounds = plates.bounds();
+        assert!(
+            (0..3).any(|a| view.eye[a] < bounds.min[a] || view.eye[a] > bounds.max[a]),
+            "{view:?}"
+        );
+    }
 
     #[test]
     fn centre_pixel_looks_forward_and_fov_is_vertical() {
