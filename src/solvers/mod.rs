@@ -90,9 +90,11 @@ pub fn solve(
         emitted_power: emitted_power(hierarchy),
         ..Default::default()
     };
-    let mut candidates = initial_candidates(hierarchy);
     for pass in 1..=settings.max_passes.max(1) {
         report.passes = pass;
+        // Later passes re-judge every link with the new radiance; the links stay in the hierarchy
+        // whenever the loop ends.
+        let candidates = if pass == 1 { initial_candidates(hierarchy) } else { take_links(hierarchy) };
         let start = Instant::now();
         let spinner = progress.spinner("refine");
         let outcome = refine(
@@ -135,7 +137,6 @@ pub fn solve(
             report.converged = swept_to_tolerance;
             break;
         }
-        candidates = take_links(hierarchy);
     }
     report
 }
