@@ -103,10 +103,17 @@ fn stats_and_images_do_not_depend_on_thread_count() {
 fn links_stay_in_the_hierarchy_when_the_pass_limit_ends_the_solve() {
     let scene = cornell_box();
     for max_passes in [1, 2] {
-        let settings = SimulationSettings { eps: 1e-5, max_passes, ..Default::default() };
+        let settings = SimulationSettings {
+            eps: 1e-5,
+            max_passes,
+            ..Default::default()
+        };
         let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
         assert_eq!(solution.report.passes, max_passes);
         assert!(!solution.report.converged);
-        assert!(solution.hierarchy.link_count() > 1000, "{max_passes} passes: links lost");
+        assert!(
+            solution.hierarchy.link_count() > 1000,
+            "{max_passes} passes: links lost"
+        );
     }
 }

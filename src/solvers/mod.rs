@@ -94,7 +94,11 @@ pub fn solve(
         report.passes = pass;
         // Later passes re-judge every link with the new radiance; the links stay in the hierarchy
         // whenever the loop ends.
-        let candidates = if pass == 1 { initial_candidates(hierarchy) } else { take_links(hierarchy) };
+        let candidates = if pass == 1 {
+            initial_candidates(hierarchy)
+        } else {
+            take_links(hierarchy)
+        };
         let start = Instant::now();
         let spinner = progress.spinner("refine");
         let outcome = refine(
