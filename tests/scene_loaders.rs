@@ -507,3 +507,24 @@ proptest! {
         let _ = std::fs::remove_dir_all(dir);
     }
 }
+
+#[test]
+fn the_one_sided_override_turns_mgf_default_two_sided_surfaces_one_sided() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark/cube.mgf");
+    let as_written = scene::load(&path, &LoadOptions::default()).unwrap();
+    assert!(
+        as_written.polygons.iter().all(|p| p.two_sided),
+        "MGF's default is two sides"
+    );
+    let options = LoadOptions {
+        force_one_sided: true,
+        ..LoadOptions::default()
+    };
+    let one_sided = scene::load(&path, &options).unwrap();
+    assert!(one_sided.polygons.iter().all(|p| !p.two_sided));
+    let (e2, e1) = (as_written.emitted_power(), one_sided.emitted_power());
+    assert!(
+        (e2.g - 2.0 * e1.g).abs() < 1e-9 * e2.g,
+        "a two-sided light emits twice: {e2:?} vs {e1:?}"
+    );
+}

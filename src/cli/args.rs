@@ -13,8 +13,11 @@ pub struct SceneArgs {
     /// Scene file (.mgf or .obj); the built-in Cornell box when omitted.
     pub scene: Option<PathBuf>,
     /// Treat every surface as two-sided, whatever the file says.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "one_sided")]
     pub two_sided: bool,
+    /// Treat every surface as one-sided (front by winding), whatever the file says (MGF defaults to two).
+    #[arg(long)]
+    pub one_sided: bool,
     /// Segments per full circle when tessellating MGF spheres, cylinders, cones, rings and tori.
     #[arg(long, default_value_t = 16, value_name = "N")]
     pub tessellation: usize,
@@ -44,6 +47,7 @@ impl SceneArgs {
     pub fn load(&self) -> Result<(Scene, String)> {
         let options = LoadOptions {
             force_two_sided: self.two_sided,
+            force_one_sided: self.one_sided,
             tessellation: self.tessellation.max(3),
         };
         match &self.scene {
@@ -53,8 +57,8 @@ impl SceneArgs {
             }
             None => {
                 let mut scene = scene::cornell::cornell_box();
-                if self.two_sided {
-                    scene.make_two_sided();
+                if self.two_sided || self.one_sided {
+                    scene.set_two_sided(self.two_sided);
                 }
                 Ok((scene, "built-in Cornell box".to_string()))
             }

@@ -109,6 +109,10 @@ impl SceneError {
 pub struct LoadOptions {
     /// Make every surface two-sided, whatever the file says.
     pub force_two_sided: bool,
+    /// Make every surface one-sided (front by winding), whatever the file says: MGF's default is two
+    /// sides, while RenderPark's scenes are usually meant one-sided (the light of `cube.mgf` hangs 1 cm
+    /// below the ceiling and would otherwise shine half its power into that gap).
+    pub force_one_sided: bool,
     /// Quality of curved MGF solids: segments per full circle. A cylinder, cone or ring becomes this
     /// many quads, a sphere half as many latitude bands of this many, a torus its square. The default 16
     /// (4 per quarter circle, RenderPark's setting) loses about 2.6% of a sphere's area; 64 loses 0.16%.
@@ -120,6 +124,7 @@ impl Default for LoadOptions {
     fn default() -> Self {
         LoadOptions {
             force_two_sided: false,
+            force_one_sided: false,
             tessellation: 16,
         }
     }
@@ -171,10 +176,10 @@ impl Scene {
             .count()
     }
 
-    /// Makes every polygon two-sided (the `--two-sided` override).
-    pub fn make_two_sided(&mut self) {
+    /// Makes every polygon two-sided or one-sided (the `--two-sided` / `--one-sided` overrides).
+    pub fn set_two_sided(&mut self, two_sided: bool) {
         for p in &mut self.polygons {
-            p.two_sided = true;
+            p.two_sided = two_sided;
         }
     }
 }
@@ -197,8 +202,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
             ))
         }
     };
-    if options.force_two_sided {
-        scene.make_two_sided();
+    if options.force_two_sided || options.force_one_sided {
+        scene.set_two_sided(options.force_two_sided);
     }
     Ok(scene)
 }
