@@ -109,9 +109,9 @@ impl SceneError {
 pub struct LoadOptions {
     /// Make every surface two-sided, whatever the file says.
     pub force_two_sided: bool,
-    /// Make every surface one-sided (front by winding), whatever the file says: MGF's default is two
-    /// sides, while RenderPark's scenes are usually meant one-sided (the light of `cube.mgf` hangs 1 cm
-    /// below the ceiling and would otherwise shine half its power into that gap).
+    /// Make every surface one-sided (front by winding), whatever the file says. MGF's default is two
+    /// sides; `cube.mgf`'s light hangs 1 cm below the ceiling and, two-sided, shines half its power into
+    /// that gap.
     pub force_one_sided: bool,
     /// Quality of curved MGF solids: segments per full circle. A cylinder, cone or ring becomes this
     /// many quads, a sphere half as many latitude bands of this many, a torus its square. The default 16
