@@ -13,13 +13,15 @@
 //! proportion to the power they shoot, so every line carries about the same power (Bekaert et al. §3).
 //!
 //! **Per-ray hierarchical refinement** (Bekaert et al. 1998 §4). When a line from source leaf j hits
-//! patch P at y, P's element tree is descended from its root towards y. At each level the oracle judges
-//! the link (candidate receiver element, j) against the threshold, with B_j the source's current
-//! radiance; where it is admissible (or the element is at the minimum area) the power is deposited;
-//! otherwise the descent continues into the child containing y, splitting a leaf on the way. Decisions
-//! are cached per (receiver, source) pair within an iteration. Power deposited at any level becomes
-//! incident radiance H = Φ / (π A) there, and push-pull carries it to the leaves and back up, so B is
-//! consistent on every level.
+//! patch P at y, both trees are descended: the receiver's from P's root towards y and the source's from
+//! its patch root towards j. At each level the oracle judges the link (receiver element, source element)
+//! against the threshold, with B the source element's current radiance; where it is admissible (or
+//! neither element can be split further) the line's power is deposited at the receiver element; otherwise
+//! the oracle's choice (the larger element) moves the receiver into its child containing y, splitting a
+//! leaf on the way, or the source into its child containing j. Decisions are cached per (receiver,
+//! source) pair within an iteration. Power deposited at any level becomes incident radiance
+//! H = Φ / (π A) there, and push-pull carries it to the leaves and back up, so B is consistent on every
+//! level.
 //!
 //! **Determinism.** Lines are traced in parallel batches of fixed size whose random numbers are seeded
 //! from (seed, iteration, batch); the oracle's from (seed, iteration, receiver, source). Refinement runs
@@ -32,7 +34,7 @@ use super::{emitted_power, link_rng, splitmix64, SolveReport};
 use crate::color::Rgb;
 use crate::geometry::{DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
-use crate::oracles::{OracleContext, RefinementOracle};
+use crate::oracles::{Decision, OracleContext, RefinementOracle};
 use crate::progress::Progress;
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
@@ -182,8 +184,13 @@ fn shoot_batch(
 
 /// The ancestor of the leaf containing `point` one level below `parent` (which must have children).
 fn child_towards(hierarchy: &Hierarchy, patch: u32, parent: ElementId, point: DVec3) -> ElementId {
-    let level = hierarchy.element(parent).level + 1;
-    let mut id = hierarchy.locate(patch, point);
+    ancestor_below(hierarchy, parent, hierarchy.locate(patch, point))
+}
+
+/// The ancestor of `descendant` one level below `ancestor` (a proper ancestor of `descendant`).
+fn ancestor_below(hierarchy: &Hierarchy, ancestor: ElementId, descendant: ElementId) -> ElementId {
+    let level = hierarchy.element(ancestor).level + 1;
+    let mut id = descendant;
     while hierarchy.element(id).level > level {
         match hierarchy.element(id).parent {
             Some(p) => id = p,
@@ -200,8 +207,26 @@ struct Deposit {
     refine_seconds: f64,
 }
 
-/// Descends the receivers' trees for every shot (per-ray refinement) and adds each shot's power to the
-/// element it settles at. `cache` holds this iteration's oracle verdicts (true: admissible).
+/// A line on its way down both trees: the receiver element containing its end point and the source
+/// element containing its origin (an ancestor of, or equal to, the leaf it was shot from).
+#[derive(Clone, Copy)]
+struct Descent {
+    shot: usize,
+    receiver: ElementId,
+    source: ElementId,
+}
+
+/// Descends the receivers' and sources' trees for every shot (per-ray refinement) and adds each shot's
+/// power to the receiver element it settles at. `cache` holds this iteration's oracle verdicts per
+/// (receiver, source) pair.
+///
+/// Both ends are descended, as in the deterministic refiner: the link is judged between the receiver and
+/// the source element at the current level (starting from the source's patch root), and the oracle's
+/// choice of which to split moves the receiver towards the end point or the source towards the line's
+/// leaf. Judging every receiver against the tiny leaf a line came from would admit each link at a coarse
+/// receiver: the many small errors of the leaves of one large source then add up coherently, smearing
+/// incident power across shadow boundaries and under objects resting on the receiver (the Cornell box's
+/// floor in front of and under its blocks), which biased the blocks' dark faces by 20-40%.
 #[allow(clippy::too_many_arguments)]
 fn deposit(
     hierarchy: &mut Hierarchy,
@@ -210,31 +235,37 @@ fn deposit(
     settings: &StochasticSettings,
     oracle_seed: u64,
     shots: &[Shot],
-    cache: &mut HashMap<(ElementId, ElementId), bool>,
+    cache: &mut HashMap<(ElementId, ElementId), Decision>,
     received: &mut Vec<Rgb>,
 ) -> Deposit {
     let start = Instant::now();
     let mut out = Deposit::default();
-    let mut active: Vec<(usize, ElementId)> = shots
+    let mut active: Vec<Descent> = shots
         .iter()
         .enumerate()
-        .map(|(k, s)| (k, hierarchy.patches[s.patch as usize].root))
+        .map(|(k, s)| Descent {
+            shot: k,
+            receiver: hierarchy.patches[s.patch as usize].root,
+            source: hierarchy.patch_of(s.source).root,
+        })
         .collect();
+    let receiver_splittable = |h: &Hierarchy, id: ElementId| {
+        let e = h.element(id);
+        !e.is_leaf() || e.area > settings.min_area
+    };
     while !active.is_empty() {
-        let splittable = |h: &Hierarchy, id: ElementId| {
-            let e = h.element(id);
-            !e.is_leaf() || e.area > settings.min_area
-        };
         // The pairs this round needs that were never judged, in order of first appearance.
         let mut pending = Vec::new();
         let mut seen = HashSet::new();
-        for &(k, r) in &active {
-            let key = (r, shots[k].source);
-            if splittable(hierarchy, r) && !cache.contains_key(&key) && seen.insert(key) {
+        for d in &active {
+            let key = (d.receiver, d.source);
+            let movable =
+                receiver_splittable(hierarchy, d.receiver) || d.source != shots[d.shot].source;
+            if movable && !cache.contains_key(&key) && seen.insert(key) {
                 pending.push(key);
             }
         }
-        let estimates: Vec<_> = {
+        let verdicts: Vec<_> = {
             let context = OracleContext {
                 hierarchy,
                 visibility,
@@ -243,25 +274,49 @@ fn deposit(
                 .par_iter()
                 .map(|&(r, s)| {
                     let mut rng = link_rng(oracle_seed, r, s, ORACLE_STREAM);
-                    oracle.estimate(&context, r, s, &mut rng)
+                    let estimate = oracle.estimate(&context, r, s, &mut rng);
+                    let decision = if estimate.error <= settings.threshold {
+                        Decision::Admissible
+                    } else {
+                        oracle.element_to_split(&context, r, s)
+                    };
+                    (estimate.rays, decision)
                 })
                 .collect()
         };
-        for (key, estimate) in pending.iter().zip(estimates) {
-            out.oracle_rays += estimate.rays;
-            cache.insert(*key, estimate.error <= settings.threshold);
+        for (key, (rays, decision)) in pending.iter().zip(verdicts) {
+            out.oracle_rays += rays;
+            cache.insert(*key, decision);
         }
         let mut next = Vec::with_capacity(active.len());
-        for (k, r) in active {
-            let shot = &shots[k];
-            let admissible = !splittable(hierarchy, r) || cache[&(r, shot.source)];
-            if admissible {
-                received[r as usize] += shot.power;
-                continue;
+        for mut d in active {
+            let shot = &shots[d.shot];
+            let can_split_receiver = receiver_splittable(hierarchy, d.receiver);
+            let can_descend_source = d.source != shot.source;
+            // The minimum-area rule of the deterministic refiner: split the other element when the
+            // chosen one cannot be, and keep the link when neither can.
+            let decision = if !can_split_receiver && !can_descend_source {
+                Decision::Admissible
+            } else {
+                match cache[&(d.receiver, d.source)] {
+                    Decision::SubdivideReceiver if !can_split_receiver => Decision::SubdivideSource,
+                    Decision::SubdivideSource if !can_descend_source => Decision::SubdivideReceiver,
+                    other => other,
+                }
+            };
+            match decision {
+                Decision::Admissible => received[d.receiver as usize] += shot.power,
+                Decision::SubdivideReceiver => {
+                    hierarchy.subdivide(d.receiver);
+                    received.resize(hierarchy.elements.len(), Rgb::BLACK);
+                    d.receiver = child_towards(hierarchy, shot.patch, d.receiver, shot.point);
+                    next.push(d);
+                }
+                Decision::SubdivideSource => {
+                    d.source = ancestor_below(hierarchy, d.source, shot.source);
+                    next.push(d);
+                }
             }
-            hierarchy.subdivide(r);
-            received.resize(hierarchy.elements.len(), Rgb::BLACK);
-            next.push((k, child_towards(hierarchy, shot.patch, r, shot.point)));
         }
         active = next;
     }
