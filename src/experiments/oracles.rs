@@ -46,7 +46,7 @@ pub struct OracleRun {
     pub leaf_elements: usize,
     pub elements: usize,
     pub links: usize,
-    /// Rays of the solution (form factors).
+    /// Rays of the solution (form factors, or shooting rays of the stochastic method).
     pub solution_rays: u64,
     /// Rays of the oracle evaluations.
     pub oracle_rays: u64,
@@ -198,7 +198,7 @@ pub fn run_one(
         leaf_elements: h.leaf_count(),
         elements: h.elements.len(),
         links: h.link_count(),
-        solution_rays: r.form_factor_rays,
+        solution_rays: r.form_factor_rays + r.shooting_rays,
         oracle_rays: r.oracle_rays,
         seconds,
         relative_rmse: errors.luminance.relative_rmse.unwrap_or(f64::NAN),
