@@ -190,18 +190,8 @@ pub fn simulate(
     let visibility = build_visibility(scene, settings.visibility)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, 1);
-    let total_emission: f64 = hierarchy
-        .patches
-        .iter()
-        .map(|p| p.emission.max_channel() * hierarchy.element(p.root).area)
-        .sum();
-    let total_area: f64 = hierarchy
-        .patches
-        .iter()
-        .map(|p| hierarchy.element(p.root).area)
-        .sum();
-    let threshold = settings.eps * total_emission;
-    let min_area = settings.min_area * total_area;
+    let threshold = settings.eps * hierarchy.total_emission();
+    let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);
     if settings.method == MethodKind::StochasticJacobi {
         let stochastic = StochasticSettings {

@@ -7,7 +7,7 @@ use radiosity::geometry::DVec3;
 use radiosity::output::camera::Camera;
 use radiosity::pipeline::{build_visibility, VisibilityKind};
 use radiosity::progress::Progress;
-use radiosity::reference::{radiance_leaving, render_reference, Estimate, ReferenceSettings};
+use radiosity::reference::{render_reference, Estimate, PathTracer, ReferenceSettings};
 use radiosity::scene::{generators, CameraSpec};
 
 fn quiet() -> Progress {
@@ -72,16 +72,12 @@ fn parallel_plates_centre_radiance_is_rho_e_times_the_point_form_factor() {
     assert!(f > 0.23 && f < 0.25, "{f}");
     let exact = Rgb::splat(rho * e * f);
 
-    let estimate = radiance_leaving(
+    let estimate = PathTracer::new(
         &scene,
         visibility.as_ref(),
-        centre,
-        DVec3::Z,
-        0,
-        true,
-        20_000,
-        5,
-    );
+        ReferenceSettings::default().roulette_depth,
+    )
+    .radiance_leaving(centre, DVec3::Z, 0, true, 20_000, 5);
     assert_within_three_sigma(estimate, exact, "radiance_leaving");
     assert!(estimate.stderr.g < 0.01 * exact.g, "{estimate:?}");
 
@@ -106,16 +102,12 @@ fn parallel_plates_centre_radiance_is_rho_e_times_the_point_form_factor() {
     assert_within_three_sigma(pixel, exact, "centre pixel");
 
     // The black back of the one-sided receiver leaves nothing.
-    let back = radiance_leaving(
+    let back = PathTracer::new(
         &scene,
         visibility.as_ref(),
-        centre,
-        -DVec3::Z,
-        0,
-        false,
-        100,
-        5,
-    );
+        ReferenceSettings::default().roulette_depth,
+    )
+    .radiance_leaving(centre, -DVec3::Z, 0, false, 100, 5);
     assert_eq!(back, Estimate::default());
 }
 
@@ -142,16 +134,12 @@ fn results_are_identical_for_one_and_two_threads() {
             .expect("thread pool");
         pool.install(|| {
             let image = render_reference(&scene, visibility.as_ref(), &camera, &settings, &quiet());
-            let point = radiance_leaving(
+            let point = PathTracer::new(
                 &scene,
                 visibility.as_ref(),
-                DVec3::new(0.3, 0.0, 0.6),
-                DVec3::Y,
-                2,
-                true,
-                3000,
-                11,
-            );
+                ReferenceSettings::default().roulette_depth,
+            )
+            .radiance_leaving(DVec3::new(0.3, 0.0, 0.6), DVec3::Y, 2, true, 3000, 11);
             (image, point)
         })
     };

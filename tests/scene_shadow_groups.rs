@@ -41,15 +41,11 @@ fn solve_wall(receivers: &Scene, occluders: &[Shape], tile_area: f64) -> Hierarc
         ..Default::default()
     };
     let mut h = Hierarchy::new(receivers, 1);
-    let total_emission: f64 = h
-        .patches
-        .iter()
-        .map(|p| p.emission.max_channel() * h.element(p.root).area)
-        .sum();
     // Wall elements stop at quadtree level 7 (side 1/128 of a tile, about 0.012, a third of the smallest
     // shadow): level-6 elements are still splittable, level-7 ones not.
     let min_area = 0.5 * tile_area / 4f64.powi(6);
-    let solve_settings = deterministic_settings(&settings, settings.eps * total_emission, min_area);
+    let solve_settings =
+        deterministic_settings(&settings, settings.eps * h.total_emission(), min_area);
     let oracle = make_oracle(&settings, &h);
     let solver = make_solver(settings.solver);
     solve(

@@ -208,6 +208,19 @@ impl Hierarchy {
         id
     }
 
+    /// Sum of the patch areas: the total surface area A_T (a two-sided polygon counts twice).
+    pub fn total_area(&self) -> f64 {
+        self.patches.iter().map(|p| self.element(p.root).area).sum()
+    }
+
+    /// Σ A·max(E) over patches: the scale relative refinement thresholds are given in.
+    pub fn total_emission(&self) -> f64 {
+        self.patches
+            .iter()
+            .map(|p| p.emission.max_channel() * self.element(p.root).area)
+            .sum()
+    }
+
     pub fn link_count(&self) -> usize {
         self.elements.iter().map(|e| e.links.len()).sum()
     }

@@ -144,15 +144,6 @@ pub fn sample_kernel(
     out
 }
 
-/// Sum of the patch areas (the total surface area A_T of the scene).
-pub fn total_area(hierarchy: &Hierarchy) -> f64 {
-    hierarchy
-        .patches
-        .iter()
-        .map(|p| hierarchy.element(p.root).area)
-        .sum()
-}
-
 #[cfg(test)]
 pub(crate) mod tests {
     use crate::geometry::Shape;

@@ -18,9 +18,7 @@
 //! unbounded (elements sharing an edge) G_max − G_av does not shrink with the elements, so this oracle
 //! refines down to the minimum area along such edges: the weakness the paper's MI oracle addresses.
 
-use super::{
-    reflected_source_radiance, sample_kernel, total_area, Estimate, OracleContext, RefinementOracle,
-};
+use super::{reflected_source_radiance, sample_kernel, Estimate, OracleContext, RefinementOracle};
 use crate::hierarchy::{ElementId, Hierarchy};
 use rand_pcg::Pcg64Mcg;
 
@@ -43,7 +41,7 @@ impl SmoothnessOracle {
 
     /// The oracle for a scene: the reference area is the hierarchy's total patch area.
     pub fn for_hierarchy(samples: usize, hierarchy: &Hierarchy) -> Self {
-        Self::new(samples, total_area(hierarchy))
+        Self::new(samples, hierarchy.total_area())
     }
 }
 

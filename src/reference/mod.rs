@@ -498,27 +498,6 @@ pub fn render_reference(
     PathTracer::new(scene, visibility, settings.roulette_depth).render(camera, settings, progress)
 }
 
-/// Radiance leaving a surface point (see [`PathTracer::radiance_leaving`]); builds the emitter table on
-/// every call, so use a [`PathTracer`] for many points.
-#[allow(clippy::too_many_arguments)]
-pub fn radiance_leaving(
-    scene: &Scene,
-    visibility: &dyn Visibility,
-    point: DVec3,
-    normal: DVec3,
-    polygon: usize,
-    front: bool,
-    spp: usize,
-    seed: u64,
-) -> Estimate {
-    PathTracer::new(
-        scene,
-        visibility,
-        ReferenceSettings::default().roulette_depth,
-    )
-    .radiance_leaving(point, normal, polygon, front, spp, seed)
-}
-
 /// Mean and standard error from the sums of equally sized independent batches: the standard error is
 /// the sample standard deviation of the batch means over √(batches) (zero for a single batch).
 fn batch_statistics(sums: &[Rgb], per_batch: usize) -> Estimate {
