@@ -6,6 +6,7 @@
 //! [`solvers`] → [`output`] (images, illuminated models) and [`measures`] (statistics, error metrics).
 //! See ARCHITECTURE.md.
 
+pub mod bases;
 pub mod cli;
 pub mod color;
 pub mod experiments;

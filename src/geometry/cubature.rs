@@ -1,8 +1,20 @@
-//! Fixed cubature rules on elements: tensor Gauss–Legendre on the unit square, mapped onto quads by the
-//! bilinear map and onto triangles by the collapsed (Duffy) map. Used for form factors (receiver
-//! points) and, later, for the Galerkin coupling coefficients of Bekaert–Willems eq. (3).
+//! Cubature rules on elements.
+//!
+//! * [`rule`]: rules of a given polynomial degree of exactness on the master domains of Bekaert–Willems
+//!   §2 (unit square, standard triangle), mapped onto an element by [`nodes_on`] as in their eq. (12):
+//!   `∫_A f dA ≈ Σ_k w_k f(u_k, v_k) J(u_k, v_k)`. Used for the Galerkin coupling coefficients (eq. 3),
+//!   the error estimates at the nodes (§4.2, Algorithm 4.1) and the basis overlaps.
+//! * [`gauss_nodes`]: the older tensor Gauss–Legendre rule (collapsed onto triangles), used for form
+//!   factors at receiver points.
+//!
+//! All 1-D Gauss rules are computed, not tabulated: Golub–Welsch (eigenvalues of the Jacobi matrix of
+//! the three-term recurrence, Golub & Welsch 1969, *Calculation of Gauss quadrature rules*, Math. Comp.
+//! 23) polished by Newton's method on the recurrence, with Christoffel weights `1 / Σ_k p_k(x)²`
+//! (orthonormal `p_k`), which gives full double precision.
 
-use super::{DVec2, DVec3, Shape};
+use std::sync::OnceLock;
+
+use super::{DVec2, DVec3, Domain, Shape};
 
 /// A cubature node on an element: world position, parameters on the element, and weight (weights sum to
 /// the element's area).
@@ -13,54 +25,106 @@ pub struct Node {
     pub weight: f64,
 }
 
-/// Gauss–Legendre nodes and weights on [0, 1], for 1 to 5 points.
-pub fn gauss_legendre_unit(n: usize) -> (&'static [f64], &'static [f64]) {
-    const X1: [f64; 1] = [0.5];
-    const W1: [f64; 1] = [1.0];
-    const X2: [f64; 2] = [0.211_324_865_405_187_1, 0.788_675_134_594_812_9];
-    const W2: [f64; 2] = [0.5, 0.5];
-    const X3: [f64; 3] = [0.112_701_665_379_258_3, 0.5, 0.887_298_334_620_741_7];
-    const W3: [f64; 3] = [
-        0.277_777_777_777_777_8,
-        0.444_444_444_444_444_4,
-        0.277_777_777_777_777_8,
-    ];
-    const X4: [f64; 4] = [
-        0.069_431_844_202_973_7,
-        0.330_009_478_207_571_9,
-        0.669_990_521_792_428_1,
-        0.930_568_155_797_026_3,
-    ];
-    const W4: [f64; 4] = [
-        0.173_927_422_568_726_9,
-        0.326_072_577_431_273_1,
-        0.326_072_577_431_273_1,
-        0.173_927_422_568_726_9,
-    ];
-    const X5: [f64; 5] = [
-        0.046_910_077_030_668_0,
-        0.230_765_344_947_158_5,
-        0.5,
-        0.769_234_655_052_841_5,
-        0.953_089_922_969_332,
-    ];
-    const W5: [f64; 5] = [
-        0.118_463_442_528_094_5,
-        0.239_314_335_249_683_2,
-        0.284_444_444_444_444_4,
-        0.239_314_335_249_683_2,
-        0.118_463_442_528_094_5,
-    ];
-    match n {
-        0 | 1 => (&X1, &W1),
-        2 => (&X2, &W2),
-        3 => (&X3, &W3),
-        4 => (&X4, &W4),
-        _ => (&X5, &W5),
+/// A cubature rule on a master domain: nodes `uv` with weights `w` summing to [`Domain::area`], exact for
+/// every monomial `u^p v^q` with `p + q <= degree`.
+#[derive(Clone, Debug)]
+pub struct Rule {
+    pub domain: Domain,
+    /// Degree of exactness actually reached (at least the requested one: the rules come in odd degrees
+    /// `2n - 1` for `n` points per direction).
+    pub degree: usize,
+    pub nodes: Vec<(DVec2, f64)>,
+}
+
+/// Largest number of 1-D points per direction in [`rule`] (degree of exactness `2 * MAX_POINTS - 1`).
+pub const MAX_POINTS: usize = 12;
+
+/// Highest degree of exactness available from [`rule`]; higher requests are clamped to it.
+pub const MAX_DEGREE: usize = 2 * MAX_POINTS - 1;
+
+/// The cached rule of degree of exactness at least `degree` (0 counts as 1; clamped to [`MAX_DEGREE`])
+/// on `domain`, with `n = ceil((degree + 1) / 2)` points per direction:
+///
+/// * square: tensor product of `n`-point Gauss–Legendre rules on [0, 1] (exact for `u^p v^q`,
+///   `p, q <= 2n - 1`);
+/// * triangle: Stroud's conical product rule (Stroud 1971, *Approximate Calculation of Multiple
+///   Integrals*, §2.4, rule T_n: 2-1): with the collapsed map `u = s`, `v = t (1 - s)` (Jacobian
+///   `1 - s`), `∫_T f = ∫∫ f(s, t(1-s)) (1-s) ds dt`; `s` takes the `n`-point Gauss–Jacobi rule for the
+///   weight `1 - s` on [0, 1] and `t` the `n`-point Gauss–Legendre rule. A monomial of total degree
+///   `<= 2n - 1` becomes a polynomial of degree `<= 2n - 1` in each of `s` and `t`, so the rule is exact.
+///
+/// All nodes lie strictly inside the domain and all weights are positive.
+pub fn rule(domain: Domain, degree: usize) -> &'static Rule {
+    static TABLE: OnceLock<Vec<[Rule; 2]>> = OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        (1..=MAX_POINTS)
+            .map(|n| {
+                [
+                    build_rule(Domain::Square, n),
+                    build_rule(Domain::Triangle, n),
+                ]
+            })
+            .collect()
+    });
+    let degree = degree.clamp(1, MAX_DEGREE);
+    // n = ceil((degree + 1) / 2) points per direction reach degree 2n - 1 >= degree.
+    let n = (degree / 2 + 1).min(MAX_POINTS);
+    &table[n - 1][match domain {
+        Domain::Square => 0,
+        Domain::Triangle => 1,
+    }]
+}
+
+fn build_rule(domain: Domain, n: usize) -> Rule {
+    let (t, wt) = gauss_legendre01(n);
+    let (s, ws) = match domain {
+        Domain::Square => (t.clone(), wt.clone()),
+        Domain::Triangle => gauss_jacobi_one_minus_x01(n),
+    };
+    let mut nodes = Vec::with_capacity(n * n);
+    for (a, wa) in s.iter().zip(&ws) {
+        for (b, wb) in t.iter().zip(&wt) {
+            let uv = match domain {
+                Domain::Square => DVec2::new(*a, *b),
+                // The factor (1 - s) of the collapse is in the Gauss–Jacobi weights.
+                Domain::Triangle => DVec2::new(*a, *b * (1.0 - *a)),
+            };
+            nodes.push((uv, wa * wb));
+        }
+    }
+    Rule {
+        domain,
+        degree: 2 * n - 1,
+        nodes,
     }
 }
 
-/// Tensor-product Gauss rule with `n` x `n` nodes (n clamped to 1..=5) on a shape.
+/// Maps `rule` onto `shape` (Bekaert–Willems eq. 12): weight `w * J(uv)` with `J` from
+/// [`Shape::jacobian`]. For a triangle `J` is twice the area and the master triangle has area 1/2, so the
+/// weights still sum to the shape's area.
+pub fn nodes_on(shape: &Shape, rule: &Rule) -> Vec<Node> {
+    debug_assert_eq!(shape.domain(), rule.domain, "rule for another domain");
+    rule.nodes
+        .iter()
+        .map(|&(uv, w)| Node {
+            point: shape.point_at(uv),
+            uv,
+            weight: w * shape.jacobian(uv),
+        })
+        .collect()
+}
+
+/// Gauss–Legendre nodes and weights on [0, 1], for 1 to 5 points (`n` clamped), computed once.
+pub fn gauss_legendre_unit(n: usize) -> (&'static [f64], &'static [f64]) {
+    static TABLE: OnceLock<Vec<(Vec<f64>, Vec<f64>)>> = OnceLock::new();
+    let table = TABLE.get_or_init(|| (1..=5).map(gauss_legendre01).collect());
+    let (x, w) = &table[n.clamp(1, 5) - 1];
+    (x, w)
+}
+
+/// Tensor-product Gauss rule with `n` x `n` nodes (n clamped to 1..=5) on a shape; on triangles the
+/// square is collapsed by the Duffy map (Gauss–Legendre in both directions, so of lower degree than
+/// [`rule`]'s Gauss–Jacobi product for the same node count).
 pub fn gauss_nodes(shape: &Shape, n: usize) -> Vec<Node> {
     let (x, w) = gauss_legendre_unit(n);
     let mut nodes = Vec::with_capacity(x.len() * x.len());
@@ -81,9 +145,270 @@ pub fn gauss_nodes(shape: &Shape, n: usize) -> Vec<Node> {
     nodes
 }
 
+/// `n`-point Gauss–Legendre rule on [0, 1] (weight 1). Recurrence of the shifted Legendre polynomials:
+/// `a_k = 1/2`, `b_k = k² / (4 (4k² - 1))`, `μ0 = 1` (Gautschi 2004, *Orthogonal Polynomials*, Table 1.1,
+/// mapped from [-1, 1]).
+fn gauss_legendre01(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let a = vec![0.5; n];
+    let b: Vec<f64> = (1..=n)
+        .map(|k| {
+            let k = k as f64;
+            k * k / (4.0 * (4.0 * k * k - 1.0))
+        })
+        .collect();
+    gauss_from_recurrence(&a, &b, 1.0)
+}
+
+/// `n`-point Gauss–Jacobi rule on [0, 1] for the weight `1 - s`: Jacobi polynomials `P^(1,0)` on
+/// [-1, 1] (weight `(1-x)^α (1+x)^β`, α = 1, β = 0) mapped by `s = (x + 1) / 2`. Recurrence (Gautschi
+/// 2004, Table 1.1): `a_k = (β² - α²) / ((2k+α+β)(2k+α+β+2))`,
+/// `b_k = 4k(k+α)(k+β)(k+α+β) / ((2k+α+β)² (2k+α+β+1)(2k+α+β-1))`; on [0, 1] `a ↦ (a + 1)/2`,
+/// `b ↦ b / 4`, `μ0 = ∫_0^1 (1 - s) ds = 1/2`.
+fn gauss_jacobi_one_minus_x01(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let (al, be) = (1.0f64, 0.0f64);
+    let a: Vec<f64> = (0..n)
+        .map(|k| {
+            let s = 2.0 * k as f64 + al + be;
+            let ak = (be * be - al * al) / (s * (s + 2.0));
+            (ak + 1.0) * 0.5
+        })
+        .collect();
+    let b: Vec<f64> = (1..=n)
+        .map(|k| {
+            let k = k as f64;
+            let s = 2.0 * k + al + be;
+            let bk =
+                4.0 * k * (k + al) * (k + be) * (k + al + be) / (s * s * (s + 1.0) * (s - 1.0));
+            bk * 0.25
+        })
+        .collect();
+    gauss_from_recurrence(&a, &b, 0.5)
+}
+
+/// Gauss rule from the recurrence `√b_{k+1} p_{k+1} = (x - a_k) p_k - √b_k p_{k-1}` of the orthonormal
+/// polynomials (`a` has `n` entries, `b` holds `b_1 ..= b_n`, `μ0` is the total mass): nodes are the
+/// eigenvalues of the Jacobi matrix (Golub–Welsch), refined by Newton on `p_n`; weights are the
+/// Christoffel numbers `1 / Σ_{k<n} p_k(x)²`. Nodes ascending.
+fn gauss_from_recurrence(a: &[f64], b: &[f64], mu0: f64) -> (Vec<f64>, Vec<f64>) {
+    let n = a.len();
+    assert!(n >= 1 && b.len() >= n);
+    let sb: Vec<f64> = b.iter().map(|x| x.sqrt()).collect();
+    let mut d = a.to_vec();
+    let mut e: Vec<f64> = (0..n)
+        .map(|i| if i + 1 < n { sb[i] } else { 0.0 })
+        .collect();
+    tridiagonal_eigenvalues(&mut d, &mut e);
+    d.sort_by(f64::total_cmp);
+    // p_0 .. p_n and the derivative of p_n at x.
+    let eval = |x: f64| -> (Vec<f64>, f64) {
+        let mut p = vec![0.0; n + 1];
+        let mut dp = vec![0.0; n + 1];
+        p[0] = 1.0 / mu0.sqrt();
+        for k in 0..n {
+            let (pm, dpm) = if k > 0 {
+                (sb[k - 1] * p[k - 1], sb[k - 1] * dp[k - 1])
+            } else {
+                (0.0, 0.0)
+            };
+            p[k + 1] = ((x - a[k]) * p[k] - pm) / sb[k];
+            dp[k + 1] = ((x - a[k]) * dp[k] + p[k] - dpm) / sb[k];
+        }
+        let dpn = dp[n];
+        (p, dpn)
+    };
+    let mut w = Vec::with_capacity(n);
+    for x in d.iter_mut() {
+        for _ in 0..3 {
+            let (p, dpn) = eval(*x);
+            if dpn == 0.0 {
+                break;
+            }
+            let step = p[n] / dpn;
+            *x -= step;
+            if step.abs() <= 1e-17 {
+                break;
+            }
+        }
+        let (p, _) = eval(*x);
+        w.push(1.0 / p[..n].iter().map(|v| v * v).sum::<f64>());
+    }
+    (d, w)
+}
+
+/// Eigenvalues of the symmetric tridiagonal matrix with diagonal `d` and off-diagonal `e` (`e[i]` couples
+/// `i` and `i + 1`; the last entry is ignored) by the implicit QL algorithm (Numerical Recipes §11.4,
+/// `tqli` without eigenvectors). The eigenvalues are left in `d`, unsorted.
+fn tridiagonal_eigenvalues(d: &mut [f64], e: &mut [f64]) {
+    let n = d.len();
+    if n == 0 {
+        return;
+    }
+    e[n - 1] = 0.0;
+    for l in 0..n {
+        let mut iterations = 0;
+        loop {
+            let mut m = l;
+            while m + 1 < n {
+                let dd = d[m].abs() + d[m + 1].abs();
+                if e[m].abs() <= f64::EPSILON * dd {
+                    break;
+                }
+                m += 1;
+            }
+            if m == l {
+                break;
+            }
+            iterations += 1;
+            assert!(iterations < 100, "tridiagonal QL did not converge");
+            let mut g = (d[l + 1] - d[l]) / (2.0 * e[l]);
+            let mut r = g.hypot(1.0);
+            g = d[m] - d[l] + e[l] / (g + r.copysign(g));
+            let (mut s, mut c, mut p) = (1.0, 1.0, 0.0);
+            let mut i = m;
+            let mut underflow = false;
+            while i > l {
+                i -= 1;
+                let f = s * e[i];
+                let b = c * e[i];
+                r = f.hypot(g);
+                e[i + 1] = r;
+                if r == 0.0 {
+                    d[i + 1] -= p;
+                    e[m] = 0.0;
+                    underflow = true;
+                    break;
+                }
+                s = f / r;
+                c = g / r;
+                g = d[i + 1] - p;
+                r = (d[i] - g) * s + 2.0 * c * b;
+                p = s * r;
+                d[i + 1] = g + p;
+                g = c * r - b;
+            }
+            if underflow {
+                continue;
+            }
+            d[l] -= p;
+            e[l] = g;
+            e[m] = 0.0;
+        }
+    }
+}
+
+/// Exact integral of `u^p v^q` over a master domain: `1 / ((p+1)(q+1))` on the unit square,
+/// `p! q! / (p+q+2)!` on the standard triangle (Dirichlet integral).
+pub fn monomial_integral(domain: Domain, p: usize, q: usize) -> f64 {
+    match domain {
+        Domain::Square => 1.0 / ((p + 1) as f64 * (q + 1) as f64),
+        Domain::Triangle => {
+            // p! q! / (p+q+2)! = 1 / ((p+q+2)(p+q+1) C(p+q, p)), evaluated as a product of ratios.
+            let mut r = 1.0 / ((p + q + 2) as f64 * (p + q + 1) as f64);
+            for k in 1..=q {
+                r *= k as f64 / (p + k) as f64;
+            }
+            r
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn rel_err(a: f64, b: f64) -> f64 {
+        (a - b).abs() / b.abs()
+    }
+
+    #[test]
+    fn legendre_matches_known_values() {
+        let (x, w) = gauss_legendre_unit(3);
+        let r = (0.15f64).sqrt();
+        for (xi, ei) in x.iter().zip([0.5 - r, 0.5, 0.5 + r]) {
+            assert!((xi - ei).abs() < 1e-15, "{xi} {ei}");
+        }
+        for (wi, ei) in w.iter().zip([5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0]) {
+            assert!((wi - ei).abs() < 1e-15);
+        }
+        // One-point Gauss–Jacobi for the weight 1 - s: node at the mean 1/3, weight 1/2.
+        let (x, w) = gauss_jacobi_one_minus_x01(1);
+        assert!((x[0] - 1.0 / 3.0).abs() < 1e-15 && (w[0] - 0.5).abs() < 1e-15);
+    }
+
+    #[test]
+    fn rules_are_exact_for_monomials_up_to_their_degree() {
+        for domain in [Domain::Square, Domain::Triangle] {
+            for requested in 0..=MAX_DEGREE + 2 {
+                let r = rule(domain, requested);
+                assert_eq!(r.domain, domain);
+                assert!(r.degree >= requested.clamp(1, MAX_DEGREE));
+                assert!(r.degree <= requested.max(1) + 1);
+                let total: f64 = r.nodes.iter().map(|n| n.1).sum();
+                assert!(rel_err(total, domain.area()) < 1e-14);
+                for &(uv, w) in &r.nodes {
+                    assert!(w > 0.0 && uv.x > 0.0 && uv.y > 0.0);
+                    assert!(domain == Domain::Square || uv.x + uv.y < 1.0);
+                }
+                for p in 0..=r.degree {
+                    for q in 0..=r.degree - p {
+                        let exact = monomial_integral(domain, p, q);
+                        let approx: f64 = r
+                            .nodes
+                            .iter()
+                            .map(|(uv, w)| w * uv.x.powi(p as i32) * uv.y.powi(q as i32))
+                            .sum();
+                        assert!(
+                            rel_err(approx, exact) < 1e-12,
+                            "{domain:?} degree {} u^{p} v^{q}: {approx} vs {exact}",
+                            r.degree
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn monomial_integrals_match_factorials() {
+        let fact = |n: usize| (1..=n).map(|k| k as f64).product::<f64>();
+        for p in 0..8 {
+            for q in 0..8 {
+                let e = fact(p) * fact(q) / fact(p + q + 2);
+                assert!(rel_err(monomial_integral(Domain::Triangle, p, q), e) < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn mapped_rules_sum_to_area_and_integrate_linear_functions() {
+        let tri = Shape::Triangle([
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(0.0, 3.0, 0.0),
+        ]);
+        let quad = Shape::Quad([
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(1.5, 1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+        ]);
+        for degree in 1..=12 {
+            for shape in [tri, quad] {
+                let nodes = nodes_on(&shape, rule(shape.domain(), degree));
+                let s: f64 = nodes.iter().map(|q| q.weight).sum();
+                assert!(rel_err(s, shape.area()) < 1e-12, "{shape:?} {degree}");
+                for q in &nodes {
+                    assert!((shape.point_at(q.uv) - q.point).length() < 1e-15);
+                }
+            }
+            // Integral of x over the triangle = area * centroid.x = 3 * 2/3 = 2.
+            let ix: f64 = nodes_on(&tri, rule(Domain::Triangle, degree))
+                .iter()
+                .map(|q| q.weight * q.point.x)
+                .sum();
+            assert!((ix - 2.0).abs() < 1e-12);
+        }
+    }
 
     #[test]
     fn weights_sum_to_area_and_integrate_polynomials() {

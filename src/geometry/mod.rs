@@ -9,6 +9,44 @@ pub mod form_factor;
 
 pub use glam::{DVec2, DVec3};
 
+/// Master parameter domain of an element (Bekaert–Willems §2): the unit square [0,1]² for quads (bilinear
+/// map) and the standard triangle (0,0), (1,0), (0,1) for triangles (barycentric map). Bases and cubature
+/// rules are defined once on these and mapped onto elements by [`Shape::point_at`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Domain {
+    Square,
+    Triangle,
+}
+
+impl Domain {
+    /// Parametric area |D|: 1 for the unit square, 1/2 for the standard triangle.
+    pub fn area(self) -> f64 {
+        match self {
+            Domain::Square => 1.0,
+            Domain::Triangle => 0.5,
+        }
+    }
+
+    /// Corners of the domain, counter-clockwise, in the order of a shape's vertices.
+    pub fn corners(self) -> &'static [DVec2] {
+        const TRI: [DVec2; 3] = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        const QUAD: [DVec2; 4] = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        match self {
+            Domain::Triangle => &TRI,
+            Domain::Square => &QUAD,
+        }
+    }
+}
+
 /// A planar convex triangle or quadrilateral; vertices are counter-clockwise seen from the front side.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Shape {
@@ -93,23 +131,17 @@ impl Shape {
         }
     }
 
+    /// The master parameter domain of [`Shape::point_at`].
+    pub fn domain(&self) -> Domain {
+        match self {
+            Shape::Triangle(_) => Domain::Triangle,
+            Shape::Quad(_) => Domain::Square,
+        }
+    }
+
     /// Corners of the parameter domain, in the order of the vertices.
     pub fn parameter_corners(&self) -> &'static [DVec2] {
-        const TRI: [DVec2; 3] = [
-            DVec2::new(0.0, 0.0),
-            DVec2::new(1.0, 0.0),
-            DVec2::new(0.0, 1.0),
-        ];
-        const QUAD: [DVec2; 4] = [
-            DVec2::new(0.0, 0.0),
-            DVec2::new(1.0, 0.0),
-            DVec2::new(1.0, 1.0),
-            DVec2::new(0.0, 1.0),
-        ];
-        match self {
-            Shape::Triangle(_) => &TRI,
-            Shape::Quad(_) => &QUAD,
-        }
+        self.domain().corners()
     }
 
     /// Parameters of a point lying in the shape's plane (inverse of [`Shape::point_at`]); for a quad this

@@ -1,0 +1,552 @@
+//! Polynomial bases on the master element domains for Galerkin radiosity (Bekaert–Willems §2).
+//!
+//! "The basis functions in our implementation were obtained by orthonormalisation of the functions
+//! {1, u, v, uv, u², v², u³, u²v, uv², v³} on the unit square and the standard triangle" (§2); they are
+//! mapped onto elements by the bilinear or barycentric map ([`Shape::point_at`]). A [`BasisKind`] takes a
+//! prefix of that list; [`Basis`] holds the Gram–Schmidt coefficients on both [`Domain`]s and the
+//! two-scale (push/pull) matrices between an element and the four children of [`Shape::subdivide`].
+//!
+//! Normalisation: orthonormal for the *averaged* parametric measure,
+//! `(1/|D|) ∫_D φ_α φ_β du dv = δ_αβ`, with `φ_0 ≡ 1`, so coefficient 0 of a function is its parametric
+//! average (its area average on triangles and parallelograms, where the Jacobian is constant). On a
+//! general quad the Jacobian varies and the mapped functions are not orthogonal for the area measure:
+//! the overlap matrix of Bekaert–Willems eq. (4) is then not diagonal.
+//!
+//! [`Shape::point_at`]: crate::geometry::Shape::point_at
+//! [`Shape::subdivide`]: crate::geometry::Shape::subdivide
+
+use crate::geometry::cubature::rule;
+use crate::geometry::{DVec2, Domain};
+
+/// The spanning monomials `u^p v^q` as `(p, q)`, in Bekaert–Willems' order {1, u, v, uv, u², v², u³, u²v,
+/// uv², v³}. Every prefix used by a [`BasisKind`] is closed under lowering an exponent, so its span is
+/// invariant under the axis-aligned affine child maps of [`child_parameters`].
+pub const MONOMIALS: [(u32, u32); 10] = [
+    (0, 0),
+    (1, 0),
+    (0, 1),
+    (1, 1),
+    (2, 0),
+    (0, 2),
+    (3, 0),
+    (2, 1),
+    (1, 2),
+    (0, 3),
+];
+
+/// Which prefix of [`MONOMIALS`] spans the basis; the same span on both domains (bilinear is {1, u, v, uv}
+/// on triangles too).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BasisKind {
+    /// {1}: 1 function.
+    Constant,
+    /// {1, u, v}: 3 functions.
+    Linear,
+    /// {1, u, v, uv}: 4 functions.
+    Bilinear,
+    /// {1, u, v, uv, u², v²}: 6 functions.
+    Quadratic,
+    /// All ten monomials up to total degree 3.
+    Cubic,
+}
+
+impl BasisKind {
+    pub const ALL: [BasisKind; 5] = [
+        BasisKind::Constant,
+        BasisKind::Linear,
+        BasisKind::Bilinear,
+        BasisKind::Quadratic,
+        BasisKind::Cubic,
+    ];
+
+    /// Number of basis functions.
+    pub fn size(self) -> usize {
+        match self {
+            BasisKind::Constant => 1,
+            BasisKind::Linear => 3,
+            BasisKind::Bilinear => 4,
+            BasisKind::Quadratic => 6,
+            BasisKind::Cubic => 10,
+        }
+    }
+
+    /// Total degree of the highest monomial (bilinear: 2, from uv).
+    pub fn polynomial_degree(self) -> usize {
+        match self {
+            BasisKind::Constant => 0,
+            BasisKind::Linear => 1,
+            BasisKind::Bilinear | BasisKind::Quadratic => 2,
+            BasisKind::Cubic => 3,
+        }
+    }
+
+    /// Degree of exactness of the receiver cubature rule. Bekaert–Willems §4.3: the minimum is "two times
+    /// the order of the approximation on the patch plus one" and "slightly higher than the minimal
+    /// required precision" gives visibly better coupling coefficients and error maxima; so `2 d + 2`,
+    /// which with [`rule`]'s odd-degree Gauss products means one more point per direction than the
+    /// minimum `2 d + 1` (constant: degree 2, a 2×2 rule rather than the 1-point centroid, so that the
+    /// error estimate at the nodes (§4.2) sees more than one point).
+    pub fn default_cubature_degree(self) -> usize {
+        2 * self.polynomial_degree() + 2
+    }
+}
+
+/// Child `child` (0..4, the order of [`Shape::subdivide`]) parameters → parent parameters. Each map is
+/// affine, `origin + sign * uv / 2`; the corners come from
+/// [`subdivide_parameters`] applied to [`Domain::corners`]: quads split at the parameter midpoints
+/// (children at (0,0), (½,0), (½,½), (0,½)); triangles at the edge midpoints, with the middle child 3
+/// (corners bc, ca, ab) rotated by a half turn, hence `sign = -1`. For bilinear quads this equality of
+/// points holds exactly too, since the parent's bilinear map restricted to an axis-aligned sub-rectangle
+/// is the child's bilinear map.
+///
+/// [`Shape::subdivide`]: crate::geometry::Shape::subdivide
+/// [`subdivide_parameters`]: crate::geometry::subdivide_parameters
+pub fn child_parameters(domain: Domain, child: usize, uv: DVec2) -> DVec2 {
+    let (origin, sign) = child_map(domain, child);
+    origin + sign * 0.5 * uv
+}
+
+fn child_map(domain: Domain, child: usize) -> (DVec2, f64) {
+    const SQUARE: [(DVec2, f64); 4] = [
+        (DVec2::new(0.0, 0.0), 1.0),
+        (DVec2::new(0.5, 0.0), 1.0),
+        (DVec2::new(0.5, 0.5), 1.0),
+        (DVec2::new(0.0, 0.5), 1.0),
+    ];
+    const TRIANGLE: [(DVec2, f64); 4] = [
+        (DVec2::new(0.0, 0.0), 1.0),
+        (DVec2::new(0.5, 0.0), 1.0),
+        (DVec2::new(0.0, 0.5), 1.0),
+        (DVec2::new(0.5, 0.5), -1.0),
+    ];
+    match domain {
+        Domain::Square => SQUARE[child],
+        Domain::Triangle => TRIANGLE[child],
+    }
+}
+
+fn domain_index(domain: Domain) -> usize {
+    match domain {
+        Domain::Square => 0,
+        Domain::Triangle => 1,
+    }
+}
+
+/// An orthonormal basis of one [`BasisKind`] on both master domains, with its two-scale matrices.
+#[derive(Clone, Debug)]
+pub struct Basis {
+    kind: BasisKind,
+    size: usize,
+    /// Per domain, `size × size` row-major and lower triangular: `φ_α = Σ_m c[α][m] x^p_m y^q_m` in the
+    /// centred coordinates of [`centred`] (the same functions as with `u^p v^q`, better conditioned).
+    coefficients: [Vec<f64>; 2],
+    /// Per domain and child, `size × size` row-major push matrices.
+    push: [[Vec<f64>; 4]; 2],
+}
+
+impl Basis {
+    /// Gram–Schmidt on the monomials (in [`centred`] coordinates) with their inner products from an
+    /// exact cubature [`rule`], two passes per function (classical Gram–Schmidt with
+    /// re-orthogonalisation, "twice is enough": Giraud et al. 2005, Numer. Math. 101), then the push
+    /// matrices by an exact cubature rule.
+    pub fn new(kind: BasisKind) -> Basis {
+        let size = kind.size();
+        let coefficients = [Domain::Square, Domain::Triangle].map(|d| gram_schmidt(d, size));
+        let mut basis = Basis {
+            kind,
+            size,
+            coefficients,
+            push: Default::default(),
+        };
+        for domain in [Domain::Square, Domain::Triangle] {
+            for child in 0..4 {
+                basis.push[domain_index(domain)][child] = basis.compute_push(domain, child);
+            }
+        }
+        basis
+    }
+
+    pub fn kind(&self) -> BasisKind {
+        self.kind
+    }
+
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    /// Writes `φ_α(uv)` into `out[α]` for `α < size`.
+    pub fn eval(&self, domain: Domain, uv: DVec2, out: &mut [f64]) {
+        let n = self.size;
+        let mut mono = [0.0; 10];
+        monomials(centred(domain, uv), &mut mono[..n]);
+        let c = &self.coefficients[domain_index(domain)];
+        for (a, o) in out[..n].iter_mut().enumerate() {
+            *o = (0..=a).map(|m| c[a * n + m] * mono[m]).sum();
+        }
+    }
+
+    /// `Σ_α c_α φ_α(uv)` (coefficients beyond `size` are ignored, missing ones count as zero).
+    pub fn value(&self, domain: Domain, uv: DVec2, coefficients: &[f64]) -> f64 {
+        let mut phi = [0.0; 10];
+        self.eval(domain, uv, &mut phi);
+        phi[..self.size]
+            .iter()
+            .zip(coefficients)
+            .map(|(p, c)| p * c)
+            .sum()
+    }
+
+    /// L2 projection (orthonormal coefficients) of `f` on `domain`, integrated by [`rule`] of degree
+    /// `cubature_degree`: `c_α = (1/|D|) ∫_D f φ_α`.
+    pub fn project(
+        &self,
+        domain: Domain,
+        cubature_degree: usize,
+        f: impl Fn(DVec2) -> f64,
+        out: &mut [f64],
+    ) {
+        let n = self.size;
+        out[..n].fill(0.0);
+        let mut phi = [0.0; 10];
+        for &(uv, w) in &rule(domain, cubature_degree).nodes {
+            self.eval(domain, uv, &mut phi);
+            let fw = f(uv) * w / domain.area();
+            for a in 0..n {
+                out[a] += fw * phi[a];
+            }
+        }
+    }
+
+    /// Push matrix of `child`: `size × size` row-major,
+    /// `P[α][β] = (1/|D|) ∫_D φ_α(uv) φ_β(map_k(uv)) du dv` with `map_k` = [`child_parameters`], so that
+    /// the child's coefficients of the parent's function restricted to the child are `P · parent`.
+    /// For every [`BasisKind`] on both domains this is exact (not just the L2 projection): the spans are
+    /// closed under lowering exponents and every child map is `origin ± uv/2` per coordinate (including
+    /// the half-turned middle triangle), so `φ_β ∘ map_k` stays in the span — bilinear on triangles
+    /// included.
+    pub fn push_matrix(&self, domain: Domain, child: usize) -> &[f64] {
+        &self.push[domain_index(domain)][child]
+    }
+
+    /// Child `child`'s coefficients of the parent function `parent`: `out = P_k · parent` (missing
+    /// parent coefficients count as zero, as in [`Basis::value`]).
+    pub fn push(&self, domain: Domain, child: usize, parent: &[f64], out: &mut [f64]) {
+        let n = self.size;
+        let p = self.push_matrix(domain, child);
+        for (a, o) in out[..n].iter_mut().enumerate() {
+            *o = (0..n).zip(parent).map(|(b, c)| p[a * n + b] * c).sum();
+        }
+    }
+
+    /// Adds child `child`'s contribution `(1/4) P_kᵀ · child` to the parent coefficients `out` (missing
+    /// child coefficients count as zero): the
+    /// children cover a quarter of the parent's parameter domain each, so
+    /// `(1/|D|) ∫_D f φ_α = Σ_k (1/4) (1/|D|) ∫_D f_k(uv) φ_α(map_k(uv)) du dv`.
+    pub fn pull_add(&self, domain: Domain, child: usize, coefficients: &[f64], out: &mut [f64]) {
+        let n = self.size;
+        let p = self.push_matrix(domain, child);
+        for b in 0..n {
+            let s: f64 = (0..n)
+                .zip(coefficients)
+                .map(|(a, c)| p[a * n + b] * c)
+                .sum();
+            out[b] += 0.25 * s;
+        }
+    }
+
+    /// Parent coefficients from the four children's: `Σ_k (1/4) P_kᵀ · children[k]`, the adjoint of
+    /// [`Basis::push`]. Exactly the L2 projection of the piecewise function onto the parent's span, and
+    /// the inverse of push on the parent's span.
+    pub fn pull(&self, domain: Domain, children: [&[f64]; 4], out: &mut [f64]) {
+        out[..self.size].fill(0.0);
+        for (k, c) in children.iter().enumerate() {
+            self.pull_add(domain, k, c, out);
+        }
+    }
+
+    fn compute_push(&self, domain: Domain, child: usize) -> Vec<f64> {
+        let n = self.size;
+        let mut p = vec![0.0; n * n];
+        let (mut phi, mut phi_k) = ([0.0; 10], [0.0; 10]);
+        // Integrand of degree 2 * polynomial_degree: exact.
+        for &(uv, w) in &rule(domain, 2 * self.kind.polynomial_degree()).nodes {
+            self.eval(domain, uv, &mut phi);
+            self.eval(domain, child_parameters(domain, child, uv), &mut phi_k);
+            let w = w / domain.area();
+            for a in 0..n {
+                for b in 0..n {
+                    p[a * n + b] += w * phi[a] * phi_k[b];
+                }
+            }
+        }
+        p
+    }
+}
+
+fn monomials(uv: DVec2, out: &mut [f64]) {
+    let (u, v) = (uv.x, uv.y);
+    let all = [
+        1.0,
+        u,
+        v,
+        u * v,
+        u * u,
+        v * v,
+        u * u * u,
+        u * u * v,
+        u * v * v,
+        v * v * v,
+    ];
+    let n = out.len();
+    out.copy_from_slice(&all[..n]);
+}
+
+/// Centred, scaled coordinates `x = 2 (u - c)`, `y = 2 (v - c)` about the domain's centroid (c = ½ on
+/// the square, ⅓ on the triangle). Every prefix of [`MONOMIALS`] is closed under lowering exponents, so
+/// `{x^p y^q}` and `{u^p v^q}` prefixes span the same nested spaces and Gram–Schmidt yields the same
+/// functions (leading coefficients stay positive); but the raw monomials on [0, 1] are nearly dependent
+/// (Hilbert-like Gram matrix), which cost ~1e-12 in the two-scale identities for cubics, while the
+/// centred ones give Legendre-like coefficients of order 10.
+fn centred(domain: Domain, uv: DVec2) -> DVec2 {
+    let c = match domain {
+        Domain::Square => 0.5,
+        Domain::Triangle => 1.0 / 3.0,
+    };
+    2.0 * (uv - DVec2::splat(c))
+}
+
+/// Orthonormal coefficients (lower triangular, `size × size`) of the first `size` [`centred`] monomials
+/// on `domain` for the averaged inner product `<f, g> = (1/|D|) ∫_D f g`; the Gram matrix of the
+/// monomials is integrated exactly (degree <= 6) by [`rule`].
+fn gram_schmidt(domain: Domain, size: usize) -> Vec<f64> {
+    let mut gram = vec![0.0; size * size];
+    let mut mono = [0.0; 10];
+    for &(uv, w) in &rule(domain, 6).nodes {
+        monomials(centred(domain, uv), &mut mono[..size]);
+        for i in 0..size {
+            for j in 0..size {
+                gram[i * size + j] += w / domain.area() * mono[i] * mono[j];
+            }
+        }
+    }
+    let dot = |a: &[f64], b: &[f64]| -> f64 {
+        let mut s = 0.0;
+        for i in 0..size {
+            for j in 0..size {
+                s += a[i] * gram[i * size + j] * b[j];
+            }
+        }
+        s
+    };
+    let mut c = vec![0.0; size * size];
+    for a in 0..size {
+        let mut v = vec![0.0; size];
+        v[a] = 1.0;
+        for _pass in 0..2 {
+            for b in 0..a {
+                let phi_b = &c[b * size..(b + 1) * size];
+                let r = dot(&v, phi_b);
+                for (vi, pi) in v.iter_mut().zip(phi_b) {
+                    *vi -= r * pi;
+                }
+            }
+        }
+        let norm = dot(&v, &v).sqrt();
+        for (ci, vi) in c[a * size..(a + 1) * size].iter_mut().zip(&v) {
+            *ci = vi / norm;
+        }
+    }
+    c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{subdivide_parameters, DVec3, Shape};
+
+    const DOMAINS: [Domain; 2] = [Domain::Square, Domain::Triangle];
+
+    #[test]
+    fn sizes_and_degrees() {
+        let sizes: Vec<usize> = BasisKind::ALL.iter().map(|k| k.size()).collect();
+        assert_eq!(sizes, [1, 3, 4, 6, 10]);
+        let cub: Vec<usize> = BasisKind::ALL
+            .iter()
+            .map(|k| k.default_cubature_degree())
+            .collect();
+        assert_eq!(cub, [2, 4, 6, 6, 8]);
+        for k in BasisKind::ALL {
+            let b = Basis::new(k);
+            assert_eq!((b.kind(), b.size()), (k, k.size()));
+            // The highest monomial's total degree.
+            let (p, q) = MONOMIALS[k.size() - 1];
+            assert_eq!((p + q) as usize, k.polynomial_degree());
+        }
+    }
+
+    #[test]
+    fn orthonormal_on_both_domains() {
+        for kind in BasisKind::ALL {
+            let basis = Basis::new(kind);
+            let n = basis.size();
+            for domain in DOMAINS {
+                let mut gram = vec![0.0; n * n];
+                let mut phi = [0.0; 10];
+                for &(uv, w) in &rule(domain, 2 * kind.polynomial_degree()).nodes {
+                    basis.eval(domain, uv, &mut phi);
+                    assert!((phi[0] - 1.0).abs() < 1e-15, "φ_0 ≡ 1");
+                    for a in 0..n {
+                        for b in 0..n {
+                            gram[a * n + b] += w / domain.area() * phi[a] * phi[b];
+                        }
+                    }
+                }
+                for a in 0..n {
+                    for b in 0..n {
+                        let e = if a == b { 1.0 } else { 0.0 };
+                        assert!(
+                            (gram[a * n + b] - e).abs() < 1e-12,
+                            "{kind:?} {domain:?} <φ{a}, φ{b}> = {}",
+                            gram[a * n + b]
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn square_basis_is_tensor_legendre() {
+        // Gram–Schmidt in this order yields products of shifted Legendre polynomials on the square,
+        // e.g. φ_3 = 12 (u - ½)(v - ½) and φ_7 = √5 (6u² - 6u + 1) · √3 (2v - 1).
+        let basis = Basis::new(BasisKind::Cubic);
+        let mut phi = [0.0; 10];
+        let uv = DVec2::new(0.3, 0.8);
+        basis.eval(Domain::Square, uv, &mut phi);
+        let l1 = |x: f64| 3f64.sqrt() * (2.0 * x - 1.0);
+        let l2 = |x: f64| 5f64.sqrt() * (6.0 * x * x - 6.0 * x + 1.0);
+        assert!((phi[3] - l1(uv.x) * l1(uv.y)).abs() < 1e-12);
+        assert!((phi[7] - l2(uv.x) * l1(uv.y)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn projection_reproduces_span() {
+        for kind in BasisKind::ALL {
+            let basis = Basis::new(kind);
+            for domain in DOMAINS {
+                // A polynomial in every span: a combination of the kind's monomials.
+                let f = |uv: DVec2| -> f64 {
+                    MONOMIALS[..kind.size()]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, (p, q))| {
+                            (i as f64 - 2.5) * uv.x.powi(*p as i32) * uv.y.powi(*q as i32)
+                        })
+                        .sum()
+                };
+                let mut c = [0.0; 10];
+                basis.project(domain, kind.default_cubature_degree(), f, &mut c);
+                for uv in [DVec2::new(0.1, 0.2), DVec2::new(0.6, 0.3)] {
+                    assert!((basis.value(domain, uv, &c) - f(uv)).abs() < 1e-12);
+                }
+                // Coefficient 0 is the average.
+                let avg: f64 = rule(domain, 4)
+                    .nodes
+                    .iter()
+                    .map(|(uv, w)| w * f(*uv))
+                    .sum::<f64>()
+                    / domain.area();
+                assert!((c[0] - avg).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn child_maps_match_subdivide() {
+        for domain in DOMAINS {
+            let children = subdivide_parameters(domain.corners());
+            for (k, corners) in children.iter().enumerate() {
+                for (corner, expected) in domain.corners().iter().zip(corners) {
+                    assert!((child_parameters(domain, k, *corner) - *expected).length() < 1e-15);
+                }
+            }
+        }
+        let quad = Shape::Quad([
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.1),
+            DVec3::new(1.5, 1.0, 0.4),
+            DVec3::new(0.2, 1.3, 0.0),
+        ]);
+        let tri = Shape::Triangle([
+            DVec3::new(0.1, 0.0, 0.0),
+            DVec3::new(2.0, 0.5, 0.0),
+            DVec3::new(0.3, 1.7, 0.9),
+        ]);
+        for shape in [quad, tri] {
+            let domain = shape.domain();
+            for (k, child) in shape.subdivide().iter().enumerate() {
+                for &(uv, _) in &rule(domain, 5).nodes {
+                    let p = shape.point_at(child_parameters(domain, k, uv));
+                    assert!((p - child.point_at(uv)).length() < 1e-14, "{domain:?} {k}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn push_reproduces_parent_on_children_and_pull_inverts_it() {
+        for kind in BasisKind::ALL {
+            let basis = Basis::new(kind);
+            let n = basis.size();
+            for domain in DOMAINS {
+                let parent: Vec<f64> = (0..n).map(|a| 1.0 + 0.37 * a as f64).collect();
+                let mut children = [[0.0; 10]; 4];
+                for (k, child) in children.iter_mut().enumerate() {
+                    basis.push(domain, k, &parent, child);
+                    for &(uv, _) in &rule(domain, 5).nodes {
+                        let on_parent =
+                            basis.value(domain, child_parameters(domain, k, uv), &parent);
+                        let on_child = basis.value(domain, uv, &child[..n]);
+                        assert!(
+                            (on_parent - on_child).abs() < 1e-12,
+                            "{kind:?} {domain:?} child {k}: {on_parent} vs {on_child}"
+                        );
+                    }
+                }
+                let mut back = [0.0; 10];
+                basis.pull(
+                    domain,
+                    [
+                        &children[0][..n],
+                        &children[1][..n],
+                        &children[2][..n],
+                        &children[3][..n],
+                    ],
+                    &mut back,
+                );
+                for a in 0..n {
+                    assert!(
+                        (back[a] - parent[a]).abs() < 1e-12,
+                        "{kind:?} {domain:?} {a}: {} vs {}",
+                        back[a],
+                        parent[a]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pull_is_the_projection_of_the_piecewise_function() {
+        // Children carrying different constants: the parent gets their projection, whose coefficient 0
+        // is the mean of the four.
+        let basis = Basis::new(BasisKind::Linear);
+        for domain in DOMAINS {
+            let vals = [1.0, 2.0, 4.0, 8.0];
+            let mut out = [0.0; 3];
+            basis.pull(domain, [&[1.0], &[2.0], &[4.0], &[8.0]], &mut out);
+            assert!((out[0] - vals.iter().sum::<f64>() / 4.0).abs() < 1e-14);
+        }
+    }
+}
