@@ -48,10 +48,11 @@ pub const MAX_DEGREE: usize = 2 * MAX_POINTS - 1;
 /// * square: tensor product of `n`-point Gauss–Legendre rules on [0, 1] (exact for `u^p v^q`,
 ///   `p, q <= 2n - 1`);
 /// * triangle: Stroud's conical product rule (Stroud 1971, *Approximate Calculation of Multiple
-///   Integrals*, §2.4, rule T_n: 2-1): with the collapsed map `u = s`, `v = t (1 - s)` (Jacobian
-///   `1 - s`), `∫_T f = ∫∫ f(s, t(1-s)) (1-s) ds dt`; `s` takes the `n`-point Gauss–Jacobi rule for the
-///   weight `1 - s` on [0, 1] and `t` the `n`-point Gauss–Legendre rule. A monomial of total degree
-///   `<= 2n - 1` becomes a polynomial of degree `<= 2n - 1` in each of `s` and `t`, so the rule is exact.
+///   Integrals*, §2.4, conical product formulas): with the collapsed map `u = s`, `v = t (1 - s)`
+///   (Jacobian `1 - s`), `∫_T f = ∫∫ f(s, t(1-s)) (1-s) ds dt`; `s` takes the `n`-point Gauss–Jacobi
+///   rule for the weight `1 - s` on [0, 1] and `t` the `n`-point Gauss–Legendre rule. A monomial of
+///   total degree `<= 2n - 1` becomes a polynomial of degree `<= 2n - 1` in each of `s` and `t`, so the
+///   rule is exact.
 ///
 /// All nodes lie strictly inside the domain and all weights are positive.
 pub fn rule(domain: Domain, degree: usize) -> &'static Rule {
@@ -236,7 +237,7 @@ fn gauss_from_recurrence(a: &[f64], b: &[f64], mu0: f64) -> (Vec<f64>, Vec<f64>)
 }
 
 /// Eigenvalues of the symmetric tridiagonal matrix with diagonal `d` and off-diagonal `e` (`e[i]` couples
-/// `i` and `i + 1`; the last entry is ignored) by the implicit QL algorithm (Numerical Recipes §11.4,
+/// `i` and `i + 1`; the last entry is ignored) by the implicit QL algorithm (Numerical Recipes,
 /// `tqli` without eigenvectors). The eigenvalues are left in `d`, unsorted.
 fn tridiagonal_eigenvalues(d: &mut [f64], e: &mut [f64]) {
     let n = d.len();
