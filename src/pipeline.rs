@@ -3,17 +3,20 @@
 //! hierarchical Monte Carlo radiosity). The command line and the
 //! tests share this one path.
 
+use crate::bases::BasisKind;
 use crate::hierarchy::Hierarchy;
+use crate::oracles::link_error::LinkErrorOracle;
 use crate::oracles::mutual_information::MutualInformationOracle;
 use crate::oracles::smoothness::SmoothnessOracle;
 use crate::oracles::{power::PowerOracle, RefinementOracle};
 use crate::progress::Progress;
 use crate::scene::Scene;
 use crate::solvers::coupling::CouplingSettings;
-use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi};
+use crate::solvers::error_estimate::EstimateKind;
+use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};
 use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
-use crate::solvers::{solve, SolveReport, SolveSettings};
+use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
@@ -29,6 +32,9 @@ pub enum OracleKind {
     #[value(name = "mi", alias = "mutual-information")]
     #[serde(rename = "mi")]
     MutualInformation,
+    /// Link error from the coupling's error coefficients, Bekaert–Willems eq. (13), with error control
+    /// (algorithm 6.1) to the accuracy asked for.
+    Error,
 }
 
 /// Solution method (`--method`).
@@ -48,6 +54,47 @@ pub enum MethodKind {
 pub enum SolverKind {
     Jacobi,
     GaussSeidel,
+    Southwell,
+}
+
+/// The accuracy error control aims at (`--accuracy`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Accuracy {
+    /// Absolute radiance error, W/(m² sr) (scene units).
+    Absolute(f64),
+    /// A fraction of the scene's mean radiance (`--accuracy 2%` is 0.02).
+    Relative(f64),
+}
+
+impl Accuracy {
+    /// The absolute radiance error for `hierarchy`: a relative accuracy is taken of the mean radiance
+    /// the energy balance predicts before solving, `L̄ = Φ_e / (π A_T (1 − ρ̄))` with ρ̄ the
+    /// area-weighted mean reflectance (exact for a closed room of uniform reflectance), averaged over
+    /// the colour channels.
+    pub fn absolute(self, hierarchy: &Hierarchy) -> f64 {
+        match self {
+            Accuracy::Absolute(value) => value,
+            Accuracy::Relative(fraction) => fraction * mean_radiance_estimate(hierarchy),
+        }
+    }
+}
+
+/// `Φ_e / (π A_T (1 − ρ̄))`, mean over channels (see [`Accuracy::absolute`]).
+pub fn mean_radiance_estimate(hierarchy: &Hierarchy) -> f64 {
+    let area = hierarchy.total_area();
+    if area <= 0.0 {
+        return 0.0;
+    }
+    let emitted = crate::solvers::emitted_power(hierarchy);
+    let rho: crate::color::Rgb = hierarchy
+        .patches
+        .iter()
+        .map(|p| p.reflectance * hierarchy.element(p.root).area)
+        .sum::<crate::color::Rgb>()
+        / area;
+    let channel = |phi: f64, rho: f64| phi / (std::f64::consts::PI * area * (1.0 - rho).max(1e-3));
+    (channel(emitted.r, rho.r) + channel(emitted.g, rho.g) + channel(emitted.b, rho.b)) / 3.0
 }
 
 /// Ray casting back end (`--visibility`).
@@ -74,10 +121,20 @@ pub struct SimulationSettings {
     pub eps: f64,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
-    /// Gauss points per direction on receivers for form factors.
-    pub receiver_order: usize,
-    /// Visibility rays per receiver node.
-    pub visibility_rays: usize,
+    /// Radiance basis on every element (Bekaert–Willems §2).
+    pub basis: BasisKind,
+    /// Degree of the cubature rules for couplings; `None`: the basis's default (§4.3).
+    pub cubature_degree: Option<usize>,
+    /// Error control's target (with the link error oracle).
+    pub accuracy: Accuracy,
+    /// Algorithm 6.1's threshold factor.
+    pub threshold_factor: f64,
+    /// Which a-posteriori estimate to compute (and control).
+    pub estimate: EstimateKind,
+    /// Most elements refinement may create.
+    pub max_elements: usize,
+    /// Most bytes the hierarchy (elements, coefficients, links) may take; refinement stops there.
+    pub max_memory: usize,
     /// Random point pairs per evaluation of the sampling oracles (eqs. (2) and (15); the paper uses 10).
     pub oracle_samples: usize,
     /// Relative change of total power at which sweeps stop; for stochastic Jacobi, the fraction of the
@@ -92,6 +149,36 @@ pub struct SimulationSettings {
     pub seed: u64,
 }
 
+/// The default accuracy of error control: 2% of the mean radiance.
+pub const DEFAULT_RELATIVE_ACCURACY: f64 = 0.02;
+
+/// Half of the machine's memory (from /proc/meminfo), or 4 GiB where that cannot be read.
+pub fn default_max_memory() -> usize {
+    let total_kib = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|text| {
+            text.lines()
+                .find(|l| l.starts_with("MemTotal:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<usize>().ok())
+        });
+    total_kib.map_or(4 << 30, |kib| kib * 1024 / 2)
+}
+
+impl SimulationSettings {
+    /// The cubature degree couplings use: the basis's default when the link error oracle reads the error
+    /// coefficients (it needs `d + 3` receiver nodes per direction, see
+    /// [`BasisKind::default_cubature_degree`]); one point per direction fewer for the other oracles,
+    /// which only need the coupling itself (a 2×2 receiver rule for the constant basis).
+    pub fn cubature_degree(&self) -> usize {
+        self.cubature_degree.unwrap_or_else(|| match self.oracle {
+            OracleKind::Error => self.basis.default_cubature_degree(),
+            _ => self.basis.default_cubature_degree() - 2,
+        })
+    }
+}
+
+/// The library's default is the classic solver the oracle experiments start from (constant basis,
+/// power oracle, `eps`); the command line defaults to error control (`radiosity render --help`).
 impl Default for SimulationSettings {
     fn default() -> Self {
         SimulationSettings {
@@ -101,8 +188,13 @@ impl Default for SimulationSettings {
             visibility: VisibilityKind::Bvh,
             eps: 1e-3,
             min_area: 1e-5,
-            receiver_order: 2,
-            visibility_rays: 4,
+            basis: BasisKind::Constant,
+            cubature_degree: None,
+            accuracy: Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY),
+            threshold_factor: 1.4,
+            estimate: EstimateKind::Realistic,
+            max_elements: 2_000_000,
+            max_memory: default_max_memory(),
             oracle_samples: 10,
             tolerance: 1e-5,
             max_iterations: 200,
@@ -147,6 +239,11 @@ pub fn make_oracle(
         OracleKind::Power => Box::new(PowerOracle),
         OracleKind::Smoothness => Box::new(SmoothnessOracle::for_hierarchy(samples, hierarchy)),
         OracleKind::MutualInformation => Box::new(MutualInformationOracle::new(samples)),
+        OracleKind::Error => Box::new(LinkErrorOracle {
+            coupling: CouplingSettings {
+                cubature_degree: settings.cubature_degree(),
+            },
+        }),
     }
 }
 
@@ -154,30 +251,49 @@ pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
     match kind {
         SolverKind::Jacobi => Box::new(Jacobi),
         SolverKind::GaussSeidel => Box::new(GaussSeidel),
+        SolverKind::Southwell => Box::new(Southwell::default()),
     }
 }
 
-/// The deterministic solver's settings for absolute refinement `threshold` and `min_area` (`simulate`
-/// derives both from the relative `eps` and `min_area` of `settings`).
-pub fn deterministic_settings(
-    settings: &SimulationSettings,
-    threshold: f64,
-    min_area: f64,
-) -> SolveSettings {
+/// The deterministic solver's settings for `hierarchy`: absolute refinement threshold and minimum area
+/// from the relative `eps` and `min_area`, the element budget from `max_elements` and `max_memory`, and
+/// error control (with the link error oracle) at the absolute accuracy.
+pub fn deterministic_settings(settings: &SimulationSettings, hierarchy: &Hierarchy) -> SolveSettings {
+    let bytes_per_element = hierarchy.memory_bytes() / hierarchy.elements.len().max(1)
+        + LINKS_PER_ELEMENT_ESTIMATE * link_bytes(settings.basis, settings.cubature_degree());
+    let memory_elements = settings.max_memory / bytes_per_element.max(1);
     SolveSettings {
         refine: RefineSettings {
-            threshold,
-            min_area,
+            threshold: settings.eps * hierarchy.total_emission(),
+            min_area: settings.min_area * hierarchy.total_area(),
+            max_elements: settings.max_elements.min(memory_elements),
             coupling: CouplingSettings {
-                receiver_order: settings.receiver_order,
-                visibility_rays: settings.visibility_rays,
+                cubature_degree: settings.cubature_degree(),
             },
             seed: settings.seed,
         },
         tolerance: settings.tolerance,
         max_iterations: settings.max_iterations,
         max_passes: settings.max_passes,
+        estimate: settings.estimate,
+        error_control: (settings.oracle == OracleKind::Error).then(|| ErrorControl {
+            accuracy: settings.accuracy.absolute(hierarchy),
+            threshold_factor: settings.threshold_factor,
+        }),
     }
+}
+
+/// Links per element assumed when turning `--max-memory` into an element budget (measured: 10 to 40 on
+/// the Cornell box and office scenes; the larger keeps the budget safe).
+const LINKS_PER_ELEMENT_ESTIMATE: usize = 40;
+
+/// Bytes of one link with its coupling block and error coefficients.
+pub fn link_bytes(basis: BasisKind, cubature_degree: usize) -> usize {
+    let size = basis.size();
+    let nodes = crate::geometry::cubature::rule(crate::geometry::Domain::Square, cubature_degree)
+        .nodes
+        .len();
+    std::mem::size_of::<crate::hierarchy::Link>() + size * size * 8 + nodes * (size + 1) * 4
 }
 
 /// Runs hierarchical radiosity on `scene`.
@@ -189,11 +305,16 @@ pub fn simulate(
     let start = Instant::now();
     let visibility = build_visibility(scene, settings.visibility)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
-    let mut hierarchy = Hierarchy::new(scene, 1);
+    let mut hierarchy = Hierarchy::new(scene, settings.basis);
     let threshold = settings.eps * hierarchy.total_emission();
     let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);
     if settings.method == MethodKind::StochasticJacobi {
+        anyhow::ensure!(
+            settings.basis == BasisKind::Constant && settings.oracle != OracleKind::Error,
+            "hierarchical Monte Carlo radiosity works with the constant basis and the power, smoothness \
+             or mi oracle (use --basis constant and --oracle power|smoothness|mi)"
+        );
         let stochastic = StochasticSettings {
             threshold,
             min_area,
@@ -216,7 +337,7 @@ pub fn simulate(
             visibility_seconds,
         });
     }
-    let solve_settings = deterministic_settings(settings, threshold, min_area);
+    let solve_settings = deterministic_settings(settings, &hierarchy);
     let solver = make_solver(settings.solver);
     let report = solve(
         &mut hierarchy,

@@ -104,10 +104,10 @@ fn global_lines_match_quadrature_for_parallel_plates() {
     }
     reference /= f;
     let scene = generators::parallel_plates(1.0, 1.0, 0.5, 1.0);
-    // ff order 5: link form factors close to the analytic F used by the reference.
+    // Degree-9 cubature: link form factors close to the analytic F used by the reference.
     let settings = SimulationSettings {
         eps: 10.0,
-        receiver_order: 5,
+        cubature_degree: Some(9),
         ..Default::default()
     };
     let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");

@@ -53,12 +53,12 @@ fn floor_setup(two_sided: bool) -> (Scene, Hierarchy) {
         vec![(floor, 0, two_sided)],
         vec![Material::diffuse("floor", Rgb::splat(0.5))],
     );
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     let children = h.subdivide(h.patches[0].root);
     let grand = h.subdivide(children[0]);
     h.subdivide(grand[2]);
     for leaf in h.leaves() {
-        let c = h.element(leaf).shape.centroid();
+        let c = h.element(leaf).shape().centroid();
         h.elements[leaf as usize].radiance[0] = Rgb::new(1.0 + c.x, 2.0 + c.y, 0.5 + c.x * c.y);
     }
     (s, h)
@@ -103,7 +103,7 @@ fn flat_render_is_the_leaf_radiance_and_misses_are_black() {
             }
             // Independent lookup: the axis-aligned leaf square strictly containing the point.
             let Some(&leaf) = leaves.iter().find(|&&l| {
-                let b = h.element(l).shape.bounds();
+                let b = h.element(l).shape().bounds();
                 inside(b.min, b.max, 1e-9)
             }) else {
                 continue;
@@ -171,6 +171,7 @@ fn images_do_not_depend_on_thread_count_and_jitter_is_seeded() {
         samples_per_pixel: 5,
         seed: 42,
         mesh_colour: Rgb::new(9.0, 0.0, 0.0),
+        ..Default::default()
     };
     let in_pool = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
@@ -259,7 +260,7 @@ fn mesh_lines_follow_leaf_edges_about_a_pixel_wide() {
             if !(0.0..=1.0).contains(&p.x) || !(0.0..=1.0).contains(&p.y) {
                 continue;
             }
-            let b = h.element(h.locate(0, p)).shape.bounds();
+            let b = h.element(h.locate(0, p)).shape().bounds();
             let d = (p.x - b.min.x)
                 .min(b.max.x - p.x)
                 .min(p.y - b.min.y)
@@ -601,7 +602,7 @@ fn lit_box_renders_with_mesh_overlay() {
     ];
     let s = scene(polygons, materials);
     let vis = visibility(&s);
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     let light_patch = 5;
 
     // Uniform level 2, then split partly shadowed leaves down to level 6.
@@ -613,10 +614,10 @@ fn lit_box_renders_with_mesh_overlay() {
     for _ in 2..6 {
         for leaf in h.leaves() {
             let e = h.element(leaf);
-            if e.patch == light_patch {
+            if e.patch() == light_patch {
                 continue;
             }
-            let shape = e.shape;
+            let shape = *e.shape();
             let n = h.patch_of(leaf).normal;
             let c = shape.centroid();
             let probes: Vec<f64> = shape
@@ -633,7 +634,7 @@ fn lit_box_renders_with_mesh_overlay() {
     for leaf in h.leaves() {
         let e = h.element(leaf);
         let patch = h.patch_of(leaf);
-        let c = e.shape.centroid();
+        let c = e.shape().centroid();
         let direct = point_to_polygon(c, patch.normal, &light)
             * light_visibility(&vis, c + patch.normal * 1e-6, &light);
         let radiance =

@@ -57,7 +57,7 @@ fn scrambled(c: DVec3) -> Rgb {
 
 fn set_leaves(h: &mut Hierarchy, value: impl Fn(DVec3) -> Rgb) {
     for leaf in h.leaves() {
-        let c = h.element(leaf).shape.centroid();
+        let c = h.element(leaf).shape().centroid();
         h.elements[leaf as usize].radiance[0] = value(c);
     }
 }
@@ -93,7 +93,7 @@ fn check_continuity(h: &Hierarchy, vr: &VertexRadiosity, patches: &[u32]) -> usi
         let mut leaves = Vec::new();
         h.collect_leaves(h.patches[patch as usize].root, &mut leaves);
         for leaf in leaves {
-            let shape = h.element(leaf).shape;
+            let shape = *h.element(leaf).shape();
             let n = shape.normal();
             let v = shape.vertices();
             for k in 0..v.len() {
@@ -130,7 +130,7 @@ fn check_continuity(h: &Hierarchy, vr: &VertexRadiosity, patches: &[u32]) -> usi
 #[test]
 fn t_vertices_within_a_patch_leave_no_crack() {
     let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     // Coarse leaves beside a refined corner, refined down to three levels: several T-vertices per edge.
     h.subdivide(h.patches[0].root);
     refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
@@ -159,7 +159,7 @@ fn t_vertices_across_coplanar_patches_leave_no_crack() {
         ],
         vec![grey("floor")],
     );
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     refine_at(&mut h, 0, DVec3::new(1.0, 0.5, 0.0), 3);
     refine_at(&mut h, 0, DVec3::new(1.5, 0.4, 0.0), 4);
     refine_at(&mut h, 1, DVec3::new(0.3, 0.5, 0.0), 1);
@@ -193,7 +193,7 @@ fn smoothing_stops_at_material_and_orientation_changes() {
             Material::diffuse("red", Rgb::new(0.7, 0.1, 0.1)),
         ],
     );
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     for patch in 0..3 {
         refine_at(&mut h, patch, DVec3::new(0.01, 0.01, 0.0), 3);
     }
@@ -223,7 +223,7 @@ fn smoothing_stops_at_material_and_orientation_changes() {
 #[test]
 fn linear_radiance_is_reproduced_inside_and_constant_everywhere() {
     let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     for _ in 0..3 {
         for leaf in h.leaves() {
             h.subdivide(leaf);
@@ -235,7 +235,7 @@ fn linear_radiance_is_reproduced_inside_and_constant_everywhere() {
     assert_eq!(vr.vertex_count(), 81);
     // Leaves away from the patch border have symmetric vertex neighbourhoods: the interpolation is the ramp.
     for leaf in h.leaves() {
-        let shape = h.element(leaf).shape;
+        let shape = *h.element(leaf).shape();
         let b = shape.bounds();
         if b.min.x < 0.1 || b.max.x > 0.9 || b.min.y < 0.1 || b.max.y > 0.9 {
             continue;
@@ -247,13 +247,13 @@ fn linear_radiance_is_reproduced_inside_and_constant_everywhere() {
     }
 
     // A constant solution stays exactly constant with T-vertices and fans.
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     refine_at(&mut h, 0, DVec3::new(0.2, 0.7, 0.0), 4);
     set_leaves(&mut h, |_| Rgb::new(0.25, 0.5, 2.0));
     let vr = VertexRadiosity::new(&h);
     assert!(vr.fanned_leaf_count() > 0);
     for leaf in h.leaves() {
-        let shape = h.element(leaf).shape;
+        let shape = *h.element(leaf).shape();
         for p in [
             shape.centroid(),
             shape.vertices()[1] * 0.9 + shape.centroid() * 0.1,
@@ -269,7 +269,7 @@ fn vertex_values_are_area_weighted_and_t_vertices_interpolated() {
     // The root split in four, the lower-left child split again: its corner (0.5, 0.25) is a T-vertex
     // inside the left edge of the lower-right child. Check the numbers by hand.
     let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
-    let mut h = Hierarchy::new(&s, 1);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Constant);
     let children = h.subdivide(h.patches[0].root);
     // children: [0,.5]^2, [.5,1]x[0,.5], [.5,1]^2, [0,.5]x[.5,1]
     let grand = h.subdivide(children[0]);

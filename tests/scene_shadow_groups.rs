@@ -34,18 +34,16 @@ const FOV_DEGREES: f64 = 30.0;
 fn solve_wall(receivers: &Scene, occluders: &[Shape], tile_area: f64) -> Hierarchy {
     let settings = SimulationSettings {
         eps: 1e-7,
-        // One Gauss point per element (4 visibility rays to the source from it): the elements are tiny
-        // next to their distance to the source, so the form factor needs no more, and the solve is four
-        // times cheaper.
-        receiver_order: 1,
+        // A degree-1 cubature (one node on each element, one visibility ray per link): the elements are
+        // tiny next to their distance to the source, so the form factor needs no more.
+        cubature_degree: Some(1),
         ..Default::default()
     };
-    let mut h = Hierarchy::new(receivers, 1);
+    let mut h = Hierarchy::new(receivers, radiosity::bases::BasisKind::Constant);
     // Wall elements stop at quadtree level 7 (side 1/128 of a tile, about 0.012, a third of the smallest
     // shadow): level-6 elements are still splittable, level-7 ones not.
-    let min_area = 0.5 * tile_area / 4f64.powi(6);
-    let solve_settings =
-        deterministic_settings(&settings, settings.eps * h.total_emission(), min_area);
+    let mut solve_settings = deterministic_settings(&settings, &h);
+    solve_settings.refine.min_area = 0.5 * tile_area / 4f64.powi(6);
     let oracle = make_oracle(&settings, &h);
     let solver = make_solver(settings.solver);
     solve(

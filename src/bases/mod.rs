@@ -15,6 +15,7 @@
 //! [`Shape::point_at`]: crate::geometry::Shape::point_at
 //! [`Shape::subdivide`]: crate::geometry::Shape::subdivide
 
+use crate::color::Rgb;
 use crate::geometry::cubature::rule;
 use crate::geometry::{DVec2, Domain};
 
@@ -83,13 +84,27 @@ impl BasisKind {
 
     /// Degree of exactness of the receiver cubature rule. Bekaert–Willems §4.3: the minimum is "two times
     /// the order of the approximation on the patch plus one" and "slightly higher than the minimal
-    /// required precision" gives visibly better coupling coefficients and error maxima; so `2 d + 2`,
-    /// which with [`rule`]'s odd-degree Gauss products means one more point per direction than the
-    /// minimum `2 d + 1` (constant: degree 2, a 2×2 rule rather than the 1-point centroid, so that the
-    /// error estimate at the nodes (§4.2) sees more than one point).
+    /// required precision" gives visibly better coupling coefficients and error maxima. We take
+    /// `2 d + 4`: with [`rule`]'s Gauss products that is `d + 3` points per direction. Fewer points fall
+    /// into a trap of the node-sampled maximum of §4.3: the `d + 1` Gauss points are the zeros of the
+    /// Legendre polynomial `P_{d+1}` that dominates the projection error (superconvergence), and the
+    /// `d + 2` points, zeros of `P_{d+2}`, miss the error of every function symmetric about the element
+    /// centre (where `P_{d+1}`'s component vanishes by parity): a constant element under a centred
+    /// emitter would report no error at all with a 2×2 rule. The source rule is coarser
+    /// ([`source_cubature_degree`]): it only integrates.
     pub fn default_cubature_degree(self) -> usize {
-        2 * self.polynomial_degree() + 2
+        2 * self.polynomial_degree() + 4
     }
+}
+
+/// Degree of the source-side rule for a receiver rule of `receiver_degree` (eq. (12) allows different
+/// rules on `i` and `j`): the source rule only has to integrate `K(x_k, y) φ_β(y)`, not to sample an
+/// error maximum, so it is the minimal `2 d + 1` for the basis of degree `d` whose default receiver
+/// rule is `receiver_degree` (`d + 1` points per direction, two fewer than the receiver), and at least
+/// a 2×2 rule, so that partial visibility of the source is sampled at four points. Each node pair costs
+/// a ray, so this halves to quarters the rays of a link.
+pub fn source_cubature_degree(receiver_degree: usize) -> usize {
+    receiver_degree.saturating_sub(3).max(2)
 }
 
 /// Child `child` (0..4, the order of [`Shape::subdivide`]) parameters → parent parameters. Each map is
@@ -547,6 +562,46 @@ mod tests {
             let mut out = [0.0; 3];
             basis.pull(domain, [&[1.0], &[2.0], &[4.0], &[8.0]], &mut out);
             assert!((out[0] - vals.iter().sum::<f64>() / 4.0).abs() < 1e-14);
+        }
+    }
+}
+
+/// Most basis functions of any kind (cubic).
+pub const MAX_BASIS_SIZE: usize = 10;
+
+impl Basis {
+    /// Child `child`'s coefficients of the parent function with RGB `coefficients` (push, exact where
+    /// the span is closed under the child map): `P_k · c`.
+    pub fn push_rgb(&self, domain: Domain, child: usize, coefficients: &[Rgb]) -> Vec<Rgb> {
+        let size = coefficients.len();
+        let p = self.push_matrix(domain, child);
+        (0..size)
+            .map(|alpha| {
+                p[alpha * size..(alpha + 1) * size]
+                    .iter()
+                    .zip(coefficients)
+                    .map(|(&m, &c)| c * m)
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Adds `weight · P_kᵀ · child` to `parent`: the projection onto the parent's basis of a function
+    /// given on child `child`, for children covering the fraction `weight` of the parent's area (pull).
+    pub fn pull_add_rgb(
+        &self,
+        domain: Domain,
+        child: usize,
+        weight: f64,
+        coefficients: &[Rgb],
+        parent: &mut [Rgb],
+    ) {
+        let size = coefficients.len();
+        let p = self.push_matrix(domain, child);
+        for (alpha, &c) in coefficients.iter().enumerate() {
+            for (beta, out) in parent.iter_mut().enumerate() {
+                *out += c * (weight * p[alpha * size + beta]);
+            }
         }
     }
 }

@@ -1,7 +1,12 @@
 //! Argument groups shared by several subcommands.
 
 use crate::geometry::DVec3;
-use crate::pipeline::{MethodKind, OracleKind, SimulationSettings, SolverKind, VisibilityKind};
+use crate::bases::BasisKind;
+use crate::pipeline::{
+    default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
+    VisibilityKind,
+};
+use crate::solvers::error_estimate::EstimateKind;
 use crate::scene::{self, LoadOptions, Scene};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -72,27 +77,46 @@ pub struct SolveArgs {
     /// Solution method: deterministic hierarchical radiosity, or hierarchical Monte Carlo radiosity.
     #[arg(long, value_enum, default_value_t = MethodKind::Deterministic)]
     pub method: MethodKind,
-    /// Refinement oracle.
-    #[arg(long, value_enum, default_value_t = OracleKind::Power)]
+    /// Refinement oracle; `error` (the default) is the link error oracle with error control to
+    /// --accuracy.
+    #[arg(long, value_enum, default_value_t = OracleKind::Error)]
     pub oracle: OracleKind,
+    /// Radiance basis on every element (Bekaert–Willems §2).
+    #[arg(long, value_enum, default_value_t = BasisKind::Linear)]
+    pub basis: BasisKind,
+    /// Polynomial degree the coupling cubature integrates exactly (1-12); default: the basis's
+    /// (2·order + 2, slightly above the minimum 2·order + 1 of §4.3).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=12), value_name = "D")]
+    pub cubature_degree: Option<u8>,
+    /// Error control's target: an absolute radiance error in W/(m² sr) (e.g. 0.05), or a percentage of
+    /// the scene's mean radiance (e.g. 2%). Used with --oracle error.
+    #[arg(long, value_parser = parse_accuracy, default_value = "2%", value_name = "EPS|P%")]
+    pub accuracy: Accuracy,
+    /// Factor by which error control lowers a failing element's link error threshold per pass.
+    #[arg(long, default_value_t = 1.4, value_name = "F")]
+    pub threshold_factor: f64,
+    /// Which a-posteriori error estimate to compute and control (Bekaert–Willems §4.3, eq. (11)).
+    #[arg(long, value_enum, default_value_t = EstimateKind::Realistic)]
+    pub error_estimate: EstimateKind,
+    /// Most elements refinement may create.
+    #[arg(long, default_value_t = 2_000_000, value_name = "N")]
+    pub max_elements: usize,
+    /// Most memory for elements and links, e.g. 2G, 500M (default: half the machine's memory).
+    #[arg(long, value_parser = parse_bytes, value_name = "BYTES")]
+    pub max_memory: Option<usize>,
     /// Iterative solver for the linear system.
     #[arg(long, value_enum, default_value_t = SolverKind::GaussSeidel)]
     pub solver: SolverKind,
     /// Ray casting back end.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
     pub visibility: VisibilityKind,
-    /// Refinement threshold ε relative to the scene's total emission (Σ A·max(E)); smaller is finer.
+    /// Refinement threshold ε of the power, smoothness and mi oracles, relative to the scene's total
+    /// emission (Σ A·max(E)); smaller is finer.
     #[arg(long, default_value_t = 1e-3)]
     pub eps: f64,
     /// Smallest splittable element area, relative to the total surface area.
     #[arg(long, default_value_t = 1e-5)]
     pub min_area: f64,
-    /// Gauss points per direction on the receiver for link form factors (1-5).
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=5))]
-    pub ff_order: u8,
-    /// Visibility rays per receiver Gauss point.
-    #[arg(long, default_value_t = 4)]
-    pub vis_rays: usize,
     /// Random point pairs (one visibility ray each) per evaluation of the smoothness and MI oracles.
     #[arg(long, default_value_t = 10, value_name = "N")]
     pub oracle_samples: usize,
@@ -125,7 +149,11 @@ impl SolveArgs {
             self.min_area.is_finite() && self.min_area >= 0.0,
             "--min-area must be non-negative"
         );
-        anyhow::ensure!(self.vis_rays >= 1, "--vis-rays must be at least 1");
+        anyhow::ensure!(
+            self.threshold_factor.is_finite() && self.threshold_factor > 1.0,
+            "--threshold-factor must be a number above 1"
+        );
+        anyhow::ensure!(self.max_elements >= 1, "--max-elements must be at least 1");
         anyhow::ensure!(
             self.oracle_samples >= 2,
             "--oracle-samples must be at least 2 (a kernel variation needs two samples)"
@@ -138,8 +166,13 @@ impl SolveArgs {
             visibility: self.visibility,
             eps: self.eps,
             min_area: self.min_area,
-            receiver_order: self.ff_order as usize,
-            visibility_rays: self.vis_rays,
+            basis: self.basis,
+            cubature_degree: self.cubature_degree.map(usize::from),
+            accuracy: self.accuracy,
+            threshold_factor: self.threshold_factor,
+            estimate: self.error_estimate,
+            max_elements: self.max_elements,
+            max_memory: self.max_memory.unwrap_or_else(default_max_memory),
             oracle_samples: self.oracle_samples,
             tolerance: self.tolerance,
             max_iterations: self.max_iterations,
@@ -241,4 +274,46 @@ pub fn parse_vec3(text: &str) -> Result<DVec3> {
         "coordinates must be finite"
     );
     Ok(DVec3::new(parts[0], parts[1], parts[2]))
+}
+
+/// Parses `--accuracy`: "0.05" (absolute radiance) or "2%" (of the mean radiance).
+pub fn parse_accuracy(text: &str) -> Result<Accuracy> {
+    let text = text.trim();
+    let (number, relative) = match text.strip_suffix('%') {
+        Some(n) => (n.trim(), true),
+        None => (text, false),
+    };
+    let value: f64 = number
+        .parse()
+        .with_context(|| format!("'{text}' is not a number or a percentage"))?;
+    anyhow::ensure!(
+        value.is_finite() && value > 0.0,
+        "the accuracy must be positive"
+    );
+    Ok(if relative {
+        Accuracy::Relative(value / 100.0)
+    } else {
+        Accuracy::Absolute(value)
+    })
+}
+
+/// Parses a byte count with an optional K, M, G or T suffix (powers of 1024).
+pub fn parse_bytes(text: &str) -> Result<usize> {
+    let text = text.trim();
+    let (number, scale) = match text.chars().last().map(|c| c.to_ascii_uppercase()) {
+        Some('K') => (&text[..text.len() - 1], 1u64 << 10),
+        Some('M') => (&text[..text.len() - 1], 1 << 20),
+        Some('G') => (&text[..text.len() - 1], 1 << 30),
+        Some('T') => (&text[..text.len() - 1], 1 << 40),
+        _ => (text, 1),
+    };
+    let value: f64 = number
+        .trim()
+        .parse()
+        .with_context(|| format!("'{text}' is not a size such as 512M or 2G"))?;
+    anyhow::ensure!(
+        value.is_finite() && value > 0.0 && value * (scale as f64) < 1e18,
+        "the size must be positive"
+    );
+    Ok((value * scale as f64) as usize)
 }

@@ -4,7 +4,7 @@
 use super::args::{CameraArgs, SceneArgs};
 use crate::pipeline::{build_visibility, VisibilityKind};
 use crate::progress::Progress;
-use crate::reference::{render_reference, samples_taken, ReferenceSettings};
+use crate::reference::{render_reference, samples_taken, PixelFilter, ReferenceSettings};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -34,6 +34,10 @@ pub struct ReferenceCommand {
     /// Ray casting back end.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
     pub visibility: VisibilityKind,
+    /// Pixel footprint: the average over the pixel (box, comparable with `render --spp 16`), or its
+    /// centre.
+    #[arg(long, value_enum, default_value_t = PixelFilter::Box)]
+    pub filter: PixelFilter,
 }
 
 impl ReferenceCommand {
@@ -54,6 +58,7 @@ impl ReferenceCommand {
             spp: self.spp,
             seed,
             roulette_depth: self.roulette_depth,
+            filter: self.filter,
         };
         let start = Instant::now();
         let visibility = build_visibility(&scene, self.visibility)?;

@@ -4,7 +4,8 @@ use super::args::{CameraArgs, SceneArgs, SolveArgs};
 use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
 use crate::output::mesh_values::VertexRadiosity;
-use crate::output::render::{render_with, RenderOptions, Shading};
+use crate::output::false_colour;
+use crate::output::render::{render_with, Quantity, RenderOptions, Shading};
 use crate::output::tonemap::{write_png, Curve, Exposure, ToneMap};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
@@ -24,14 +25,19 @@ pub struct RenderCommand {
     /// PNG image to write (exposed, tone-mapped, sRGB).
     #[arg(short, long, default_value = "radiosity.png")]
     pub output: PathBuf,
-    /// Flat: element constants. Smooth: radiosity averaged to vertices and interpolated (Gouraud).
-    #[arg(long, value_enum, default_value_t = Shading::Smooth)]
+    /// Basis: each element's basis expansion (the computed solution). Flat: element averages. Smooth:
+    /// values averaged to vertices and interpolated (Gouraud, crack free).
+    #[arg(long, value_enum, default_value_t = Shading::Basis)]
     pub shading: Shading,
+    /// What the PNG shows: the radiance, or each element's a-posteriori error estimate in false colour
+    /// with a colour bar (W/(m² sr); compare with `compare --diff`).
+    #[arg(long, value_enum, default_value_t = Quantity::Radiance)]
+    pub show: Quantity,
     /// Draw the element mesh on top.
     #[arg(long)]
     pub mesh: bool,
-    /// Samples per pixel (1 = pixel centres, comparable with `reference`).
-    #[arg(long, default_value_t = 1)]
+    /// Samples per pixel, stratified and box-filtered (antialiased edges); 1 = pixel centres.
+    #[arg(long, default_value_t = 16)]
     pub spp: u32,
     /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
     #[arg(long)]
@@ -78,6 +84,7 @@ impl RenderCommand {
             .then(|| VertexRadiosity::new(&solution.hierarchy));
         let options = RenderOptions {
             shading: self.shading,
+            quantity: self.show,
             mesh: self.mesh,
             samples_per_pixel: self.spp.max(1),
             seed,
@@ -96,7 +103,13 @@ impl RenderCommand {
             exposure: self.exposure.map_or(Exposure::Auto, Exposure::Multiplier),
             curve: self.tone,
         };
-        write_png(&self.output, &image, &tone)?;
+        match self.show {
+            Quantity::Radiance => write_png(&self.output, &image, &tone)?,
+            Quantity::ErrorEstimate => {
+                let errors: Vec<Option<f64>> = image.pixels.iter().map(|c| Some(c.r)).collect();
+                false_colour::write_png(&self.output, &errors, image.width, image.height)?;
+            }
+        }
         if let Some(path) = &self.hdr {
             image.write_exr(path)?;
         }
@@ -118,8 +131,9 @@ impl RenderCommand {
         if !progress.quiet {
             let s = &stats.seconds;
             eprintln!(
-                "{name}: {} elements ({} leaves), {} links, {} rays, {} passes, {} sweeps; \
+                "{name}: {}; {} elements ({} leaves), {} links, {} rays, {} passes, {} sweeps; \
                  load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
+                error_summary(&solution.report.error),
                 stats.elements,
                 stats.leaf_elements,
                 stats.links,
@@ -135,6 +149,30 @@ impl RenderCommand {
             );
         }
         Ok(())
+    }
+}
+
+/// "estimated error ≤ X (accuracy Y reached)" or how many leaves missed the accuracy, and by how much.
+pub fn error_summary(error: &crate::solvers::ErrorReport) -> String {
+    let s = &error.summary;
+    match error.accuracy {
+        Some(accuracy) if s.leaves_above == 0 => format!(
+            "estimated error ≤ {:.3} W/m²sr (accuracy {accuracy:.3} reached)",
+            s.max_estimate
+        ),
+        Some(accuracy) => format!(
+            "accuracy {accuracy:.3} W/m²sr NOT reached ({}): {} of {} leaves ({:.1}% of the area) \
+             above it, worst estimate {:.3}",
+            error.stopped_by,
+            s.leaves_above,
+            s.leaves,
+            100.0 * s.area_fraction_above,
+            s.max_estimate
+        ),
+        None => format!(
+            "estimated error: max {:.3}, mean {:.3} W/m²sr",
+            s.max_estimate, s.mean_estimate
+        ),
     }
 }
 

@@ -257,6 +257,7 @@ pub fn oracle_name(kind: OracleKind) -> &'static str {
         OracleKind::Power => "power",
         OracleKind::Smoothness => "smoothness",
         OracleKind::MutualInformation => "mi",
+        OracleKind::Error => "error",
     }
 }
 

@@ -19,6 +19,23 @@ pub enum Domain {
 }
 
 impl Domain {
+    /// The nearest point of the domain to `uv` (parameters of points slightly outside an element, from
+    /// rounding, are moved onto its boundary).
+    pub fn clamp(self, uv: DVec2) -> DVec2 {
+        let uv = uv.clamp(DVec2::ZERO, DVec2::ONE);
+        match self {
+            Domain::Square => uv,
+            Domain::Triangle => {
+                let excess = uv.x + uv.y - 1.0;
+                if excess > 0.0 {
+                    (uv - DVec2::splat(0.5 * excess)).max(DVec2::ZERO)
+                } else {
+                    uv
+                }
+            }
+        }
+    }
+
     /// Parametric area |D|: 1 for the unit square, 1/2 for the standard triangle.
     pub fn area(self) -> f64 {
         match self {

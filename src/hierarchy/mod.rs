@@ -3,13 +3,18 @@
 //! quads at parameter midpoints, triangles at edge midpoints). Links between elements live at the
 //! receiving element and carry the form factor of the interaction.
 //!
-//! An element carries a vector of basis coefficients (`radiance`, constant basis first: see
-//! [`crate::bases`]). Clusters (Sillion–Drettakis §4) will be elements too: an element without a patch
-//! whose children are other elements.
+//! An element carries a vector of basis coefficients (`radiance`, constant function first: see
+//! [`crate::bases`]), and every link a coupling block with one entry per pair of receiver and source
+//! basis functions (Bekaert–Willems eq. (3)) plus the link error coefficients of their Algorithm 4.1.
+//! Elements come in two kinds ([`ElementKind`]): a piece of one patch's surface, or a cluster
+//! (Sillion–Drettakis §4): a box of other elements, with no patch, that links and push-pull treat as one
+//! element whose radiance is the area-weighted average of its contents.
 
+use crate::bases::{Basis, BasisKind};
 use crate::color::Rgb;
-use crate::geometry::{DVec3, Shape};
+use crate::geometry::{Aabb, DVec3, Shape};
 use crate::scene::Scene;
+use std::sync::Arc;
 
 /// Index of an element in [`Hierarchy::elements`].
 pub type ElementId = u32;
@@ -30,40 +35,140 @@ pub struct Patch {
 }
 
 /// An interaction from `source` to the element holding the link (the receiver).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Link {
     pub source: ElementId,
-    /// Receiver-area-averaged form factor F_ij from the receiver i to the source j, visibility included.
-    pub form_factor: f64,
+    /// The coupling block and link error coefficients (Bekaert–Willems Algorithm 4.1).
+    pub coupling: LinkCoupling,
     /// The refinement oracle's radiance-independent factor for this link (its error estimate divided by
     /// ρ_i B_j), kept so that re-refinement after a solve needs no new kernel samples; `None` when the
-    /// source was dark when the link was judged.
+    /// source was dark when the link was judged (or for the link error oracle, which reads `coupling`).
     pub oracle_factor: Option<f64>,
 }
 
-/// A node of a patch's quadtree.
+impl Link {
+    /// Receiver-area-averaged form factor F_ij (visibility included): the constant–constant entry.
+    pub fn form_factor(&self) -> f64 {
+        self.coupling.block[0]
+    }
+}
+
+/// What Algorithm 4.1 of Bekaert–Willems returns for a link i ← j, without the receiver's reflectance
+/// ρ_i (applied when gathering, so one block serves all three colour channels), and divided by A_i so
+/// that with the averaged-orthonormal bases of [`crate::bases`] the gathered irradiance coefficients are
+/// `H_α = Σ_β block[α·b + β] L_{j,β}` and the constant–constant entry is the form factor F_ij.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkCoupling {
+    /// `a × b` row-major coupling coefficients `K_{i,α;j,β} / (ρ_i A_i)` (eq. (3)).
+    pub block: Box<[f64]>,
+    /// `n × b` row-major link error coefficients `δ_{j,β}(x_k) / ρ_i` at the receiver's `n` cubature
+    /// nodes (Algorithm 4.1 step 4b); kept per β rather than in the reduced form of §4.3 because the
+    /// reduced form freezes the source radiance at link creation, when most sources are still dark.
+    pub errors: Box<[f32]>,
+    /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
+    /// which carry propagated error in eqs. (11) and (13).
+    pub node_factors: Box<[f32]>,
+    /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
+    pub visibility: f32,
+    /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
+    /// standard deviation of a visibility `v` sampled with `m` source nodes (the `sqrt(v(1 − v))` form of
+    /// Sillion–Drettakis Appendix A). It is the "term describing visibility error" that Bekaert–Willems
+    /// §7 proposes to add to eq. (5): δ_j cannot see a partial occlusion that the node pairs sample
+    /// wrongly.
+    pub visibility_error: f32,
+}
+
+impl LinkCoupling {
+    /// A constant-basis link with form factor `f` and no error information.
+    pub fn constant(form_factor: f64) -> Self {
+        LinkCoupling {
+            block: Box::new([form_factor]),
+            errors: Box::new([]),
+            node_factors: Box::new([]),
+            visibility: 1.0,
+            visibility_error: 0.0,
+        }
+    }
+
+    /// Heap bytes held by this coupling (for memory budgets and reports).
+    pub fn heap_bytes(&self) -> usize {
+        self.block.len() * 8 + (self.errors.len() + self.node_factors.len()) * 4
+    }
+}
+
+/// A piece of one patch's surface: a node of the patch's quadtree.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surface {
+    pub patch: u32,
+    pub shape: Shape,
+}
+
+/// A cluster (Sillion–Drettakis §4): a box of elements that exchanges light as a whole.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cluster {
+    pub bounds: Aabb,
+}
+
+/// The two kinds of element.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ElementKind {
+    Surface(Surface),
+    Cluster(Cluster),
+}
+
+/// A node of the element hierarchy: a surface element or a cluster.
 #[derive(Clone, Debug)]
 pub struct Element {
-    pub patch: u32,
+    pub kind: ElementKind,
     pub parent: Option<ElementId>,
-    pub children: Option<[ElementId; 4]>,
+    /// Four regular children for a split surface, the contents for a cluster, empty for a leaf.
+    pub children: Vec<ElementId>,
     pub level: u16,
-    pub shape: Shape,
+    /// Surface area (for a cluster, the total area of its contents).
     pub area: f64,
     /// Basis coefficients of the exitant radiance, RGB; index 0 is the constant (element average).
     pub radiance: Vec<Rgb>,
     /// Incoming links: the sources this element gathers from.
     pub links: Vec<Link>,
+    /// A-posteriori error estimate of the radiance (Bekaert–Willems §4, W/(m² sr)): after the extended
+    /// push-pull of algorithm 6.1, on a leaf the estimate there, on an inner element the largest below.
+    pub error: f64,
+    /// Link error threshold `Δ_l` of algorithm 6.1 (radiance); infinite when error control is off.
+    pub threshold: f64,
 }
 
 impl Element {
     pub fn is_leaf(&self) -> bool {
-        self.children.is_none()
+        self.children.is_empty()
     }
 
     /// Average exitant radiance over the element (the constant coefficient).
     pub fn average_radiance(&self) -> Rgb {
         self.radiance[0]
+    }
+
+    /// The surface this element covers; `None` for a cluster.
+    pub fn surface(&self) -> Option<&Surface> {
+        match &self.kind {
+            ElementKind::Surface(s) => Some(s),
+            ElementKind::Cluster(_) => None,
+        }
+    }
+
+    /// The element's surface, for code that walks patch trees (which hold surface elements only).
+    pub fn surface_of_patch_tree(&self) -> &Surface {
+        self.surface()
+            .expect("patch trees hold surface elements only")
+    }
+
+    /// The element's shape (see [`Element::surface_of_patch_tree`]).
+    pub fn shape(&self) -> &Shape {
+        &self.surface_of_patch_tree().shape
+    }
+
+    /// The element's patch (see [`Element::surface_of_patch_tree`]).
+    pub fn patch(&self) -> u32 {
+        self.surface_of_patch_tree().patch
     }
 }
 
@@ -74,19 +179,19 @@ pub struct Hierarchy {
     pub elements: Vec<Element>,
     /// Patch index of each polygon's front and back side (`None` for the back of a one-sided polygon).
     pub polygon_patches: Vec<[Option<u32>; 2]>,
-    /// Number of basis coefficients per element.
-    pub basis_size: usize,
+    /// The radiance basis of every element (Bekaert–Willems §2).
+    pub basis: Arc<Basis>,
 }
 
 impl Hierarchy {
     /// One patch per radiating side of each polygon, each with a root element whose radiance starts at the
     /// patch's emission.
-    pub fn new(scene: &Scene, basis_size: usize) -> Self {
+    pub fn new(scene: &Scene, basis: BasisKind) -> Self {
         let mut h = Hierarchy {
             patches: Vec::new(),
             elements: Vec::new(),
             polygon_patches: vec![[None, None]; scene.polygons.len()],
-            basis_size: basis_size.max(1),
+            basis: Arc::new(Basis::new(basis)),
         };
         for (index, polygon) in scene.polygons.iter().enumerate() {
             let material = scene.material_of(polygon);
@@ -103,17 +208,18 @@ impl Hierarchy {
                 };
                 let patch = h.patches.len() as u32;
                 let root = h.elements.len() as ElementId;
-                let mut radiance = vec![Rgb::BLACK; h.basis_size];
+                let mut radiance = vec![Rgb::BLACK; h.basis_size()];
                 radiance[0] = material.emission;
                 h.elements.push(Element {
-                    patch,
+                    kind: ElementKind::Surface(Surface { patch, shape }),
                     parent: None,
-                    children: None,
+                    children: Vec::new(),
                     level: 0,
-                    shape,
                     area: shape.area(),
                     radiance,
                     links: Vec::new(),
+                    error: 0.0,
+                    threshold: f64::INFINITY,
                 });
                 h.patches.push(Patch {
                     polygon: index,
@@ -130,38 +236,51 @@ impl Hierarchy {
         h
     }
 
+    /// Number of basis coefficients per element.
+    pub fn basis_size(&self) -> usize {
+        self.basis.size()
+    }
+
     pub fn element(&self, id: ElementId) -> &Element {
         &self.elements[id as usize]
     }
 
+    /// The patch of a surface element.
     pub fn patch_of(&self, id: ElementId) -> &Patch {
-        &self.patches[self.elements[id as usize].patch as usize]
+        &self.patches[self.elements[id as usize].patch() as usize]
     }
 
-    /// Splits a leaf into its four regular children (no-op returning the existing children otherwise).
-    /// Children inherit the parent's radiance coefficients.
+    /// Splits a surface leaf into its four regular children (returning the existing children if it is
+    /// already split). Children inherit the parent's radiance, pushed through the basis's two-scale
+    /// relation so that the piecewise function is unchanged.
     pub fn subdivide(&mut self, id: ElementId) -> [ElementId; 4] {
-        if let Some(children) = self.elements[id as usize].children {
-            return children;
-        }
         let parent = &self.elements[id as usize];
-        let (patch, level, radiance) = (parent.patch, parent.level + 1, parent.radiance.clone());
-        let shapes = parent.shape.subdivide();
+        if let [a, b, c, d] = parent.children[..] {
+            return [a, b, c, d];
+        }
+        let surface = parent.surface_of_patch_tree().clone();
+        let (level, error, threshold) = (parent.level + 1, parent.error, parent.threshold);
+        let domain = surface.shape.domain();
         let first = self.elements.len() as ElementId;
-        for shape in shapes {
+        for (k, shape) in surface.shape.subdivide().into_iter().enumerate() {
+            let radiance = self.basis.push_rgb(domain, k, &self.elements[id as usize].radiance);
             self.elements.push(Element {
-                patch,
+                kind: ElementKind::Surface(Surface {
+                    patch: surface.patch,
+                    shape,
+                }),
                 parent: Some(id),
-                children: None,
+                children: Vec::new(),
                 level,
-                shape,
                 area: shape.area(),
-                radiance: radiance.clone(),
+                radiance,
                 links: Vec::new(),
+                error,
+                threshold,
             });
         }
         let children = [first, first + 1, first + 2, first + 3];
-        self.elements[id as usize].children = Some(children);
+        self.elements[id as usize].children = children.to_vec();
         children
     }
 
@@ -178,9 +297,11 @@ impl Hierarchy {
     pub fn collect_leaves(&self, id: ElementId, out: &mut Vec<ElementId>) {
         let mut stack = vec![id];
         while let Some(e) = stack.pop() {
-            match self.elements[e as usize].children {
-                Some(c) => stack.extend(c.iter().rev()),
-                None => out.push(e),
+            let children = &self.elements[e as usize].children;
+            if children.is_empty() {
+                out.push(e);
+            } else {
+                stack.extend(children.iter().rev());
             }
         }
     }
@@ -195,17 +316,27 @@ impl Hierarchy {
     pub fn locate(&self, patch: u32, p: DVec3) -> ElementId {
         let mut id = self.patches[patch as usize].root;
         let normal = self.patches[patch as usize].normal;
-        while let Some(children) = self.elements[id as usize].children {
-            id = *children
-                .iter()
-                .max_by(|a, b| {
-                    let da = inside_margin(&self.elements[**a as usize].shape, normal, p);
-                    let db = inside_margin(&self.elements[**b as usize].shape, normal, p);
-                    da.total_cmp(&db)
-                })
-                .expect("four children");
+        while let Some(&child) = self.elements[id as usize].children.iter().max_by(|a, b| {
+            let da = inside_margin(self.elements[**a as usize].shape(), normal, p);
+            let db = inside_margin(self.elements[**b as usize].shape(), normal, p);
+            da.total_cmp(&db)
+        }) {
+            id = child;
         }
         id
+    }
+
+    /// Exitant radiance of surface element `id` at the point `p` on it: its basis expansion evaluated
+    /// at the point's parameters (clamped into the element).
+    pub fn radiance_at(&self, id: ElementId, p: DVec3) -> Rgb {
+        let e = self.element(id);
+        let shape = e.shape();
+        let domain = shape.domain();
+        let uv = domain.clamp(shape.parameters_of(p));
+        let mut phi = [0.0; crate::bases::MAX_BASIS_SIZE];
+        let phi = &mut phi[..e.radiance.len()];
+        self.basis.eval(domain, uv, phi);
+        e.radiance.iter().zip(phi.iter()).map(|(&c, &f)| c * f).sum()
     }
 
     /// Sum of the patch areas: the total surface area A_T (a two-sided polygon counts twice).
@@ -223,6 +354,21 @@ impl Hierarchy {
 
     pub fn link_count(&self) -> usize {
         self.elements.iter().map(|e| e.links.len()).sum()
+    }
+
+    /// Bytes held by elements, coefficients and links: what `--max-memory` budgets.
+    pub fn memory_bytes(&self) -> usize {
+        let coefficients = self.basis_size() * std::mem::size_of::<Rgb>();
+        self.elements
+            .iter()
+            .map(|e| {
+                std::mem::size_of::<Element>()
+                    + coefficients
+                    + e.children.len() * 4
+                    + e.links.capacity() * std::mem::size_of::<Link>()
+                    + e.links.iter().map(|l| l.coupling.heap_bytes()).sum::<usize>()
+            })
+            .sum()
     }
 
     pub fn leaf_count(&self) -> usize {

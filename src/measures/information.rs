@@ -208,14 +208,14 @@ impl HierarchyLeaves {
                     blocks.push(Block {
                         receiver: source.clone(),
                         source: receiver.clone(),
-                        form_factor: element.area * link.form_factor
+                        form_factor: element.area * link.form_factor()
                             / hierarchy.element(link.source).area,
                     });
                 }
                 blocks.push(Block {
                     receiver,
                     source,
-                    form_factor: link.form_factor,
+                    form_factor: link.form_factor(),
                 });
             }
         }

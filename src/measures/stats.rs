@@ -38,6 +38,14 @@ pub struct RunStats {
     /// Σ π A (1 - ρ) H over leaves (W per channel).
     pub absorbed_power: Rgb,
     pub threads: usize,
+    /// Bytes held by elements, coefficients and links.
+    pub memory_bytes: usize,
+    /// Relative change of total power after each sweep.
+    pub residuals: Vec<f64>,
+    /// The a-posteriori error estimate (Bekaert–Willems §4) over the leaves, and error control's end.
+    pub error: crate::solvers::ErrorReport,
+    /// Splits refused for the element budget (`--max-elements`, `--max-memory`).
+    pub refused_by_budget: usize,
     pub settings: SimulationSettings,
     /// Information-theoretic measures (`radiosity measure`), Feixas et al. eqs. (3), (10).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -76,6 +84,10 @@ impl RunStats {
             emitted_power: r.emitted_power,
             absorbed_power: r.absorbed_power,
             threads: rayon::current_num_threads(),
+            memory_bytes: h.memory_bytes(),
+            residuals: r.residuals.clone(),
+            error: r.error.clone(),
+            refused_by_budget: r.refused_by_budget,
             settings: *settings,
             information: None,
         }

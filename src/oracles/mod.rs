@@ -2,28 +2,30 @@
 //! representing the interaction by that single link, and decide whether it is admissible or which of the
 //! two elements to subdivide. One implementation per criterion, chosen with `--oracle`:
 //! [`power::PowerOracle`] (Feixas et al. eq. (1)), [`smoothness::SmoothnessOracle`] (kernel smoothness,
-//! eq. (2)) and [`mutual_information::MutualInformationOracle`] (eq. (15)); the Bekaert–Willems link-error
-//! oracle will implement the same trait.
+//! eq. (2)), [`mutual_information::MutualInformationOracle`] (eq. (15)) and the Bekaert–Willems link
+//! error oracle [`link_error::LinkErrorOracle`] (eq. (13)), which judges a link from its coupling.
 //!
 //! Shared conventions: ρ and B are RGB and every oracle scales by the largest per-channel product ρ_i B_j
 //! ([`reflected_source_radiance`]); the sampling oracles evaluate the kernel at random point pairs with
 //! [`sample_kernel`] and report its visibility rays.
 
+pub mod link_error;
 pub mod mutual_information;
 pub mod power;
 pub mod smoothness;
 
 use crate::geometry::form_factor::point_to_point;
 use crate::geometry::DVec2;
-use crate::hierarchy::{ElementId, Hierarchy};
+use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
 use crate::visibility::Visibility;
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 
 /// What to do with a candidate link.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Decision {
     /// Keep the link at this level.
+    #[default]
     Admissible,
     /// Split the receiver and link its children to the source.
     SubdivideReceiver,
@@ -46,6 +48,14 @@ pub struct Estimate {
     pub rays: u64,
 }
 
+/// A link error estimate from the link's coupling, with the element whose subdivision reduces it most.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LinkJudgement {
+    /// Estimated error of the link, in radiance (W/(m² sr)).
+    pub error: f64,
+    pub split: Decision,
+}
+
 /// A refinement criterion.
 pub trait RefinementOracle: Sync + Send {
     /// Name used on the command line and in reports.
@@ -65,6 +75,25 @@ pub trait RefinementOracle: Sync + Send {
         source: ElementId,
         rng: &mut Pcg64Mcg,
     ) -> Estimate;
+
+    /// Whether the oracle judges links from their computed coupling ([`RefinementOracle::link_error`])
+    /// rather than from [`RefinementOracle::estimate`]; refinement then computes the coupling first,
+    /// keeps it on the link, and compares with each receiver's own threshold.
+    fn judges_couplings(&self) -> bool {
+        false
+    }
+
+    /// The link's error and the element to split, from its coupling (Bekaert–Willems eq. (13)); `None`
+    /// for oracles that do not judge couplings.
+    fn link_error(
+        &self,
+        _context: &OracleContext,
+        _receiver: ElementId,
+        _source: ElementId,
+        _coupling: &LinkCoupling,
+    ) -> Option<LinkJudgement> {
+        None
+    }
 
     /// Which element to split when the estimate exceeds the threshold. The classic rule (Hanrahan et al.,
     /// used with eqs. (1), (2) and (15)) splits the larger of the two elements.
@@ -115,19 +144,15 @@ pub fn sample_kernel(
     rng: &mut Pcg64Mcg,
 ) -> KernelSamples {
     let h = context.hierarchy;
-    let (r, s) = (h.element(receiver), h.element(source));
+    let (r, s) = (h.element(receiver).shape(), h.element(source).shape());
     let (nx, ny) = (h.patch_of(receiver).normal, h.patch_of(source).normal);
     let mut out = KernelSamples {
         values: Vec::with_capacity(n),
         rays: 0,
     };
     for _ in 0..n {
-        let x = r
-            .shape
-            .sample_uniform(DVec2::new(rng.random(), rng.random()));
-        let y = s
-            .shape
-            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let x = r.sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let y = s.sample_uniform(DVec2::new(rng.random(), rng.random()));
         let f = point_to_point(x, nx, y, ny);
         let g = if f > 0.0 {
             out.rays += 1;
@@ -180,7 +205,7 @@ pub(crate) mod tests {
 
     pub fn context_for(scene: &Scene) -> (Hierarchy, Box<dyn Visibility>) {
         (
-            Hierarchy::new(scene, 1),
+            Hierarchy::new(scene, crate::bases::BasisKind::Constant),
             build_visibility(scene, VisibilityKind::BruteForce).expect("brute force"),
         )
     }

@@ -33,8 +33,8 @@ impl RefinementOracle for PowerOracle {
     ) -> Estimate {
         let h = context.hierarchy;
         let (r, s) = (h.element(receiver), h.element(source));
-        let f_ij = point_to_polygon(r.shape.centroid(), h.patch_of(receiver).normal, &s.shape);
-        let f_ji = point_to_polygon(s.shape.centroid(), h.patch_of(source).normal, &r.shape);
+        let f_ij = point_to_polygon(r.shape().centroid(), h.patch_of(receiver).normal, s.shape());
+        let f_ji = point_to_polygon(s.shape().centroid(), h.patch_of(source).normal, r.shape());
         let transport = (r.area * f_ij).max(s.area * f_ji);
         Estimate {
             error: reflected_source_radiance(h, receiver, source) * transport,

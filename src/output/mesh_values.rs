@@ -88,14 +88,14 @@ impl VertexRadiosity {
         for &leaf in &leaves {
             let element = hierarchy.element(leaf);
             let mut ids = [0u32; 4];
-            for (k, &p) in element.shape.vertices().iter().enumerate() {
+            for (k, &p) in element.shape().vertices().iter().enumerate() {
                 let id = welder.insert(p);
                 if id as usize == point_patches.len() {
                     point_patches.push(Vec::new());
                 }
                 let list = &mut point_patches[id as usize];
-                if !list.contains(&element.patch) {
-                    list.push(element.patch);
+                if !list.contains(&element.patch()) {
+                    list.push(element.patch());
                 }
                 ids[k] = id;
             }
@@ -126,9 +126,9 @@ impl VertexRadiosity {
         let mut records = Vec::with_capacity(leaves.len());
         for (slot, (&leaf, points)) in leaves.iter().zip(&corner_points).enumerate() {
             let element = hierarchy.element(leaf);
-            let group = group_of[element.patch as usize];
+            let group = group_of[element.patch() as usize];
             let mut corners = [0u32; 4];
-            for k in 0..element.shape.vertex_count() {
+            for k in 0..element.shape().vertex_count() {
                 let id = *vertex_of.entry((points[k], group)).or_insert_with(|| {
                     positions.push(welder.points[points[k] as usize]);
                     normals.push(hierarchy.patches[group as usize].normal);
@@ -136,7 +136,9 @@ impl VertexRadiosity {
                     positions.len() as u32 - 1
                 });
                 let (value, area) = &mut sums[id as usize];
-                *value += element.radiance[0] * element.area;
+                // The leaf's own value at this corner (its average with the constant basis).
+                let corner = hierarchy.radiance_at(leaf, element.shape().vertices()[k]);
+                *value += corner * element.area;
                 *area += element.area;
                 corners[k] = id;
             }
@@ -163,8 +165,8 @@ impl VertexRadiosity {
             .par_iter()
             .map(|record| {
                 let element = hierarchy.element(record.element);
-                let group = group_of[element.patch as usize];
-                let n = element.shape.vertex_count();
+                let group = group_of[element.patch() as usize];
+                let n = element.shape().vertex_count();
                 let mut loop_ids = Vec::with_capacity(n);
                 let mut anchors = Vec::new();
                 for k in 0..n {
@@ -234,7 +236,7 @@ impl VertexRadiosity {
             return element.radiance[0];
         }
         let record = &self.leaves[slot as usize];
-        let shape = &element.shape;
+        let shape = element.shape();
         let c = |k: usize| self.values[record.corners[k] as usize];
         match &record.boundary {
             None => match shape {
@@ -279,7 +281,7 @@ impl VertexRadiosity {
             triangles: Vec::new(),
         };
         for record in &self.leaves {
-            let shape = &hierarchy.element(record.element).shape;
+            let shape = hierarchy.element(record.element).shape();
             let c = record.corners;
             match (&record.boundary, shape) {
                 (None, Shape::Triangle(_)) => mesh.triangles.push([c[0], c[1], c[2]]),

@@ -22,11 +22,25 @@ pub enum Shading {
     Flat,
     /// Vertex-averaged radiance interpolated over each leaf (RenderPark's Gouraud look), crack free.
     Smooth,
+    /// The leaf's basis expansion evaluated at the point (Bekaert–Willems §2): exactly the computed
+    /// solution, smooth within elements for non-constant bases.
+    Basis,
+}
+
+/// What the image shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Quantity {
+    /// Exitant radiance.
+    #[default]
+    Radiance,
+    /// The leaf's a-posteriori error estimate (Bekaert–Willems §4), W/(m² sr), in every channel.
+    ErrorEstimate,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     pub shading: Shading,
+    pub quantity: Quantity,
     /// Draw the leaf elements' edges on top.
     pub mesh: bool,
     /// 1: the pixel centre only. n > 1: n stratified, jittered samples inside the pixel, averaged.
@@ -41,6 +55,7 @@ impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             shading: Shading::Flat,
+            quantity: Quantity::Radiance,
             mesh: false,
             samples_per_pixel: 1,
             seed: 0,
@@ -141,12 +156,16 @@ impl Tracer<'_> {
         if self.options.mesh {
             // Camera rays are unit length, so t is the distance from the eye.
             let width = MESH_HALF_WIDTH * self.camera.pixel_footprint(hit.t);
-            if boundary_distance(&element.shape, p) < width {
+            if boundary_distance(element.shape(), p) < width {
                 return self.options.mesh_colour;
             }
         }
+        if self.options.quantity == Quantity::ErrorEstimate {
+            return Rgb::new(element.error, element.error, element.error);
+        }
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
+            (Shading::Basis, _) => self.hierarchy.radiance_at(leaf, p),
             _ => element.radiance[0],
         }
     }

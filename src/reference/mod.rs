@@ -51,6 +51,21 @@ pub struct ReferenceSettings {
     pub seed: u64,
     /// Bounces taken before Russian roulette may end a path.
     pub roulette_depth: usize,
+    /// Where in the pixel paths start.
+    pub filter: PixelFilter,
+}
+
+/// The pixel footprint of a reference image (`--filter`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PixelFilter {
+    /// The radiance at the pixel centre.
+    Centre,
+    /// The average radiance over the pixel (box filter): each of the [`BATCHES`] batches starts at a
+    /// jittered point of its own cell of a 4 × 4 grid over the pixel, so the estimate is comparable with
+    /// `render --spp 16` (and above). Its standard error then includes the variation within the pixel.
+    #[default]
+    Box,
 }
 
 impl Default for ReferenceSettings {
@@ -59,6 +74,7 @@ impl Default for ReferenceSettings {
             spp: 64,
             seed: 1,
             roulette_depth: 3,
+            filter: PixelFilter::Box,
         }
     }
 }
@@ -405,8 +421,8 @@ impl<'a> PathTracer<'a> {
         Self::combine(emission, &sums, per_batch)
     }
 
-    /// The reference image seen by `camera`: per pixel, `settings.spp` paths from the surface point seen
-    /// through the pixel centre. Rows run in parallel; each pixel has its own generator.
+    /// The reference image seen by `camera`: per pixel, `settings.spp` paths from the surface points seen
+    /// through the pixel (see [`PixelFilter`]). Rows run in parallel; each pixel has its own generator.
     pub fn render(
         &self,
         camera: &Camera,
@@ -448,20 +464,31 @@ impl<'a> PathTracer<'a> {
         pixel: u64,
         settings: &ReferenceSettings,
     ) -> Estimate {
-        let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
-        let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
-            return Estimate::default();
-        };
-        let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front) else {
-            return Estimate::default();
-        };
         let (batches, per_batch) = batch_layout(settings.spp);
         let seed = derive_seed(settings.seed, pixel);
         let mut sums = [Rgb::BLACK; BATCHES];
+        let side = (BATCHES as f64).sqrt() as usize;
         for (b, sum) in sums.iter_mut().enumerate().take(batches) {
-            *sum = self.batch(start, per_batch, &mut stream(seed, b as u64));
+            let mut rng = stream(seed, b as u64);
+            let (px, py) = match settings.filter {
+                PixelFilter::Centre => (0.5, 0.5),
+                PixelFilter::Box => (
+                    ((b % side) as f64 + rng.random::<f64>()) / side as f64,
+                    ((b / side) as f64 + rng.random::<f64>()) / side as f64,
+                ),
+            };
+            let ray = camera.ray(x as f64 + px, y as f64 + py);
+            let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
+                continue;
+            };
+            let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front)
+            else {
+                continue;
+            };
+            // Emission is added per batch: each batch may see a different surface.
+            *sum = self.batch(start, per_batch, &mut rng) + emission * per_batch as f64;
         }
-        Self::combine(emission, &sums[..batches], per_batch)
+        Self::combine(Rgb::BLACK, &sums[..batches], per_batch)
     }
 }
 

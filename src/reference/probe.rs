@@ -175,13 +175,13 @@ fn nearest_containing(
     best.map(|(_, index, front, point)| (index, front, point))
 }
 
-/// The radiosity solution's radiance at a surface point: the average radiance of the leaf element
-/// containing it.
+/// The radiosity solution's radiance at a surface point: the basis expansion of the leaf element
+/// containing it, evaluated there.
 pub fn solution_radiance(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Rgb {
     match hierarchy.patch_for_side(surface.polygon, surface.front) {
         Some(patch) => {
             let leaf = hierarchy.locate(patch, surface.point);
-            hierarchy.element(leaf).average_radiance()
+            hierarchy.radiance_at(leaf, surface.point)
         }
         None => Rgb::BLACK,
     }

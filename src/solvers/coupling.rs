@@ -1,93 +1,165 @@
-//! Link coupling for the constant basis: the receiver-averaged form factor
-//! `F_ij = 1/A_i ∫_{A_i} F(x → j) V(x, j) dA_x`, integrated with a fixed Gauss rule over the receiver
-//! (`geometry::cubature`). At each receiver node the unoccluded point-to-polygon form factor is exact
-//! (Lambert's formula) and the visibility V is estimated by rays to stratified random points on the source,
-//! each weighted by the point-to-point kernel G(x, y) so that parts of the source that do not contribute
-//! do not count. Higher-order bases (Bekaert–Willems eq. (3)) extend this to a coupling matrix.
+//! Link coupling, Bekaert–Willems Algorithm 4.1: the coupling block `K_{i,α;j,β}` of eq. (3), the link
+//! error coefficients `δ_{j,β}(x_k)` of eq. (6) at the receiver's cubature nodes, and the point-to-source
+//! factors `K_{j,1}(x_k)` that carry propagated error in eqs. (11) and (13).
+//!
+//! The receiver gets a cubature rule of `--cubature-degree` (eq. (12)), the source a coarser one
+//! ([`crate::bases::source_cubature_degree`]: it only integrates). The kernel is
+//! evaluated at every pair of receiver node `x_k` and source node `y_l`, with the transmittance of the
+//! segment between them (a ray per pair: this is where shadows come from, and what the error
+//! coefficients see). One refinement over the paper's step 2: the inner integrals
+//! `K_{j,β}(x_k) = ∫ K(x_k, y) φ_β(y) dA_y` are scaled so that their unoccluded constant part equals the
+//! exact point-to-polygon factor (Lambert's formula, which §7 recommends for `K_{j,1}`): a ratio
+//! estimator that removes the cubature error of the near-singular kernel between adjacent elements while
+//! keeping the cubature's visibility and its shape across the source.
+//!
+//! With the averaged-orthonormal bases of [`crate::bases`] the overlap matrix of eq. (4) is `A_i I` on
+//! triangles and parallelograms, so the solve of step 4a is a division by `A_i` (on other convex quads
+//! the bilinear map's varying Jacobian makes `O` only approximately diagonal; we neglect that, as the
+//! error is second order in the quad's departure from a parallelogram).
 
-use crate::geometry::cubature::gauss_nodes;
+use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
-use crate::geometry::DVec2;
-use crate::hierarchy::{ElementId, Hierarchy};
+use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
 use crate::visibility::Visibility;
-use rand::Rng;
-use rand_pcg::Pcg64Mcg;
 
-/// How link form factors are computed.
+/// How link couplings are computed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CouplingSettings {
-    /// Gauss points per parameter direction on the receiver (1..=5): n² nodes.
-    pub receiver_order: usize,
-    /// Visibility rays from each receiver node to the source.
-    pub visibility_rays: usize,
+    /// Polynomial degree integrated exactly by the receiver's cubature rule (eq. (12)); the source's is
+    /// [`crate::bases::source_cubature_degree`] of it.
+    pub cubature_degree: usize,
 }
 
 impl Default for CouplingSettings {
     fn default() -> Self {
-        CouplingSettings {
-            receiver_order: 2,
-            visibility_rays: 4,
-        }
+        CouplingSettings { cubature_degree: 4 }
     }
 }
 
-/// A link's form factor and the rays spent on it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A link's coupling and what it cost.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Coupling {
-    pub form_factor: f64,
-    /// The same integral without visibility (zero means the elements cannot interact at all).
+    pub coupling: LinkCoupling,
+    /// The receiver-averaged form factor without visibility (zero: the elements cannot interact).
     pub unoccluded: f64,
+    /// Nodes of the source rule (visibility samples per receiver node).
+    pub source_nodes: usize,
     pub rays: u64,
 }
 
-/// Form factor from receiver element `receiver` to source element `source`, visibility included.
-pub fn form_factor(
+/// Algorithm 4.1 for the link `source` → `receiver` (both surface elements).
+pub fn couple(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
     settings: &CouplingSettings,
-    rng: &mut Pcg64Mcg,
 ) -> Coupling {
-    let r = hierarchy.element(receiver);
-    let s = hierarchy.element(source);
+    let basis = &hierarchy.basis;
+    let size = basis.size();
+    let (r, s) = (hierarchy.element(receiver), hierarchy.element(source));
+    let (r_shape, s_shape) = (r.shape(), s.shape());
     let n_r = hierarchy.patch_of(receiver).normal;
     let n_s = hierarchy.patch_of(source).normal;
-    let rays_per_node = settings.visibility_rays.max(1);
-    let (mut visible, mut unoccluded, mut rays) = (0.0, 0.0, 0u64);
-    for node in gauss_nodes(&r.shape, settings.receiver_order) {
-        let f = point_to_polygon(node.point, n_r, &s.shape);
-        if f <= 0.0 {
+    let degree = settings.cubature_degree;
+    let x_nodes = nodes_on(r_shape, rule(r_shape.domain(), degree));
+    let y_nodes = nodes_on(
+        s_shape,
+        rule(s_shape.domain(), crate::bases::source_cubature_degree(degree)),
+    );
+    let phi_x = basis_values(basis, r_shape, &x_nodes);
+    let phi_y = basis_values(basis, s_shape, &y_nodes);
+
+    let n = x_nodes.len();
+    // Step 2: K_{j,β}(x_k), without ρ_i.
+    let mut inner = vec![0.0; n * size];
+    let (mut unoccluded, mut rays) = (0.0, 0u64);
+    for (k, x) in x_nodes.iter().enumerate() {
+        let exact = point_to_polygon(x.point, n_r, s_shape);
+        if exact <= 0.0 {
             continue;
         }
-        let (mut seen, mut total) = (0.0, 0.0);
-        let mut plain_seen = 0usize;
-        for k in 0..rays_per_node {
-            let sample = DVec2::new(
-                (k as f64 + rng.random::<f64>()) / rays_per_node as f64,
-                rng.random::<f64>(),
-            );
-            let y = s.shape.sample_uniform(sample);
-            let g = point_to_point(node.point, n_r, y, n_s);
-            rays += 1;
-            let open = !visibility.segment_occluded(node.point, y);
-            if open {
-                seen += g;
-                plain_seen += 1;
+        unoccluded += x.weight * exact;
+        let row = &mut inner[k * size..(k + 1) * size];
+        let mut open_sum = 0.0;
+        for (l, y) in y_nodes.iter().enumerate() {
+            // Step 1: the kernel at the node pair, with its transmittance.
+            let g = y.weight * point_to_point(x.point, n_r, y.point, n_s);
+            if g <= 0.0 {
+                continue;
             }
-            total += g;
+            open_sum += g;
+            rays += 1;
+            let t = visibility.transmittance(x.point, y.point);
+            if t > 0.0 {
+                for (beta, value) in row.iter_mut().enumerate() {
+                    *value += g * t * phi_y[l * size + beta];
+                }
+            }
         }
-        let v = if total > 0.0 {
-            seen / total
-        } else {
-            plain_seen as f64 / rays_per_node as f64
-        };
-        unoccluded += node.weight * f;
-        visible += node.weight * f * v;
+        if open_sum > 0.0 {
+            let scale = exact / open_sum;
+            row.iter_mut().for_each(|v| *v *= scale);
+        }
     }
+    // Step 3: the block, divided by A_i (step 4a with O = A_i I).
+    let mut block = vec![0.0; size * size];
+    for (k, x) in x_nodes.iter().enumerate() {
+        let w = x.weight / r.area;
+        for alpha in 0..size {
+            let wa = w * phi_x[k * size + alpha];
+            for beta in 0..size {
+                block[alpha * size + beta] += wa * inner[k * size + beta];
+            }
+        }
+    }
+    // Step 4b: δ_{j,β}(x_k) = Σ_α R_{α,β} φ_α(x_k) − K_{j,β}(x_k).
+    let mut errors = vec![0.0f32; n * size];
+    for k in 0..n {
+        for beta in 0..size {
+            let projected: f64 = (0..size)
+                .map(|alpha| block[alpha * size + beta] * phi_x[k * size + alpha])
+                .sum();
+            errors[k * size + beta] = (projected - inner[k * size + beta]) as f32;
+        }
+    }
+    let node_factors = (0..n).map(|k| inner[k * size] as f32).collect();
+    let visible: f64 = (0..n).map(|k| x_nodes[k].weight * inner[k * size]).sum();
+    let visibility = if unoccluded > 0.0 {
+        (visible / unoccluded).clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
     Coupling {
-        form_factor: visible / r.area,
+        coupling: LinkCoupling {
+            block: block.into(),
+            errors: errors.into(),
+            node_factors,
+            visibility: visibility as f32,
+            visibility_error: visibility_error(unoccluded / r.area, visibility, y_nodes.len()),
+        },
         unoccluded: unoccluded / r.area,
+        source_nodes: y_nodes.len(),
         rays,
     }
+}
+
+/// `F_unoccluded · sqrt(v (1 − v) / m)`: see `LinkCoupling::visibility_error`.
+pub fn visibility_error(unoccluded: f64, visibility: f64, source_nodes: usize) -> f32 {
+    let v = visibility.clamp(0.0, 1.0);
+    (unoccluded * (v * (1.0 - v) / source_nodes.max(1) as f64).sqrt()) as f32
+}
+
+/// `φ_α` at each node, row-major (node, α).
+pub fn basis_values(
+    basis: &crate::bases::Basis,
+    shape: &crate::geometry::Shape,
+    nodes: &[Node],
+) -> Vec<f64> {
+    let size = basis.size();
+    let mut out = vec![0.0; nodes.len() * size];
+    for (k, node) in nodes.iter().enumerate() {
+        basis.eval(shape.domain(), node.uv, &mut out[k * size..(k + 1) * size]);
+    }
+    out
 }

@@ -4,6 +4,7 @@
 //! Monte Carlo radiosity ([`stochastic`]) replaces links by power-carrying random lines.
 
 pub mod coupling;
+pub mod error_estimate;
 pub mod gathering;
 pub mod push_pull;
 pub mod refine;
@@ -14,6 +15,7 @@ use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::RefinementOracle;
 use crate::progress::Progress;
 use crate::visibility::Visibility;
+use error_estimate::{estimate_errors, summarize, ErrorSummary, EstimateKind};
 use gathering::GatheringSolver;
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
@@ -47,6 +49,32 @@ pub struct SolveSettings {
     pub max_iterations: usize,
     /// Most refine/solve passes (refinement uses the radiance of the previous pass).
     pub max_passes: usize,
+    /// The a-posteriori estimate computed after each pass (and used by error control).
+    pub estimate: EstimateKind,
+    /// Error control (Bekaert–Willems algorithm 6.1); needs the link error oracle.
+    pub error_control: Option<ErrorControl>,
+}
+
+/// What error control aims at (Bekaert–Willems §6).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ErrorControl {
+    /// Largest acceptable absolute radiance error ε, W/(m² sr).
+    pub accuracy: f64,
+    /// Factor by which a leaf's link error threshold falls after a pass that left its estimate above
+    /// ε (the paper uses 1.4).
+    pub threshold_factor: f64,
+}
+
+/// How a solve under error control ended.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ErrorReport {
+    /// The accuracy asked for (absolute radiance); `None` without error control.
+    pub accuracy: Option<f64>,
+    pub estimate: Option<EstimateKind>,
+    /// The estimate over the leaves after the last pass.
+    pub summary: ErrorSummary,
+    /// Why refinement stopped: "accuracy reached", "element budget", "pass limit", "stable".
+    pub stopped_by: String,
 }
 
 /// What a solve did.
@@ -63,8 +91,15 @@ pub struct SolveReport {
     pub exitant_power: Rgb,
     pub refine_seconds: f64,
     pub solve_seconds: f64,
-    /// Whether the last pass refined nothing and the sweeps met the tolerance.
+    /// Whether the last pass refined nothing and the sweeps met the tolerance (under error control:
+    /// whether every leaf's estimate is within the accuracy).
     pub converged: bool,
+    /// Relative change of the total exitant power after each sweep (the residual of the iteration).
+    pub residuals: Vec<f64>,
+    /// The a-posteriori error estimate and, under error control, how it ended.
+    pub error: ErrorReport,
+    /// Splits refused because the element budget was reached.
+    pub refused_by_budget: usize,
 }
 
 /// Total self-emitted power Σ π A E of the patches.
@@ -90,6 +125,12 @@ pub fn solve(
         emitted_power: emitted_power(hierarchy),
         ..Default::default()
     };
+    report.error.estimate = Some(settings.estimate);
+    if let Some(control) = &settings.error_control {
+        report.error.accuracy = Some(control.accuracy);
+        initialise_thresholds(hierarchy, control.accuracy);
+    }
+    report.error.stopped_by = "pass limit".into();
     for pass in 1..=settings.max_passes.max(1) {
         report.passes = pass;
         // Later passes re-judge every link with the new radiance; the links stay in the hierarchy
@@ -115,6 +156,7 @@ pub fn solve(
         report.refine_seconds += start.elapsed().as_secs_f64();
         report.oracle_rays += outcome.oracle_rays;
         report.form_factor_rays += outcome.form_factor_rays;
+        report.refused_by_budget += outcome.refused_by_budget;
 
         let start = Instant::now();
         let bar = progress.bar(settings.max_iterations as u64, "solve");
@@ -129,6 +171,7 @@ pub fn solve(
             let total = sweep.exitant.r + sweep.exitant.g + sweep.exitant.b;
             let change = ((total - previous) / total).abs();
             bar.set_message(format!("pass {pass}: relative power change {change:.2e}"));
+            report.residuals.push(change);
             previous = total;
             if change < settings.tolerance || total == 0.0 {
                 swept_to_tolerance = true;
@@ -137,10 +180,62 @@ pub fn solve(
         }
         bar.finish_and_clear();
         report.solve_seconds += start.elapsed().as_secs_f64();
-        if outcome.subdivisions == 0 && outcome.refined_links == 0 && pass > 1 {
+        estimate_errors(hierarchy, settings.estimate);
+        if let Some(control) = &settings.error_control {
+            report.error.summary = summarize(hierarchy, control.accuracy);
+            if report.error.summary.leaves_above == 0 {
+                report.converged = swept_to_tolerance;
+                report.error.stopped_by = "accuracy reached".into();
+                break;
+            }
+            if outcome.refused_by_budget > 0 {
+                report.error.stopped_by = "element budget".into();
+                break;
+            }
+            lower_thresholds(hierarchy, control);
+        } else if outcome.subdivisions == 0 && outcome.refined_links == 0 && pass > 1 {
             report.converged = swept_to_tolerance;
+            report.error.stopped_by = "stable".into();
             break;
         }
     }
+    if settings.error_control.is_none() {
+        report.error.summary = summarize(hierarchy, f64::INFINITY);
+    }
     report
+}
+
+/// Algorithm 6.1 step 1b: `Δ_p = (1 − ρ_p) ε − max |δ_e|` on every element, with `δ_e = 0` (emission is
+/// constant per patch) and ρ_p the patch's largest channel.
+fn initialise_thresholds(hierarchy: &mut Hierarchy, accuracy: f64) {
+    for id in 0..hierarchy.elements.len() {
+        let rho = hierarchy.patch_of(id as ElementId).reflectance.max_channel();
+        hierarchy.elements[id].threshold = (1.0 - rho).max(0.0) * accuracy;
+    }
+}
+
+/// Extended push-pull, steps 1c and 2f: leaves whose estimate exceeds ε get their threshold divided by
+/// the factor, and every inner element takes the smallest threshold below it.
+fn lower_thresholds(hierarchy: &mut Hierarchy, control: &ErrorControl) {
+    fn visit(h: &mut Hierarchy, id: ElementId, control: &ErrorControl) -> f64 {
+        let children = h.elements[id as usize].children.clone();
+        let e = &mut h.elements[id as usize];
+        if children.is_empty() {
+            if e.error > control.accuracy {
+                e.threshold /= control.threshold_factor;
+            }
+            return e.threshold;
+        }
+        let lowest = children
+            .iter()
+            .map(|&c| visit(h, c, control))
+            .fold(f64::INFINITY, f64::min);
+        let e = &mut h.elements[id as usize];
+        e.threshold = e.threshold.min(lowest);
+        e.threshold
+    }
+    for p in 0..hierarchy.patches.len() {
+        let root = hierarchy.patches[p].root;
+        visit(hierarchy, root, control);
+    }
 }

@@ -1,6 +1,8 @@
-//! Push-pull (Hanrahan et al. 1991): irradiance gathered at any level of a patch's tree is pushed down to
-//! the leaves, where B = E + ρ H, and radiance is pulled up as area-weighted averages so that links to
-//! interior elements see the average of their children.
+//! Push-pull (Hanrahan et al. 1991) for basis coefficients: irradiance gathered at any level of a patch's
+//! tree is pushed down to the leaves through the basis's two-scale relation ([`crate::bases`]), where
+//! `L = E + ρ H` coefficient by coefficient, and radiance is pulled up as the area-weighted projection of
+//! the children's functions onto the parent's basis, so that links to interior elements see the
+//! children's radiance. With the constant basis this is the classic average.
 
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -9,62 +11,92 @@ use std::f64::consts::PI;
 /// New radiance of every element of one patch tree.
 #[derive(Clone, Debug, Default)]
 pub struct PatchUpdate {
-    /// (element, new average radiance), for every element of the tree.
-    pub radiance: Vec<(ElementId, Rgb)>,
+    /// Elements of the tree, in the order of `radiance`.
+    pub elements: Vec<ElementId>,
+    /// Their new radiance coefficients, `basis size` per element.
+    pub radiance: Vec<Rgb>,
     /// Power absorbed by the patch's leaves: Σ π A (1 - ρ) H, per channel.
     pub absorbed: Rgb,
     /// Exitant power of the leaves: Σ π A B, per channel.
     pub exitant: Rgb,
 }
 
-/// Pushes `gathered` (incident radiance gathered over each element's own links, indexed by element) down
-/// the tree of `patch` and pulls the resulting radiance up.
+impl PatchUpdate {
+    /// (element, coefficients) pairs.
+    pub fn entries(&self) -> impl Iterator<Item = (ElementId, &[Rgb])> {
+        let size = self.radiance.len() / self.elements.len().max(1);
+        self.elements
+            .iter()
+            .copied()
+            .zip(self.radiance.chunks_exact(size.max(1)))
+    }
+
+    /// Writes the new coefficients into the hierarchy.
+    pub fn apply(&self, hierarchy: &mut Hierarchy) {
+        for (id, coefficients) in self.entries() {
+            hierarchy.elements[id as usize]
+                .radiance
+                .copy_from_slice(coefficients);
+        }
+    }
+}
+
+/// Pushes `gathered` (which adds the irradiance coefficients gathered over an element's own links into
+/// its second argument) down the tree of `patch` and pulls the resulting radiance up.
 pub fn push_pull(
     hierarchy: &Hierarchy,
     patch: u32,
-    gathered: &dyn Fn(ElementId) -> Rgb,
+    gathered: &dyn Fn(ElementId, &mut [Rgb]),
 ) -> PatchUpdate {
     let p = &hierarchy.patches[patch as usize];
     let mut update = PatchUpdate::default();
-    visit(
-        hierarchy,
-        p.root,
-        Rgb::BLACK,
-        p.emission,
-        p.reflectance,
+    let down = vec![Rgb::BLACK; hierarchy.basis_size()];
+    let mut walk = Walk {
+        h: hierarchy,
+        emission: p.emission,
+        reflectance: p.reflectance,
         gathered,
-        &mut update,
-    );
+        update: &mut update,
+    };
+    walk.visit(p.root, down);
     update
 }
 
-fn visit(
-    h: &Hierarchy,
-    id: ElementId,
-    down: Rgb,
+struct Walk<'a> {
+    h: &'a Hierarchy,
     emission: Rgb,
     reflectance: Rgb,
-    gathered: &dyn Fn(ElementId) -> Rgb,
-    update: &mut PatchUpdate,
-) -> Rgb {
-    let e = h.element(id);
-    let incident = down + gathered(id);
-    let radiance = match e.children {
-        None => {
-            let b = emission + reflectance * incident;
-            update.absorbed += (Rgb::WHITE - reflectance) * incident * (PI * e.area);
-            update.exitant += b * (PI * e.area);
+    gathered: &'a dyn Fn(ElementId, &mut [Rgb]),
+    update: &'a mut PatchUpdate,
+}
+
+impl Walk<'_> {
+    /// `incident` arrives holding the irradiance pushed down from the ancestors; returns the radiance.
+    fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> Vec<Rgb> {
+        let h = self.h;
+        let e = h.element(id);
+        (self.gathered)(id, &mut incident);
+        let radiance = if e.is_leaf() {
+            let mut b: Vec<Rgb> = incident.iter().map(|&x| self.reflectance * x).collect();
+            // Emission is constant over a patch: the constant function represents it exactly (δ_e = 0).
+            b[0] += self.emission;
+            self.update.absorbed += (Rgb::WHITE - self.reflectance) * incident[0] * (PI * e.area);
+            self.update.exitant += b[0] * (PI * e.area);
             b
-        }
-        Some(children) => {
-            let mut sum = Rgb::BLACK;
-            for c in children {
-                let child_area = h.element(c).area;
-                sum += visit(h, c, incident, emission, reflectance, gathered, update) * child_area;
+        } else {
+            let domain = e.shape().domain();
+            let mut sum = vec![Rgb::BLACK; incident.len()];
+            for (k, &child) in e.children.iter().enumerate() {
+                let down = h.basis.push_rgb(domain, k, &incident);
+                let child_radiance = self.visit(child, down);
+                let weight = h.element(child).area / e.area;
+                h.basis
+                    .pull_add_rgb(domain, k, weight, &child_radiance, &mut sum);
             }
-            sum / e.area
-        }
-    };
-    update.radiance.push((id, radiance));
-    radiance
+            sum
+        };
+        self.update.elements.push(id);
+        self.update.radiance.extend_from_slice(&radiance);
+        radiance
+    }
 }

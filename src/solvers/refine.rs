@@ -1,34 +1,54 @@
 //! Hierarchical refinement (Hanrahan et al. 1991) as deterministic parallel rounds: every pending
 //! candidate link is judged by the oracle in parallel; the elements to split are split sequentially in
 //! candidate order; split candidates are replaced by links to the children and judged in the next round.
-//! Admissible links get their form factors in parallel at the end. The element and link sets therefore
-//! do not depend on the number of threads.
+//! Admissible links get their couplings in parallel at the end, except under the link error oracle
+//! (Bekaert–Willems §5), which judges a link from its coupling and so computes it first. The element and
+//! link sets therefore do not depend on the number of threads.
 
-use super::coupling::{form_factor, CouplingSettings};
+use super::coupling::{couple, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
-use crate::hierarchy::{ElementId, Hierarchy, Link};
+use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
 use crate::visibility::Visibility;
 use rayon::prelude::*;
 
-/// A link under consideration; `form_factor` and `oracle_factor` are cached for links that were already
+/// A link under consideration; `coupling` and `oracle_factor` are cached for links that were already
 /// computed and judged.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Candidate {
     pub receiver: ElementId,
     pub source: ElementId,
-    pub form_factor: Option<f64>,
+    pub coupling: Option<LinkCoupling>,
     pub oracle_factor: Option<f64>,
+    /// Visibility `v` of the parent link when that link was partially occluded: a link between
+    /// sub-elements whose own node pairs all agree (all open or all blocked) may have sampled a
+    /// partial occlusion too coarsely, so it keeps the parent's visibility error (one generation).
+    pub inherited_visibility: Option<f32>,
+}
+
+impl Candidate {
+    fn new(receiver: ElementId, source: ElementId, inherited_visibility: Option<f32>) -> Self {
+        Candidate {
+            receiver,
+            source,
+            coupling: None,
+            oracle_factor: None,
+            inherited_visibility,
+        }
+    }
 }
 
 /// Refinement parameters.
 #[derive(Clone, Copy, Debug)]
 pub struct RefineSettings {
-    /// Oracle threshold ε, in the oracle's units (radiance × area).
+    /// Oracle threshold ε, in the oracle's units (radiance × area). The link error oracle uses each
+    /// receiver's own threshold `Element::threshold` instead (Bekaert–Willems algorithm 6.1).
     pub threshold: f64,
     /// Elements of at most this area are never split.
     pub min_area: f64,
+    /// Elements are not split beyond this count (the element budget); links stay where they are.
+    pub max_elements: usize,
     pub coupling: CouplingSettings,
     pub seed: u64,
 }
@@ -42,8 +62,10 @@ pub struct RefineOutcome {
     pub refined_links: usize,
     /// Rays cast by the oracle.
     pub oracle_rays: u64,
-    /// Rays cast for form factors.
+    /// Rays cast for link couplings.
     pub form_factor_rays: u64,
+    /// Splits refused because the element budget was reached.
+    pub refused_by_budget: usize,
 }
 
 /// Whether two elements can exchange light at all: each has a vertex strictly in front of the other.
@@ -72,19 +94,14 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
                     && useful
                     && receiver.polygon != source.polygon
                     && can_interact(&receiver.shape, &source.shape))
-                .then_some(Candidate {
-                    receiver: receiver.root,
-                    source: source.root,
-                    form_factor: None,
-                    oracle_factor: None,
-                })
+                .then(|| Candidate::new(receiver.root, source.root, None))
             })
         })
         .collect()
 }
 
 /// Removes every link from the hierarchy and returns them as candidates (for re-refinement after the
-/// radiance changed), keeping their form factors.
+/// radiance changed), keeping their couplings.
 pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
     let mut out = Vec::with_capacity(hierarchy.link_count());
     for (id, e) in hierarchy.elements.iter_mut().enumerate() {
@@ -92,8 +109,9 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
             out.push(Candidate {
                 receiver: id as ElementId,
                 source: link.source,
-                form_factor: Some(link.form_factor),
+                coupling: Some(link.coupling),
                 oracle_factor: link.oracle_factor,
+                inherited_visibility: None,
             });
         }
     }
@@ -101,7 +119,6 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
 }
 
 const ORACLE_STREAM: u64 = 1;
-const COUPLING_STREAM: u64 = 2;
 
 /// Refines `candidates` until every one is admissible, then stores them as links at their receivers.
 pub fn refine(
@@ -129,12 +146,28 @@ pub fn refine(
                 .collect()
         };
         let mut next = Vec::new();
-        for (c, verdict) in candidates.iter().zip(decisions) {
+        for (c, verdict) in candidates.into_iter().zip(decisions) {
             outcome.oracle_rays += verdict.rays;
-            match verdict.decision {
+            outcome.form_factor_rays += verdict.coupling_rays;
+            let mut decision = verdict.decision;
+            if decision != Decision::Admissible
+                && hierarchy.elements.len() + 4 > settings.max_elements
+            {
+                outcome.refused_by_budget += 1;
+                decision = Decision::Admissible;
+            }
+            let partial = verdict
+                .coupling
+                .as_ref()
+                .or(c.coupling.as_ref())
+                .map(|k| k.visibility)
+                .filter(|v| *v > 0.0 && *v < 1.0);
+            match decision {
+                Decision::Admissible if verdict.no_interaction => {}
                 Decision::Admissible => admissible.push(Candidate {
                     oracle_factor: verdict.oracle_factor,
-                    ..*c
+                    coupling: verdict.coupling.or(c.coupling),
+                    ..c
                 }),
                 Decision::SubdivideReceiver => {
                     outcome.refined_links += 1;
@@ -142,7 +175,7 @@ pub fn refine(
                         outcome.subdivisions += 1;
                     }
                     for child in hierarchy.subdivide(c.receiver) {
-                        push_if_interacting(hierarchy, &mut next, child, c.source);
+                        push_if_interacting(hierarchy, &mut next, child, c.source, partial);
                     }
                 }
                 Decision::SubdivideSource => {
@@ -151,7 +184,7 @@ pub fn refine(
                         outcome.subdivisions += 1;
                     }
                     for child in hierarchy.subdivide(c.source) {
-                        push_if_interacting(hierarchy, &mut next, c.receiver, child);
+                        push_if_interacting(hierarchy, &mut next, c.receiver, child, partial);
                     }
                 }
             }
@@ -159,40 +192,35 @@ pub fn refine(
         candidates = next;
     }
     let h = &*hierarchy;
-    let computed: Vec<(Option<Link>, u64)> = admissible
-        .par_iter()
-        .map(|c| match c.form_factor {
-            Some(f) => (
-                Some(Link {
-                    source: c.source,
-                    form_factor: f,
-                    oracle_factor: c.oracle_factor,
-                }),
+    let computed: Vec<(Option<(ElementId, Link)>, u64)> = admissible
+        .into_par_iter()
+        .map(|c| match c.coupling {
+            Some(coupling) => (
+                Some((
+                    c.receiver,
+                    Link {
+                        source: c.source,
+                        coupling,
+                        oracle_factor: c.oracle_factor,
+                    },
+                )),
                 0,
             ),
             None => {
-                let mut rng = link_rng(settings.seed, c.receiver, c.source, COUPLING_STREAM);
-                let k = form_factor(
-                    h,
-                    visibility,
-                    c.receiver,
-                    c.source,
-                    &settings.coupling,
-                    &mut rng,
-                );
+                let k = couple(h, visibility, c.receiver, c.source, &settings.coupling);
                 let link = (k.unoccluded > 0.0).then_some(Link {
                     source: c.source,
-                    form_factor: k.form_factor,
+                    coupling: k.coupling,
                     oracle_factor: c.oracle_factor,
                 });
-                (link, k.rays)
+                (link.map(|l| (c.receiver, l)), k.rays)
             }
         })
         .collect();
-    for (c, (link, rays)) in admissible.iter().zip(computed) {
+    for (link, rays) in computed {
         outcome.form_factor_rays += rays;
-        if let Some(link) = link {
-            hierarchy.elements[c.receiver as usize].links.push(link);
+        if let Some((receiver, link)) = link {
+            hierarchy.elements[receiver as usize].links.push(link);
         }
     }
     outcome
@@ -203,28 +231,43 @@ fn push_if_interacting(
     out: &mut Vec<Candidate>,
     receiver: ElementId,
     source: ElementId,
+    inherited_visibility: Option<f32>,
 ) {
-    if can_interact(&h.element(receiver).shape, &h.element(source).shape) {
-        out.push(Candidate {
-            receiver,
-            source,
-            form_factor: None,
-            oracle_factor: None,
-        });
+    if can_interact(h.element(receiver).shape(), h.element(source).shape()) {
+        out.push(Candidate::new(receiver, source, inherited_visibility));
     }
 }
 
 /// An oracle verdict on one candidate.
 struct Verdict {
     decision: Decision,
+    /// Rays cast by the oracle's own samples.
     rays: u64,
     /// Radiance-independent factor of the estimate, to cache on the link.
     oracle_factor: Option<f64>,
+    /// The coupling computed to judge the link (link error oracle), to keep on it.
+    coupling: Option<LinkCoupling>,
+    coupling_rays: u64,
+    /// The elements cannot exchange light at all (drop the link).
+    no_interaction: bool,
+}
+
+impl Verdict {
+    fn admissible(oracle_factor: Option<f64>) -> Self {
+        Verdict {
+            decision: Decision::Admissible,
+            rays: 0,
+            oracle_factor,
+            coupling: None,
+            coupling_rays: 0,
+            no_interaction: false,
+        }
+    }
 }
 
 /// The oracle's verdict, with the minimum-area rule: if the element it wants to split is too small the
 /// other one is split instead, and if both are too small the link is admissible. A cached oracle factor
-/// is reused (see the contract of [`RefinementOracle::estimate`]).
+/// or coupling is reused (see the contract of [`RefinementOracle::estimate`]).
 fn decide(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
@@ -234,37 +277,56 @@ fn decide(
     let h = context.hierarchy;
     let splittable = |id: ElementId| h.element(id).area > settings.min_area;
     if !splittable(c.receiver) && !splittable(c.source) {
-        return Verdict {
-            decision: Decision::Admissible,
-            rays: 0,
-            oracle_factor: c.oracle_factor,
-        };
+        return Verdict::admissible(c.oracle_factor);
     }
-    let weight = reflected_source_radiance(h, c.receiver, c.source);
-    let (error, rays, oracle_factor) = match c.oracle_factor {
-        Some(factor) => (weight * factor, 0, Some(factor)),
-        None => {
-            let mut rng = link_rng(settings.seed, c.receiver, c.source, ORACLE_STREAM);
-            let estimate = oracle.estimate(context, c.receiver, c.source, &mut rng);
-            let factor = (weight > 0.0).then(|| estimate.error / weight);
-            (estimate.error, estimate.rays, factor)
+    let mut verdict = Verdict::admissible(None);
+    let (error, threshold, split) = if oracle.judges_couplings() {
+        if c.coupling.is_none() {
+            let mut k = couple(h, context.visibility, c.receiver, c.source, &settings.coupling);
+            if let Some(v) = c.inherited_visibility {
+                if k.coupling.visibility == 0.0 || k.coupling.visibility == 1.0 {
+                    k.coupling.visibility_error =
+                        visibility_error(k.unoccluded, f64::from(v), k.source_nodes);
+                }
+            }
+            verdict.coupling_rays = k.rays;
+            verdict.no_interaction = k.unoccluded <= 0.0;
+            verdict.coupling = Some(k.coupling);
         }
-    };
-    if error <= settings.threshold {
-        return Verdict {
-            decision: Decision::Admissible,
-            rays,
-            oracle_factor,
+        let coupling = verdict.coupling.as_ref().or(c.coupling.as_ref());
+        let judgement = coupling
+            .and_then(|k| oracle.link_error(context, c.receiver, c.source, k))
+            .unwrap_or_default();
+        (
+            judgement.error,
+            h.element(c.receiver).threshold,
+            Some(judgement.split),
+        )
+    } else {
+        let weight = reflected_source_radiance(h, c.receiver, c.source);
+        let error = match c.oracle_factor {
+            Some(factor) => {
+                verdict.oracle_factor = Some(factor);
+                weight * factor
+            }
+            None => {
+                let mut rng = link_rng(settings.seed, c.receiver, c.source, ORACLE_STREAM);
+                let estimate = oracle.estimate(context, c.receiver, c.source, &mut rng);
+                verdict.rays = estimate.rays;
+                verdict.oracle_factor = (weight > 0.0).then(|| estimate.error / weight);
+                estimate.error
+            }
         };
+        (error, settings.threshold, None)
+    };
+    if error <= threshold || verdict.no_interaction {
+        return verdict;
     }
-    let decision = match oracle.element_to_split(context, c.receiver, c.source) {
+    let split = split.unwrap_or_else(|| oracle.element_to_split(context, c.receiver, c.source));
+    verdict.decision = match split {
         Decision::SubdivideReceiver if !splittable(c.receiver) => Decision::SubdivideSource,
         Decision::SubdivideSource if !splittable(c.source) => Decision::SubdivideReceiver,
         other => other,
     };
-    Verdict {
-        decision,
-        rays,
-        oracle_factor,
-    }
+    verdict
 }

@@ -161,7 +161,7 @@ fn shoot_batch(
         let power = sources.power[k] * (total / (n as f64 * scalar(sources.power[k])));
         let element = hierarchy.element(source);
         let origin = element
-            .shape
+            .shape()
             .sample_uniform(DVec2::new(rng.random(), rng.random()));
         let normal = hierarchy.patch_of(source).normal;
         let direction = cosine_direction(normal, DVec2::new(rng.random(), rng.random()));
@@ -341,7 +341,7 @@ pub fn solve_stochastic(
     };
     let emission: Vec<Rgb> = hierarchy.patches.iter().map(|p| p.emission).collect();
     for e in &mut hierarchy.elements {
-        e.radiance[0] = emission[e.patch as usize];
+        e.radiance[0] = emission[e.patch() as usize];
     }
     let mut unshot: Vec<Rgb> = hierarchy.elements.iter().map(|e| e.radiance[0]).collect();
     let t_min = 1e-9 * scene_diameter(hierarchy);
@@ -408,15 +408,16 @@ pub fn solve_stochastic(
             .collect();
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
-            .map(|p| push_pull(h, p, &|id| incident[id as usize]))
+            .map(|p| push_pull(h, p, &|id, out| out[0] += incident[id as usize]))
             .collect();
         unshot.resize(hierarchy.elements.len(), Rgb::BLACK);
         for update in &updates {
             report.absorbed_power += update.absorbed;
-            for &(id, b) in &update.radiance {
+            for (id, b) in update.entries() {
+                let b = b[0];
                 let e = &mut hierarchy.elements[id as usize];
                 // push-pull returns E + ρ H; this iteration's share is ρ H.
-                let delta = b - emission[e.patch as usize];
+                let delta = b - emission[e.patch() as usize];
                 unshot[id as usize] = delta;
                 e.radiance[0] += delta;
             }

@@ -41,6 +41,17 @@ pub trait Visibility: Sync + Send {
         self.occluded(&ray, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON)
     }
 
+    /// Fraction of light that passes along the open segment between two surface points, in [0, 1]: the
+    /// `vis(x, y)` of the radiosity kernel (Bekaert–Willems eq. (1)). Exact ray casting gives 0 or 1;
+    /// extinction through clusters (Sillion–Drettakis §3.1) gives values in between.
+    fn transmittance(&self, from: DVec3, to: DVec3) -> f64 {
+        if self.segment_occluded(from, to) {
+            0.0
+        } else {
+            1.0
+        }
+    }
+
     /// Short name for reports ("bvh", "embree", "brute-force").
     fn name(&self) -> &'static str;
 }
