@@ -134,3 +134,206 @@ fn every_subcommand_has_help() {
         );
     }
 }
+
+fn renderpark(name: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/scenes/renderpark")
+        .join(name)
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+/// Runs radiosity with its standard output a pipe whose reader has already gone.
+fn into_closed_pipe(args: &[&str]) -> std::process::Output {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_radiosity"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run radiosity");
+    drop(child.stdout.take());
+    child.wait_with_output().expect("wait for radiosity")
+}
+
+#[test]
+fn a_closed_standard_output_ends_quietly() {
+    let dir = temp_dir("pipe");
+    let exr = dir.join("a.exr");
+    radiosity::output::image::Image::new(4, 4)
+        .write_exr(&exr)
+        .unwrap();
+    let exr = exr.to_str().unwrap();
+    let corridor = renderpark("corridor.mgf");
+    for args in [
+        vec!["info", corridor.as_str(), "--materials"],
+        vec!["compare", exr, exr, "--json"],
+        vec!["compare", exr, exr],
+    ] {
+        let out = into_closed_pipe(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        assert!(out.status.success(), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn outputs_never_overwrite_the_scene_and_failed_writes_fail() {
+    let dir = temp_dir("outputs");
+    let scene = dir.join("scene.mgf");
+    let out = radiosity(&["scene", "cornell", "-o", scene.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let before = std::fs::read(&scene).unwrap();
+    let s = scene.to_str().unwrap();
+    let fast = ["--width", "8", "--height", "8", "--eps", "0.05", "-q"];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["-o", s], "scene file"),
+        (vec!["--hdr", s], "scene file"),
+        (vec!["--stats", s], "scene file"),
+        (vec!["-o", "/nonexistent-dir/x.png"], "does not exist"),
+        (vec!["-o", dir.to_str().unwrap()], "directory"),
+    ];
+    for (extra, reason) in cases {
+        let mut args = vec!["render", s];
+        args.extend(&fast);
+        args.extend(&extra);
+        let out = radiosity(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{extra:?}");
+        assert!(
+            stderr.lines().count() == 1 && stderr.contains(reason),
+            "{extra:?}: {stderr}"
+        );
+    }
+    assert_eq!(
+        std::fs::read(&scene).unwrap(),
+        before,
+        "the scene is untouched"
+    );
+    // A full disk: an error, with no partial file claimed (and the device left alone).
+    let is_device = |p: &str| {
+        use std::os::unix::fs::FileTypeExt;
+        std::fs::metadata(p).is_ok_and(|m| m.file_type().is_char_device())
+    };
+    if !is_device("/dev/full") {
+        return;
+    }
+    let png = dir.join("ok.png");
+    let mut args = vec!["render", s];
+    args.extend(&fast);
+    args.extend(["-o", png.to_str().unwrap(), "--hdr", "/dev/full"]);
+    let out = radiosity(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("/dev/full") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    let mut args = vec!["render", s];
+    args.extend(&fast);
+    args.extend(["-o", "/dev/full"]);
+    assert!(!radiosity(&args).status.success());
+    assert!(is_device("/dev/full"), "/dev/full must never be replaced");
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn resource_options_are_bounded() {
+    for args in [
+        vec!["render", "-q", "--width", "16384", "--height", "16384"],
+        vec!["render", "-q", "--spp", "1000000000"],
+        vec![
+            "render", "-q", "--width", "4096", "--height", "4096", "--spp", "60000",
+        ],
+        vec!["render", "-q", "--tessellation", "1000000000"],
+        vec!["render", "-q", "--rays", "1000000000000"],
+        vec!["render", "-q", "--vis-rays", "100000000"],
+        vec!["reference", "-q", "--spp", "1000000000"],
+        vec!["render", "-q", "--threads", "100000000"],
+        vec!["render", "-q", "--width", "0"],
+    ] {
+        let start = std::time::Instant::now();
+        let mut args = args.clone();
+        args.extend(["-o", "/tmp/radiosity-never.png"]);
+        let out = radiosity(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            !stderr.contains("panicked") && stderr.contains("error"),
+            "{args:?}: {stderr}"
+        );
+        assert!(
+            start.elapsed().as_secs() < 20,
+            "{args:?} took {:?}",
+            start.elapsed()
+        );
+    }
+}
+
+#[test]
+fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
+    let dir = temp_dir("light");
+    let dark = dir.join("dark.mgf");
+    std::fs::write(
+        &dark,
+        "m grey =\n c\n rd 0.5\nv a =\n p 0 0 0\nv b =\n p 1 0 0\nv c =\n p 1 1 0\nf a b c\n",
+    )
+    .unwrap();
+    let png = dir.join("dark.png");
+    let out = radiosity(&[
+        "render",
+        dark.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("no surface emits light"), "{stderr}");
+    // `scene cornell -o c.mgf`, then `render c.mgf`: the camera comes back, the image is lit.
+    let scene = dir.join("c.mgf");
+    assert!(
+        radiosity(&["scene", "cornell", "-o", scene.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let png = dir.join("c.png");
+    let out = radiosity(&[
+        "render",
+        "-q",
+        scene.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--eps",
+        "0.01",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let image = image::open(&png).unwrap().to_rgb8();
+    let mean = image
+        .pixels()
+        .map(|p| p.0.iter().map(|&c| c as f64).sum::<f64>())
+        .sum::<f64>()
+        / (3.0 * image.pixels().len() as f64);
+    assert!(mean > 30.0, "mean pixel value {mean}");
+}

@@ -528,3 +528,183 @@ fn the_one_sided_override_turns_mgf_default_two_sided_surfaces_one_sided() {
         "a two-sided light emits twice: {e2:?} vs {e1:?}"
     );
 }
+
+/// Issue 8: inputs that used to panic, exhaust memory or hang end in a one-line error at file:line.
+#[test]
+fn short_mtl_colours_are_errors_at_their_line() {
+    for (mtl, line, reason) in [
+        ("newmtl white\nKd 1\n", 2, "Kd needs 3 number(s), got 1"),
+        ("newmtl a\n\nKa 0.1 0.2\n", 3, "Ka needs 3"),
+        ("newmtl a\nKs\n", 2, "Ks needs 3"),
+        ("newmtl a\nKe 1 x 1\n", 2, "'x' is not a number"),
+        ("newmtl a\nNs\n", 2, "Ns needs 1"),
+        ("newmtl a\nKd 1 1 1e99\n", 2, "not finite"),
+    ] {
+        let dir = temp_dir(&[("box.obj", CUBE_OBJ), ("box.mtl", mtl)]);
+        let e = scene::load(&dir.join("box.obj"), &LoadOptions::default()).unwrap_err();
+        assert!(e.0.file.ends_with("box.mtl"), "{e}");
+        assert_eq!(e.0.line, line, "{e}");
+        assert!(e.0.message.contains(reason), "{mtl:?}: {e}");
+    }
+}
+
+#[test]
+fn obj_lines_tobj_rejects_are_reported_with_their_line() {
+    for (obj, line, reason) in [
+        ("v 0 0 0\nvn 0 1\n", 2, "vn needs 3"),
+        ("v 0 0 0\nvt x 1\n", 2, "not a number"),
+        ("v 0 0 0\nv 1 1 1 0\n", 2, "weight w is zero"),
+        ("v 0 0 0\nv 1 1 1 1 1\n", 2, "not 5 numbers"),
+        ("v 0 0 0\nusemtl\n", 2, "usemtl needs"),
+    ] {
+        let dir = temp_dir(&[("bad.obj", obj)]);
+        let e = scene::load(&dir.join("bad.obj"), &LoadOptions::default()).unwrap_err();
+        assert_eq!(
+            (e.0.line, e.0.message.contains(reason)),
+            (line, true),
+            "{e}"
+        );
+    }
+    let dir = temp_dir(&[]);
+    std::fs::write(dir.join("bad.obj"), b"v 0 0 0\nv 1 \xff 0\n").unwrap();
+    let e = scene::load(&dir.join("bad.obj"), &LoadOptions::default()).unwrap_err();
+    assert!(e.0.line == 2 && e.0.message.contains("not UTF-8"), "{e}");
+}
+
+#[test]
+fn echoed_tokens_are_sanitised_and_truncated() {
+    let huge = "x".repeat(5 << 20);
+    let e = load_text("bad.mgf", &format!("v a =\n p 0 {huge} 0\n")).unwrap_err();
+    let shown = e.to_string();
+    assert!(shown.len() < 1000, "{} bytes", shown.len());
+    assert!(shown.contains("bad.mgf:2"), "{shown}");
+    let e = load_text("bad.mgf", "v a =\n p 0 \u{1b}[31mred\u{7} 0\n").unwrap_err();
+    let shown = e.to_string();
+    assert!(!shown.chars().any(|c| c.is_control()), "{shown:?}");
+    assert!(shown.contains("\\u{1b}"), "{shown}");
+}
+
+#[test]
+fn devices_huge_files_and_include_cycles_are_refused() {
+    // mtllib /dev/zero: refused, not read forever.
+    let dir = temp_dir(&[("box.obj", &CUBE_OBJ.replace("box.mtl", "/dev/zero"))]);
+    let e = scene::load(&dir.join("box.obj"), &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("not a regular file"), "{e}");
+    // MGF include of a device.
+    let e = load_text("a.mgf", "i /dev/zero\n").unwrap_err();
+    assert!(
+        e.0.line == 1 && e.0.message.contains("not a regular file"),
+        "{e}"
+    );
+    // The scene itself.
+    let e = scene::load(Path::new("/dev/zero.mgf"), &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("/dev/zero"), "{e}");
+    // Oversized files (sparse, so the test costs no disk).
+    let dir = temp_dir(&[]);
+    let big = std::fs::File::create(dir.join("big.mgf")).unwrap();
+    big.set_len(scene::MAX_FILE_BYTES + 1).unwrap();
+    let e = scene::load(&dir.join("big.mgf"), &LoadOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("larger than"), "{e}");
+    // Self-inclusion, with a long body: the cycle is found at the first include.
+    let body = format!("i self.mgf\n{}", "# padding\n".repeat(400_000));
+    let e = load_text("self.mgf", &body).unwrap_err();
+    assert!(e.0.message.contains("include cycle"), "{e}");
+    assert!(e.0.message.contains("self.mgf:1 -> "), "{e}");
+    // A two-file cycle names the chain.
+    let dir = temp_dir(&[("a.mgf", "\ni b.mgf\n"), ("b.mgf", "i a.mgf\n")]);
+    let e = scene::load(&dir.join("a.mgf"), &LoadOptions::default()).unwrap_err();
+    let (message, file) = (&e.0.message, &e.0.file);
+    assert!(file.ends_with("b.mgf") && e.0.line == 1, "{e}");
+    assert!(
+        message.contains("a.mgf:2 -> ") && message.contains("b.mgf:1 -> "),
+        "{e}"
+    );
+    // Deep but acyclic nesting is bounded.
+    let files: Vec<(String, String)> = (0..40)
+        .map(|k| (format!("n{k}.mgf"), format!("i n{}.mgf\n", k + 1)))
+        .collect();
+    let refs: Vec<(&str, &str)> = files
+        .iter()
+        .map(|(a, b)| (a.as_str(), b.as_str()))
+        .collect();
+    let dir = temp_dir(&refs);
+    let e = scene::load(&dir.join("n0.mgf"), &LoadOptions::default()).unwrap_err();
+    assert!(e.0.message.contains("nested deeper"), "{e}");
+}
+
+#[test]
+fn huge_arrays_and_polygons_are_bounded_and_fast() {
+    let start = std::time::Instant::now();
+    // A million-instance array used to be quadratic (each instance's transform built step by step).
+    let scene = load_mgf("xf -a 1000000 -t 0 0 1\nv a =\nxf\n");
+    assert!(scene.polygons.is_empty());
+    let scene = load_mgf(&format!(
+        "{SQUARE}xf -a 100000 -rz 1 -t 0 0 1\nf a b c d\nxf\n"
+    ));
+    assert_eq!(scene.polygons.len(), 100_000);
+    // Nested arrays past the polygon or entity budget: an error, not an exhausted machine.
+    let text = format!("{SQUARE}xf -a 1000 -t 0 0 1\nxf -a 1000 -t 1 0 0\nxf -a 1000 -t 0 1 0\nf a b c d\nxf\nxf\nxf\n");
+    let e = load_text("big.mgf", &text).unwrap_err();
+    assert!(e.0.message.contains("more than 1000000 polygons"), "{e}");
+    let e = load_text("big.mgf", "xf -a 100000\nxf -a 1000\nv a =\nxf\nxf\n").unwrap_err();
+    assert!(e.0.message.contains("entities"), "{e}");
+    // A polygon with a million vertices: refused at its line.
+    let mut text = String::new();
+    let n = 1_000_000;
+    for k in 0..n {
+        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        text.push_str(&format!("v v{k} =\n p {} {} 0\n", a.cos(), a.sin()));
+    }
+    text.push('f');
+    for k in 0..n {
+        text.push_str(&format!(" v{k}"));
+    }
+    text.push('\n');
+    let e = load_text("round.mgf", &text).unwrap_err();
+    assert_eq!(e.0.line, 2 * n + 1, "{e}");
+    assert!(e.0.message.contains("more than"), "{e}");
+    // Large polygons under the bound are split quickly.
+    let n = 5000;
+    let mut text = String::new();
+    for k in 0..n {
+        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        let r = if k % 2 == 0 { 1.0 } else { 0.8 };
+        text.push_str(&format!("v v{k} =\n p {} {} 0\n", r * a.cos(), r * a.sin()));
+    }
+    text.push('f');
+    for k in 0..n {
+        text.push_str(&format!(" v{k}"));
+    }
+    text.push('\n');
+    let scene = load_mgf(&text);
+    assert!(scene.polygons.len() >= n / 2);
+    assert!(start.elapsed().as_secs() < 60, "{:?}", start.elapsed());
+}
+
+#[test]
+fn the_camera_comment_round_trips() {
+    let dir = temp_dir(&[]);
+    let path = dir.join("c.mgf");
+    scene::mgf::writer::save(&cornell::cornell_box(), &path).unwrap();
+    let back = scene::load(&path, &LoadOptions::default()).unwrap();
+    assert_eq!(back.camera, cornell::cornell_box().camera);
+    let e = load_text(
+        "c.mgf",
+        "# camera: eye 0 0 0 look_at 0 0 x up 0 1 0 fov 40\n",
+    )
+    .unwrap_err();
+    assert!(e.0.line == 1 && e.0.message.contains("'x'"), "{e}");
+    let scene = load_mgf("# camera: eye 0 0 0 look_at 0 0 0 up 0 1 0 fov 40\n");
+    assert!(scene.camera.is_none() && scene.warnings.len() == 1);
+}
+
+#[test]
+fn nan_and_degenerate_polygons_in_readers() {
+    let e = load_text("bad.obj", "v 0 0 0\nv nan 0 0\n").unwrap_err();
+    assert_eq!(e.0.line, 2, "{e}");
+    // Collinear and zero-area faces warn at their line.
+    let scene = load_mgf(&format!("{SQUARE}v e =\n p 2 0 0\nf a b e\nf a a b\n"));
+    assert!(scene.polygons.is_empty());
+    let lines: Vec<usize> = scene.warnings.iter().map(|w| w.line).collect();
+    assert_eq!(lines, [11, 12], "{:?}", scene.warnings);
+}

@@ -24,7 +24,7 @@ pub struct SceneArgs {
     #[arg(long)]
     pub one_sided: bool,
     /// Segments per full circle when tessellating MGF spheres, cylinders, cones, rings and tori.
-    #[arg(long, default_value_t = 16, value_name = "N")]
+    #[arg(long, default_value_t = 16, value_name = "N", value_parser = count(0, 1024))]
     pub tessellation: usize,
 }
 
@@ -45,6 +45,9 @@ impl SceneArgs {
             !scene.polygons.is_empty(),
             "{name}: the scene has no polygons"
         );
+        if scene.emitter_count() == 0 && !progress.quiet {
+            eprintln!("warning: {name}: no surface emits light: the solution is black");
+        }
         Ok((scene, name))
     }
 
@@ -99,7 +102,7 @@ pub struct SolveArgs {
     #[arg(long, value_enum, default_value_t = EstimateKind::Realistic)]
     pub error_estimate: EstimateKind,
     /// Most elements refinement may create.
-    #[arg(long, default_value_t = 2_000_000, value_name = "N")]
+    #[arg(long, default_value_t = 2_000_000, value_name = "N", value_parser = count(1, 1 << 31))]
     pub max_elements: usize,
     /// Most memory for elements and links, e.g. 2G, 500M (default: half the machine's memory).
     #[arg(long, value_parser = parse_bytes, value_name = "BYTES")]
@@ -118,24 +121,25 @@ pub struct SolveArgs {
     #[arg(long, default_value_t = 1e-5)]
     pub min_area: f64,
     /// Random point pairs (one visibility ray each) per evaluation of the smoothness and MI oracles.
-    #[arg(long, default_value_t = 10, value_name = "N")]
+    #[arg(long, default_value_t = 10, value_name = "N", value_parser = count(2, 100_000))]
     pub oracle_samples: usize,
     /// Stop iterating when the relative change of total power is below this.
     #[arg(long, default_value_t = 1e-5)]
     pub tolerance: f64,
     /// Most solver sweeps per refinement pass.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 200, value_parser = count(0, 1_000_000))]
     pub max_iterations: usize,
     /// Most refine/solve passes.
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = 12, value_parser = count(0, 1000))]
     pub max_passes: usize,
     /// Stochastic Jacobi: rays shot in the first iteration; later iterations get a share proportional
     /// to the power they shoot.
-    #[arg(long, default_value_t = 100_000, value_name = "N")]
+    #[arg(long, default_value_t = 100_000, value_name = "N",
+          value_parser = clap::value_parser!(u64).range(1..=1_000_000_000))]
     pub rays: u64,
     /// Stochastic Jacobi: most iterations (they also stop when the unshot power falls below
     /// --tolerance times the emitted power).
-    #[arg(long, default_value_t = 100, value_name = "N")]
+    #[arg(long, default_value_t = 100, value_name = "N", value_parser = count(0, 100_000))]
     pub iterations: usize,
 }
 
@@ -201,10 +205,10 @@ pub struct CameraArgs {
     #[arg(long)]
     pub fov: Option<f64>,
     /// Image width in pixels (default 512, 256 for experiments).
-    #[arg(long)]
+    #[arg(long, value_parser = count(1, MAX_IMAGE_SIDE))]
     pub width: Option<usize>,
     /// Image height in pixels (default 512, 256 for experiments).
-    #[arg(long)]
+    #[arg(long, value_parser = count(1, MAX_IMAGE_SIDE))]
     pub height: Option<usize>,
 }
 
@@ -224,7 +228,7 @@ impl CameraArgs {
             width > 0 && height > 0,
             "--width and --height must be positive"
         );
-        anyhow::ensure!(width * height <= 1 << 28, "image too large");
+        check_pixels(width, height)?;
         let fov = self
             .fov
             .unwrap_or(scene.camera.map_or(50.0, |c| c.fov_degrees));
@@ -252,6 +256,39 @@ impl CameraArgs {
         );
         Ok(Camera::new(&spec, width, height))
     }
+}
+
+/// Widest or tallest image, in pixels.
+pub const MAX_IMAGE_SIDE: u64 = 32_768;
+/// Most pixels in one image (8192 x 4096): a larger image needs gigabytes.
+pub const MAX_PIXELS: usize = 1 << 25;
+/// Most samples (pixels times samples per pixel) one image may take.
+pub const MAX_SAMPLES: u128 = 1 << 32;
+
+/// A clap parser for a count between `lo` and `hi` (inclusive): out-of-range values are refused
+/// with the range instead of exhausting memory or time.
+pub fn count(lo: u64, hi: u64) -> clap::builder::RangedU64ValueParser<usize> {
+    clap::builder::RangedU64ValueParser::<usize>::new().range(lo..=hi)
+}
+
+/// Refuses images above the pixel budget.
+pub fn check_pixels(width: usize, height: usize) -> Result<()> {
+    anyhow::ensure!(
+        width as u128 * height as u128 <= MAX_PIXELS as u128,
+        "image of {width}x{height} pixels is too large (at most {MAX_PIXELS} pixels)"
+    );
+    Ok(())
+}
+
+/// Refuses images above the sample budget (pixels times samples per pixel).
+pub fn check_samples(width: usize, height: usize, spp: usize) -> Result<()> {
+    let total = width as u128 * height as u128 * spp as u128;
+    anyhow::ensure!(
+        total <= MAX_SAMPLES,
+        "{width}x{height} pixels at {spp} samples per pixel is {total} samples, more than the \
+         {MAX_SAMPLES} allowed: lower --spp or the image size"
+    );
+    Ok(())
 }
 
 /// Parses "x,y,z" (commas or spaces).
@@ -316,4 +353,38 @@ pub fn parse_bytes(text: &str) -> Result<usize> {
         "the size must be positive"
     );
     Ok((value * scale as f64) as usize)
+}
+
+/// Checks an output path before any work: not a scene file (`.mgf`, `.obj`, `.mtl`, or the same file as
+/// the input `scene`), not a directory, and in a directory that exists.
+pub fn check_output(
+    option: &str,
+    path: &std::path::Path,
+    scene: Option<&std::path::Path>,
+) -> Result<()> {
+    let shown = path.display();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    anyhow::ensure!(
+        !matches!(ext.as_str(), "mgf" | "obj" | "mtl"),
+        "{option} {shown}: refusing to write an output over a scene file (.{ext})"
+    );
+    if let (Some(scene), Ok(output)) = (scene, path.canonicalize()) {
+        anyhow::ensure!(
+            output != scene,
+            "{option} {shown}: is the input scene; refusing to overwrite it"
+        );
+    }
+    anyhow::ensure!(!path.is_dir(), "{option} {shown}: is a directory");
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        anyhow::ensure!(
+            dir.is_dir(),
+            "{option} {shown}: directory {} does not exist",
+            dir.display()
+        );
+    }
+    Ok(())
 }

@@ -33,7 +33,7 @@ pub struct RaysBench {
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Random polygon-to-polygon segments to cast.
-    #[arg(long, default_value_t = 2_000_000)]
+    #[arg(long, default_value_t = 2_000_000, value_parser = super::args::count(1, 1_000_000_000))]
     pub rays: usize,
     /// Back ends to measure (repeatable).
     #[arg(long = "backend", value_enum, default_values_t = [VisibilityKind::Bvh])]
@@ -47,9 +47,9 @@ pub struct RenderBench {
     pub scenes: Vec<String>,
     #[command(flatten)]
     pub solve: SolveArgs,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = super::args::count(1, super::args::MAX_IMAGE_SIDE))]
     pub width: usize,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = super::args::count(1, super::args::MAX_IMAGE_SIDE))]
     pub height: usize,
 }
 
@@ -68,22 +68,22 @@ impl RaysBench {
         let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
         let triangles: usize = shapes.iter().map(|s| s.vertex_count() - 2).sum();
         let segments = random_segments(&shapes, self.rays, seed);
-        println!(
+        outln!(
             "| scene | polygons (triangles) | back end | build (s) | threads | rays/s | blocked |"
-        );
-        println!("|---|---|---|---|---|---|---|");
+        )?;
+        outln!("|---|---|---|---|---|---|---|")?;
         for &kind in &self.backends {
             let (visibility, build_seconds) = timed(|| build_visibility(&scene, kind));
             let visibility = visibility?;
             for threads in [1, rayon::current_num_threads()] {
                 let r = occlusion_rate(visibility.as_ref(), &segments, threads)?;
-                println!(
+                outln!(
                     "| {name} | {} ({triangles}) | {} | {build_seconds:.3} | {threads} | {:.3} M | {} |",
                     shapes.len(),
                     visibility.name(),
                     r.rays_per_second / 1e6,
                     r.blocked
-                );
+                )?;
                 if threads == rayon::current_num_threads() {
                     break;
                 }
@@ -96,8 +96,9 @@ impl RaysBench {
 impl RenderBench {
     fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
         let settings = self.solve.settings(seed)?;
-        println!("| scene | polygons | elements | leaves | links | rays | load (s) | solve (s) | render (s) | total (s) |");
-        println!("|---|---|---|---|---|---|---|---|---|---|");
+        super::args::check_pixels(self.width, self.height)?;
+        outln!("| scene | polygons | elements | leaves | links | rays | load (s) | solve (s) | render (s) | total (s) |")?;
+        outln!("|---|---|---|---|---|---|---|---|---|---|")?;
         for name in &self.scenes {
             let start = Instant::now();
             let scene = if name == "cornell" {
@@ -126,7 +127,7 @@ impl RenderBench {
             });
             let h = &solution.hierarchy;
             let r = &solution.report;
-            println!(
+            outln!(
                 "| {name} | {} | {} | {} | {} | {} | {load:.3} | {solve:.3} | {render_seconds:.3} | {:.3} |",
                 scene.polygons.len(),
                 h.elements.len(),
@@ -134,7 +135,7 @@ impl RenderBench {
                 h.link_count(),
                 r.form_factor_rays + r.oracle_rays + r.shooting_rays,
                 start.elapsed().as_secs_f64()
-            );
+            )?;
         }
         Ok(())
     }

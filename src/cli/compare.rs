@@ -32,7 +32,7 @@ pub struct CompareCommand {
     #[arg(long)]
     pub json: bool,
     /// Feature-based error metric for each feature size (pixels).
-    #[arg(long, num_args = 1.., value_name = "SIZE")]
+    #[arg(long, num_args = 1.., value_name = "SIZE", value_parser = super::args::count(0, 4096))]
     pub fbem: Vec<usize>,
     /// Exponent p of the FBEM norm.
     #[arg(long, default_value_t = 2.0, value_name = "P")]
@@ -46,7 +46,7 @@ pub struct CompareCommand {
     pub shadow_threshold: f64,
     /// Largest shadow width (pixels) detected when the mask is estimated from the reference alone;
     /// default: a quarter of the smaller image side.
-    #[arg(long, value_name = "PIXELS")]
+    #[arg(long, value_name = "PIXELS", value_parser = super::args::count(0, 4096))]
     pub feature_window: Option<usize>,
     /// Write the feature mask 𝓕^s as PNG (white = feature, grey = ignored); with several sizes, one file
     /// per size named with `-sSIZE` before the extension.
@@ -127,9 +127,9 @@ impl CompareCommand {
             fbem: results,
         };
         if self.json {
-            println!("{}", serde_json::to_string_pretty(&report)?);
+            outln!("{}", serde_json::to_string_pretty(&report)?)?;
         } else {
-            print_text(&report);
+            print_text(&report)?;
         }
         Ok(())
     }
@@ -192,61 +192,76 @@ fn with_size_suffix(path: &Path, size: usize) -> PathBuf {
     path.with_file_name(name)
 }
 
-fn print_text(r: &Report) {
+fn print_text(r: &Report) -> std::io::Result<()> {
     let e = &r.errors;
-    println!("a: {}", r.a.display());
-    println!("b: {} (reference)", r.b.display());
-    println!(
+    outln!("a: {}", r.a.display())?;
+    outln!("b: {} (reference)", r.b.display())?;
+    outln!(
         "{}×{} pixels, {} compared, {} ignored",
-        e.width, e.height, e.compared, e.ignored
-    );
-    println!(
+        e.width,
+        e.height,
+        e.compared,
+        e.ignored
+    )?;
+    outln!(
         "{:<10} {:>12} {:>12} {:>12} {:>12} {:>12}",
-        "", "RMSE", "rel. RMSE", "MAE", "max", "max at"
-    );
+        "",
+        "RMSE",
+        "rel. RMSE",
+        "MAE",
+        "max",
+        "max at"
+    )?;
     let row = |name: &str, c: &ChannelErrors| {
         let rel = c
             .relative_rmse
             .map_or_else(|| "-".to_string(), |v| format!("{v:.6e}"));
-        println!(
+        outln!(
             "{name:<10} {:>12.6e} {rel:>12} {:>12.6e} {:>12.6e} {:>12}",
             c.rmse,
             c.mae,
             c.max,
             format!("({}, {})", c.max_at[0], c.max_at[1])
-        );
+        )
     };
-    row("r", &e.r);
-    row("g", &e.g);
-    row("b", &e.b);
-    row("luminance", &e.luminance);
+    row("r", &e.r)?;
+    row("g", &e.g)?;
+    row("b", &e.b)?;
+    row("luminance", &e.luminance)?;
     if let Some(d) = &r.diff {
-        println!(
+        outln!(
             "diff: {} ({} luminance error, colour scale {:.3e} .. {:.3e})",
             d.path.display(),
             if d.relative { "relative" } else { "absolute" },
             d.scale.min,
             d.scale.max
-        );
+        )?;
     }
     if let Some(kind) = r.fbem_mask {
         let source = match kind {
             "shadow" => "shadow region (with --unoccluded)",
             _ => "estimated from the reference alone",
         };
-        println!(
+        outln!(
             "FBEM of luminance, p = {}; feature mask: {source}",
             r.fbem.first().map_or(2.0, |f| f.p)
-        );
-        println!(
+        )?;
+        outln!(
             "{:>6} {:>12} {:>10} {:>14}",
-            "size", "FBEM", "openings", "feature frac."
-        );
+            "size",
+            "FBEM",
+            "openings",
+            "feature frac."
+        )?;
         for f in &r.fbem {
-            println!(
+            outln!(
                 "{:>6} {:>12.6e} {:>10} {:>14.4}",
-                f.size, f.value, f.openings, f.feature_fraction
-            );
+                f.size,
+                f.value,
+                f.openings,
+                f.feature_fraction
+            )?;
         }
     }
+    Ok(())
 }

@@ -36,28 +36,28 @@ pub struct OraclesExperiment {
     #[command(flatten)]
     pub solve: SolveArgs,
     /// Target leaf-element counts (the paper: 1000 and 2000 on the Cornell box, 14000 on the cube room).
-    #[arg(long, value_delimiter = ',', default_values_t = [1000, 2000])]
+    #[arg(long, value_delimiter = ',', default_values_t = [1000, 2000], value_parser = super::args::count(0, 10_000_000))]
     pub targets: Vec<usize>,
     /// Oracles to compare.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [OracleKind::Power, OracleKind::Smoothness, OracleKind::MutualInformation])]
     pub oracles: Vec<OracleKind>,
     /// Oracle sample counts: the main run (the paper's 10) and the robustness run (4).
-    #[arg(long, value_delimiter = ',', default_values_t = [10, 4])]
+    #[arg(long, value_delimiter = ',', default_values_t = [10, 4], value_parser = super::args::count(0, 100_000))]
     pub samples: Vec<usize>,
     /// Accept an element count within this fraction of the target.
     #[arg(long, default_value_t = 0.05)]
     pub count_tolerance: f64,
     /// Most solves per ε search.
-    #[arg(long, default_value_t = 14)]
+    #[arg(long, default_value_t = 14, value_parser = super::args::count(0, 1000))]
     pub max_solves: usize,
     /// Feature sizes (pixels) for the FBEM columns.
-    #[arg(long, value_delimiter = ',', default_values_t = [2, 4, 8, 16])]
+    #[arg(long, value_delimiter = ',', default_values_t = [2, 4, 8, 16], value_parser = super::args::count(0, 4096))]
     pub fbem_sizes: Vec<usize>,
     /// Reference image (linear EXR at this view and size); computed and written there when missing.
     #[arg(long)]
     pub reference: Option<PathBuf>,
     /// Paths per pixel when the reference is computed.
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, default_value_t = 1024, value_parser = super::args::count(0, 1 << 24))]
     pub reference_spp: usize,
     #[command(flatten)]
     pub camera: CameraArgs,
@@ -155,7 +155,7 @@ impl OraclesExperiment {
             self.out.join("table.json"),
             serde_json::to_string_pretty(&runs)? + "\n",
         )?;
-        print!("{table}");
+        out!("{table}")?;
         Ok(())
     }
 
@@ -185,6 +185,7 @@ impl OraclesExperiment {
             );
             return Ok(image);
         }
+        super::args::check_samples(camera.width, camera.height, self.reference_spp.max(2))?;
         let visibility = build_visibility(scene, self.solve.visibility)?;
         let settings = ReferenceSettings {
             spp: self.reference_spp.max(2),

@@ -19,13 +19,13 @@ impl InfoCommand {
         for warning in &scene.warnings {
             eprintln!("warning: {warning}");
         }
-        println!("scene: {name}");
-        println!("{}", crate::scene::summary(&scene));
+        outln!("scene: {name}")?;
+        outln!("{}", crate::scene::summary(&scene))?;
         if self.materials {
             for m in &scene.materials {
                 let r = m.reflectance;
                 let e = m.emission;
-                println!(
+                outln!(
                     "material {:<24} rho ({:.3} {:.3} {:.3})  emission ({:.3} {:.3} {:.3})  {}",
                     m.name,
                     r.r,
@@ -39,7 +39,7 @@ impl InfoCommand {
                     } else {
                         "one-sided"
                     }
-                );
+                )?;
             }
         }
         Ok(())

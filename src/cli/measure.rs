@@ -20,7 +20,7 @@ pub struct MeasureCommand {
     #[command(flatten)]
     pub solve: SolveArgs,
     /// Global lines for the continuous measures (eq. 10); the Monte Carlo error falls as 1/√N.
-    #[arg(long, default_value_t = 100_000, value_name = "N")]
+    #[arg(long, default_value_t = 100_000, value_name = "N", value_parser = super::args::count(1, 100_000_000))]
     pub lines: usize,
     /// Solve at each of these ε (comma separated) and report every level; without values, 100·ε down to
     /// ε in steps of √10.
@@ -87,13 +87,21 @@ impl MeasureCommand {
             }
             if !self.json {
                 if levels.is_empty() {
-                    println!(
+                    outln!(
                         "{:>10} {:>8} {:>9} {:>9} {:>8} {:>7} {:>9} {:>9} {:>7}",
-                        "eps", "leaves", "I_r^d", "I_r^c", "+-", "Delta", "I_v^d", "I_v^c", "Dv"
-                    );
+                        "eps",
+                        "leaves",
+                        "I_r^d",
+                        "I_r^c",
+                        "+-",
+                        "Delta",
+                        "I_v^d",
+                        "I_v^c",
+                        "Dv"
+                    )?;
                 }
                 let m = &measures;
-                println!(
+                outln!(
                     "{:>10.3e} {:>8} {:>9.4} {:>9.4} {:>8.4} {:>7.4} {:>9.4} {:>9.4} {:>7.4}",
                     eps,
                     m.leaves,
@@ -104,7 +112,7 @@ impl MeasureCommand {
                     m.visibility_discrete,
                     m.visibility_continuous,
                     m.delta_v
-                );
+                )?;
             }
             let mut stats = RunStats::new(&name, scene.polygons.len(), &solution, &level_settings);
             stats.information = Some(measures);
@@ -119,7 +127,7 @@ impl MeasureCommand {
                     map.insert("levels".to_string(), serde_json::to_value(&levels)?);
                 }
             }
-            println!("{}", serde_json::to_string_pretty(&value)?);
+            outln!("{}", serde_json::to_string_pretty(&value)?)?;
         }
         if let (Some(path), Some(stats)) = (&self.stats, &last_stats) {
             let json = serde_json::to_string_pretty(stats)?;

@@ -1,6 +1,23 @@
 //! Command line: `render` (default), `info`, `bench`. Every subcommand has `--help`; failures print one
 //! line `error: ...` with the file, line and reason where there is one, and exit with status 1.
 
+/// `println!` to stdout that returns the I/O error (a closed pipe) instead of panicking.
+macro_rules! outln {
+    () => {
+        std::io::Write::write_all(&mut std::io::stdout().lock(), b"\n")
+    };
+    ($($arg:tt)*) => {
+        std::io::Write::write_fmt(&mut std::io::stdout().lock(), format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` to stdout that returns the I/O error instead of panicking.
+macro_rules! out {
+    ($($arg:tt)*) => {
+        std::io::Write::write_fmt(&mut std::io::stdout().lock(), format_args!($($arg)*))
+    };
+}
+
 mod args;
 mod bench;
 mod compare;
@@ -26,7 +43,7 @@ pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
     /// Worker threads (default: all cores). Results do not depend on it.
-    #[arg(long, global = true, value_name = "N")]
+    #[arg(long, global = true, value_name = "N", value_parser = args::count(1, 1024))]
     pub threads: Option<usize>,
     /// Seed of every random choice; the same seed gives the same result.
     #[arg(long, global = true, default_value_t = 1)]
@@ -67,11 +84,21 @@ pub fn main() -> i32 {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => 0,
+        // A reader that went away (`radiosity info ... | head`) is not a failure: stop quietly.
+        Err(error) if is_broken_pipe(&error) => 0,
         Err(error) => {
             eprintln!("error: {error:#}");
             1
         }
     }
+}
+
+/// Whether `error` is, or was caused by, a write to a closed pipe.
+fn is_broken_pipe(error: &anyhow::Error) -> bool {
+    error.chain().any(|e| {
+        e.downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
 }
 
 /// Runs a parsed command line on a thread pool of the requested size.

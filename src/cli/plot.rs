@@ -45,11 +45,11 @@ impl PlotCommand {
         };
         let series = plot(&self.files, &spec, &self.output)?;
         let points: usize = series.iter().map(|s| s.points.len()).sum();
-        println!(
+        outln!(
             "wrote {}: {} series, {points} points",
             self.output.display(),
             series.len()
-        );
+        )?;
         Ok(())
     }
 }

@@ -23,7 +23,7 @@ pub struct ProbeCommand {
     #[arg(long)]
     pub reference: bool,
     /// Paths per point for `--reference` (rounded up to a multiple of 16).
-    #[arg(long, default_value_t = 16384, value_name = "N")]
+    #[arg(long, default_value_t = 16384, value_name = "N", value_parser = super::args::count(0, 1 << 24))]
     pub spp: usize,
     /// Print JSON instead of the table.
     #[arg(long)]
@@ -53,31 +53,36 @@ impl ProbeCommand {
             &self.points,
         )?;
         if self.json {
-            println!("{}", serde_json::to_string_pretty(&results)?);
+            outln!("{}", serde_json::to_string_pretty(&results)?)?;
             return Ok(());
         }
-        println!("# {name}: {} points", results.len());
-        print!(
+        outln!("# {name}: {} points", results.len())?;
+        out!(
             "{:>5} {:>30} {:>6} {:>35}",
-            "line", "point", "poly", "radiosity (r g b)"
-        );
+            "line",
+            "point",
+            "poly",
+            "radiosity (r g b)"
+        )?;
         if self.reference {
-            print!(
+            out!(
                 " {:>35} {:>35} {:>6}",
-                "reference (r g b)", "stderr (r g b)", "z"
-            );
+                "reference (r g b)",
+                "stderr (r g b)",
+                "z"
+            )?;
         }
-        println!();
+        outln!()?;
         let triple = |v: [f64; 3]| format!("{:>11.4e} {:>11.4e} {:>11.4e}", v[0], v[1], v[2]);
         for r in &results {
             let point = format!("{:.4} {:.4} {:.4}", r.point[0], r.point[1], r.point[2]);
             let side = if r.front { "" } else { "b" };
-            print!(
+            out!(
                 "{:>5} {point:>30} {:>6} {}",
                 r.line,
                 format!("{}{side}", r.polygon),
                 triple(r.radiosity.to_array())
-            );
+            )?;
             if let Some(e) = r.reference {
                 // Largest deviation of the radiosity value in standard errors of the reference.
                 let z = (0..3)
@@ -93,13 +98,13 @@ impl ProbeCommand {
                         }
                     })
                     .fold(0.0, f64::max);
-                print!(
+                out!(
                     " {} {} {z:>6.2}",
                     triple(e.mean.to_array()),
                     triple(e.stderr.to_array())
-                );
+                )?;
             }
-            println!();
+            outln!()?;
         }
         Ok(())
     }

@@ -23,13 +23,13 @@ pub struct ReferenceCommand {
     pub hdr: PathBuf,
     /// Paths per pixel (at least 2; rounded up to a multiple of 16, the independent batches the standard
     /// error is estimated from).
-    #[arg(long, default_value_t = 64, value_name = "N")]
+    #[arg(long, default_value_t = 64, value_name = "N", value_parser = super::args::count(0, 1 << 24))]
     pub spp: usize,
     /// Output OpenEXR file of the per-pixel standard error of the mean (linear radiance).
     #[arg(long, value_name = "FILE")]
     pub stderr: Option<PathBuf>,
     /// Bounces before Russian roulette may end a path.
-    #[arg(long, default_value_t = 3, value_name = "N")]
+    #[arg(long, default_value_t = 3, value_name = "N", value_parser = super::args::count(0, 1000))]
     pub roulette_depth: usize,
     /// Ray casting back end.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
@@ -54,6 +54,7 @@ impl ReferenceCommand {
         }
         anyhow::ensure!(scene.emitter_count() > 0, "{name} has no emitting surface");
         let camera = self.camera.camera(&scene, 512)?;
+        super::args::check_samples(camera.width, camera.height, self.spp)?;
         let settings = ReferenceSettings {
             spp: self.spp,
             seed,
@@ -74,13 +75,13 @@ impl ReferenceCommand {
                 .map_or("n/a (all black)".to_string(), |r| {
                     format!("{:.3}%", 100.0 * r)
                 });
-            println!(
+            outln!(
                 "reference: {name}, {}x{} at {} spp in {seconds:.2} s ({}); mean relative standard error {relative} over non-black pixels",
                 camera.width,
                 camera.height,
                 samples_taken(self.spp),
                 visibility.name()
-            );
+            )?;
         }
         Ok(())
     }

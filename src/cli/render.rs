@@ -36,8 +36,9 @@ pub struct RenderCommand {
     /// Draw the element mesh on top.
     #[arg(long)]
     pub mesh: bool,
-    /// Samples per pixel, stratified and box-filtered (antialiased edges); 1 = pixel centres.
-    #[arg(long, default_value_t = 16)]
+    /// Samples per pixel, stratified and box-filtered (antialiased edges, comparable with
+    /// `reference`); 1 = pixel centres (comparable with `reference --filter centre`).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=65_536))]
     pub spp: u32,
     /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
     #[arg(long)]
@@ -72,11 +73,13 @@ impl RenderCommand {
                 "--exposure must be a positive number"
             );
         }
+        self.check_outputs()?;
         let start = Instant::now();
         let (scene, name) = self.scene.load_for_solving(progress)?;
         let load_seconds = start.elapsed().as_secs_f64();
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene, 512)?;
+        super::args::check_samples(camera.width, camera.height, self.spp as usize)?;
         let solution = simulate(&scene, &settings, progress)?;
 
         let start = Instant::now();
@@ -124,9 +127,10 @@ impl RenderCommand {
         stats.seconds.load = load_seconds;
         stats.seconds.render = render_seconds;
         if let Some(path) = &self.stats {
-            let json = serde_json::to_string_pretty(&stats)?;
-            std::fs::write(path, json + "\n")
-                .with_context(|| format!("writing {}", path.display()))?;
+            let json = serde_json::to_string_pretty(&stats)? + "\n";
+            crate::output::write_atomically(path, |to| {
+                std::fs::write(to, &json).with_context(|| format!("writing {}", path.display()))
+            })?;
         }
         if !progress.quiet {
             let s = &stats.seconds;
@@ -174,6 +178,38 @@ pub fn error_summary(error: &crate::solvers::ErrorReport) -> String {
             s.max_estimate, s.mean_estimate
         ),
     }
+}
+
+impl RenderCommand {
+    /// Refuses, before any work, outputs that would overwrite the scene (or any scene file) or each
+    /// other, or that go into a directory that does not exist.
+    fn check_outputs(&self) -> Result<()> {
+        let mut outputs: Vec<(&str, &Path)> = vec![("--output", self.output.as_path())];
+        outputs.extend(self.hdr.iter().map(|p| ("--hdr", p.as_path())));
+        outputs.extend(self.export.iter().map(|p| ("--export", p.as_path())));
+        outputs.extend(self.stats.iter().map(|p| ("--stats", p.as_path())));
+        let input = self
+            .scene
+            .scene
+            .as_deref()
+            .and_then(|p| p.canonicalize().ok());
+        let mut seen = Vec::new();
+        for (option, path) in outputs {
+            super::args::check_output(option, path, input.as_deref())?;
+            let same = |p: &PathBuf| p == path || same_file(p, path);
+            anyhow::ensure!(
+                !seen.iter().any(same),
+                "{option} {}: the same file is written twice",
+                path.display()
+            );
+            seen.push(path.to_path_buf());
+        }
+        Ok(())
+    }
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }
 
 fn extension(path: &Path) -> String {

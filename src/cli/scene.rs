@@ -205,13 +205,13 @@ impl SceneCommand {
             }
         };
         writer::save(&scene, &out.output)?;
-        println!(
+        outln!(
             "wrote {}: {} polygons, {} objects, {} materials",
             out.output.display(),
             scene.polygons.len(),
             scene.objects.len(),
             scene.materials.len()
-        );
+        )?;
         Ok(())
     }
 }

@@ -7,23 +7,31 @@ use super::{DVec3, Shape};
 use std::f64::consts::PI;
 
 /// Point-to-point (differential) form factor kernel between `x` with normal `nx` and `y` with normal `ny`,
-/// per unit area of `y`; zero when either point faces away.
+/// per unit area of `y`; zero when either point faces away (or an input is not finite).
 pub fn point_to_point(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
     let d = y - x;
     let r2 = d.length_squared();
-    if r2 <= 0.0 {
+    if !(r2 > 0.0 && r2.is_finite()) {
         return 0.0;
     }
     let cos_x = nx.dot(d);
     let cos_y = -ny.dot(d);
-    if cos_x <= 0.0 || cos_y <= 0.0 {
+    if !(cos_x > 0.0 && cos_y > 0.0) {
         return 0.0;
     }
-    cos_x * cos_y / (PI * r2 * r2)
+    // Divided separately so that r2 * r2 cannot underflow for very close points.
+    let f = (cos_x / r2) * (cos_y / r2) / PI;
+    if f.is_finite() {
+        f
+    } else {
+        0.0
+    }
 }
 
 /// Exact unoccluded form factor from a differential area at `x` (normal `nx`) to the front side of a
 /// polygon, by Lambert's contour integral over the part of the polygon above the tangent plane of `x`.
+/// Any triangle or quad is accepted (non-convex, non-planar, degenerate): the result is in [0, 1], and 0
+/// for non-finite input.
 pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
     let n_src = polygon.normal();
     let verts = polygon.vertices();
@@ -31,8 +39,9 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
     if n_src.dot(x - verts[0]) <= 0.0 {
         return 0.0;
     }
-    // Clip the polygon to the half-space in front of x (Sutherland–Hodgman against one plane).
-    let mut clipped: [DVec3; 5] = [DVec3::ZERO; 5];
+    // Clip the polygon to the half-space in front of x (Sutherland–Hodgman against one plane). Each
+    // vertex contributes at most itself and one crossing, so a non-convex quad needs up to 8 slots.
+    let mut clipped: [DVec3; 8] = [DVec3::ZERO; 8];
     let mut count = 0;
     let height = |p: DVec3| nx.dot(p - x);
     for k in 0..verts.len() {
@@ -63,7 +72,12 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
         let angle = sin.atan2(a.dot(b));
         sum += angle * nx.dot(cross / sin);
     }
-    (sum / (2.0 * PI)).abs()
+    let f = (sum / (2.0 * PI)).abs();
+    if f.is_finite() {
+        f.min(1.0)
+    } else {
+        0.0
+    }
 }
 
 /// Closed-form form factor between two coaxial parallel rectangles a x b at distance c (Howell's catalogue,

@@ -187,7 +187,12 @@ impl Shape {
                         break;
                     }
                 }
-                uv
+                // Newton can diverge on non-convex or degenerate quads: keep the affine guess then.
+                if uv.is_finite() {
+                    uv
+                } else {
+                    barycentric_uv(v[0], v[1], v[3], p)
+                }
             }
         }
     }
@@ -267,7 +272,8 @@ impl Shape {
     }
 }
 
-/// Children parameter domains of a regular split, matching [`Shape::subdivide`] for the same kind of shape.
+/// Children parameter domains of a regular split, matching [`Shape::subdivide`] for the same kind of shape
+/// (none for a domain that is not a triangle or quad).
 pub fn subdivide_parameters(corners: &[DVec2]) -> Vec<Vec<DVec2>> {
     match corners {
         [a, b, c] => {
@@ -294,10 +300,7 @@ pub fn subdivide_parameters(corners: &[DVec2]) -> Vec<Vec<DVec2>> {
                 vec![da, mid, cd, *d],
             ]
         }
-        _ => panic!(
-            "a parameter domain has 3 or 4 corners, not {}",
-            corners.len()
-        ),
+        _ => Vec::new(),
     }
 }
 

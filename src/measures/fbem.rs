@@ -83,8 +83,7 @@ impl Mask {
                 0
             };
         }
-        img.save(path)
-            .with_context(|| format!("writing {}", path.display()))
+        crate::output::save_png(path, &img)
     }
 }
 

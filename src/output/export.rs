@@ -22,8 +22,8 @@ pub fn write_ply(
 ) -> Result<()> {
     let mesh = vertices.mesh(hierarchy);
     let scale = tone.exposure_scale(mesh.radiance.iter().copied());
-    let write = || -> std::io::Result<()> {
-        let mut out = BufWriter::new(File::create(path)?);
+    let write = |to: &Path| -> std::io::Result<()> {
+        let mut out = BufWriter::new(File::create(to)?);
         write!(
             out,
             "ply\n\
@@ -58,7 +58,9 @@ pub fn write_ply(
         }
         out.flush()
     };
-    write().with_context(|| format!("writing {}", path.display()))
+    super::write_atomically(path, |to| {
+        write(to).with_context(|| format!("writing {}", path.display()))
+    })
 }
 
 const GLB_MAGIC: u32 = 0x4654_6C67; // "glTF"
@@ -86,7 +88,9 @@ pub fn write_glb(
         );
     }
     let bytes = glb_bytes(&mesh, tone);
-    std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
+    super::write_atomically(path, |to| {
+        std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
+    })
 }
 
 /// The whole `.glb` file in memory.

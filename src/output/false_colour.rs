@@ -2,7 +2,7 @@
 //! large) with a colour bar along the right side labelled with the minimum and maximum of the scale.
 //! Labels are drawn with a built-in 3×5 bitmap font, so no font dependency is needed.
 
-use anyhow::{ensure, Context, Result};
+use anyhow::{ensure, Result};
 use image::{Rgb as Px, RgbImage};
 use serde::Serialize;
 use std::path::Path;
@@ -113,8 +113,7 @@ pub fn write_png(
     height: usize,
 ) -> Result<ErrorScale> {
     let (img, scale) = render(errors, width, height)?;
-    img.save(path)
-        .with_context(|| format!("writing {}", path.display()))?;
+    super::save_png(path, &img)?;
     Ok(scale)
 }
 

@@ -32,11 +32,21 @@ impl Image {
 
     /// Writes linear radiance as 32-bit float OpenEXR.
     pub fn write_exr(&self, path: &Path) -> Result<()> {
-        exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
+        use exr::prelude::{Image as Exr, SpecificChannels, Vec2, WritableImage};
+        // Encoded in memory: exr's `to_file` deletes its target on a write error, even a device.
+        let channels = SpecificChannels::rgb(|Vec2(x, y)| {
             let c = self.get(x, y);
             (c.r as f32, c.g as f32, c.b as f32)
+        });
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        Exr::from_channels((self.width, self.height), channels)
+            .write()
+            .to_buffered(&mut bytes)
+            .with_context(|| format!("encoding {}", path.display()))?;
+        let bytes = bytes.into_inner();
+        super::write_atomically(path, |to| {
+            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
         })
-        .with_context(|| format!("writing {}", path.display()))
     }
 
     /// Reads the first RGB(A) layer of an OpenEXR file.

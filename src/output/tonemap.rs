@@ -3,7 +3,7 @@
 
 use super::image::Image;
 use crate::color::Rgb;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::Path;
 
 /// How linear radiance is scaled before the tone curve.
@@ -132,9 +132,9 @@ pub fn to_srgb8(image: &Image, tone: &ToneMap) -> image::RgbImage {
 
 /// Writes a tone-mapped PNG.
 pub fn write_png(path: &Path, image: &Image, tone: &ToneMap) -> Result<()> {
-    to_srgb8(image, tone)
-        .save_with_format(path, image::ImageFormat::Png)
-        .with_context(|| format!("writing {}", path.display()))
+    // Not `save_with_format`: the image crate's buffered file writer drops the error of its last
+    // flush (a full disk went unnoticed).
+    super::save_png(path, &to_srgb8(image, tone))
 }
 
 #[cfg(test)]

@@ -85,8 +85,59 @@ pub struct Diagnostic {
 
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}: {}", self.file.display(), self.line, self.message)
+        let file = sanitise(&self.file.display().to_string(), MAX_SHOWN_CHARS);
+        write!(f, "{file}:{}: ", self.line)?;
+        f.write_str(&sanitise(&self.message, MAX_SHOWN_CHARS))
     }
+}
+
+/// Longest file name or message shown in a diagnostic, in characters.
+const MAX_SHOWN_CHARS: usize = 240;
+
+/// Makes input text safe to echo: control characters escaped, cut to `max` characters.
+pub fn sanitise(text: &str, max: usize) -> String {
+    let mut out = String::new();
+    for (count, c) in text.chars().enumerate() {
+        if count == max {
+            let rest = text.chars().count() - count;
+            out.push_str(&format!("... ({rest} more characters)"));
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Most polygons one scene may have (a few hundred bytes each before meshing).
+pub const MAX_POLYGONS: usize = 1_000_000;
+
+/// Largest scene, material or include file read (bytes): bigger inputs are refused, not exhausted.
+pub const MAX_FILE_BYTES: u64 = 64 << 20;
+
+/// Reads a regular file of at most [`MAX_FILE_BYTES`]; devices, pipes and directories are refused.
+pub fn read_bounded(path: &Path) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read file: {e}"))?;
+    if !meta.is_file() {
+        return Err("cannot read file: not a regular file".into());
+    }
+    let too_big = || format!("file larger than {} MiB refused", MAX_FILE_BYTES >> 20);
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(too_big());
+    }
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read file: {e}"))?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read file: {e}"))?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(too_big());
+    }
+    Ok(bytes)
 }
 
 /// A fatal error reading a scene, with file, line and reason.

@@ -2,10 +2,12 @@
 //! W/(m² sr); faces are one-sided, front by counter-clockwise winding. Polygons are kept (no `tobj`
 //! triangulation) and split by [`polygonize`](super::polygonize). Objects are named after OBJ `o`/`g`.
 //!
-//! `tobj` reports errors without line numbers, so the file is first checked line by line for the
-//! problems users make (bad numbers, face indices out of range), which are reported with their line.
+//! `tobj` reports errors without line numbers (and panics on short MTL colours), so the OBJ and its MTL
+//! libraries are first checked line by line for what `tobj` rejects (bad numbers, short colours, face
+//! indices out of range, invalid UTF-8), which is reported with its file and line. Files are read with
+//! the size limit of [`read_bounded`](super::read_bounded).
 
-use super::polygonize::polygonize;
+use super::polygonize::{polygonize, PolygonError};
 use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError};
 use crate::color::Rgb;
 use glam::DVec3;
@@ -18,17 +20,35 @@ const MAX_REFLECTANCE: f64 = 0.999;
 
 /// Reads an OBJ file and its MTL libraries.
 pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
-    let text = std::fs::read(path)
-        .map_err(|e| SceneError::new(path, 0, format!("cannot read file: {e}")))?;
-    let face_lines = check(path, &String::from_utf8_lossy(&text))?;
+    let text = super::read_bounded(path).map_err(|e| SceneError::new(path, 0, e))?;
+    let face_lines = check(path, &text)?;
     let load_options = tobj::LoadOptions {
         triangulate: false,
         single_index: false,
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, materials) = tobj::load_obj(path, &load_options)
-        .map_err(|e| SceneError::new(path, 0, format!("invalid OBJ: {e}")))?;
+    // Material libraries are read and checked here (tobj panics on short colour lines); the first
+    // problem found with a line number wins over tobj's line-less error.
+    let mtl_error: std::cell::RefCell<Option<SceneError>> = Default::default();
+    let loaded = tobj::load_obj_buf(&mut text.as_slice(), &load_options, |name| {
+        let mtl_path = path
+            .parent()
+            .map_or(name.to_path_buf(), |dir| dir.join(name));
+        match read_mtl(&mtl_path) {
+            Ok(bytes) => tobj::load_mtl_buf(&mut bytes.as_slice()),
+            Err(MtlProblem::Missing) => Err(tobj::LoadError::OpenFileFailed),
+            Err(MtlProblem::Invalid(e)) => {
+                mtl_error.borrow_mut().get_or_insert(e);
+                Err(tobj::LoadError::MaterialParseError)
+            }
+        }
+    });
+    if let Some(e) = mtl_error.into_inner() {
+        return Err(e);
+    }
+    let (models, materials) =
+        loaded.map_err(|e| SceneError::new(path, 0, format!("invalid OBJ: {e}")))?;
     let mut scene = Scene::default();
     let warn = |scene: &mut Scene, line: usize, message: String| {
         scene.warnings.push(Diagnostic {
@@ -133,6 +153,9 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
                             two_sided: false,
                         }));
                 }
+                Err(e @ PolygonError::TooManyVertices(_)) => {
+                    return Err(SceneError::new(path, line, e.to_string()))
+                }
                 Err(e) => warn(&mut scene, line, format!("{e}: polygon dropped")),
             }
         }
@@ -140,23 +163,96 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
-/// Checks vertex and face lines; returns the line number of every face (faces of three or more
-/// vertices, in file order, as `tobj` returns them).
-fn check(path: &Path, text: &str) -> Result<Vec<usize>, SceneError> {
+/// Why a material library was not read.
+enum MtlProblem {
+    /// Absent or unreadable: the scene falls back to grey with a warning.
+    Missing,
+    /// Present but refused (not a regular file, too large, malformed): an error at file:line.
+    Invalid(SceneError),
+}
+
+/// Reads an MTL file and checks the statements `tobj` parses: colours need three numbers, scalars one.
+fn read_mtl(path: &Path) -> Result<Vec<u8>, MtlProblem> {
+    if !path.exists() {
+        return Err(MtlProblem::Missing);
+    }
+    let bytes =
+        super::read_bounded(path).map_err(|e| MtlProblem::Invalid(SceneError::new(path, 0, e)))?;
+    for (k, raw) in bytes.split(|&b| b == b'\n').enumerate() {
+        let error = |m: String| MtlProblem::Invalid(SceneError::new(path, k + 1, m));
+        let line = std::str::from_utf8(raw).map_err(|_| error("not UTF-8 text".into()))?;
+        let mut words = line.split_whitespace();
+        let Some(keyword) = words.next() else {
+            continue;
+        };
+        let count = match keyword {
+            "Ka" | "Kd" | "Ks" | "Ke" | "Kt" | "Tf" => 3,
+            "Ns" | "Ni" | "d" | "Tr" | "illum" => 1,
+            _ => continue,
+        };
+        let values: Vec<&str> = words.collect();
+        if keyword.starts_with('K') && values.first() == Some(&"spectral")
+            || values.first() == Some(&"xyz")
+        {
+            return Err(error(format!("{keyword}: only RGB colours are supported")));
+        }
+        if values.len() < count {
+            return Err(error(format!(
+                "{keyword} needs {count} number(s), got {}",
+                values.len()
+            )));
+        }
+        for w in &values[..count] {
+            match w.parse::<f32>() {
+                Ok(v) if v.is_finite() => {}
+                Ok(_) => return Err(error(format!("{keyword}: number '{w}' is not finite"))),
+                Err(_) => return Err(error(format!("{keyword}: '{w}' is not a number"))),
+            }
+        }
+    }
+    Ok(bytes)
+}
+
+/// Checks vertex and face lines (and the UTF-8 `tobj` needs); returns the line number of every face
+/// (faces of three or more vertices, in file order, as `tobj` returns them).
+fn check(path: &Path, bytes: &[u8]) -> Result<Vec<usize>, SceneError> {
     let mut vertices = 0usize;
     let mut faces = Vec::new();
-    for (k, raw) in text.lines().enumerate() {
+    for (k, raw) in bytes.split(|&b| b == b'\n').enumerate() {
         let number = k + 1;
-        let mut words = raw.split_whitespace();
         let error = |m: String| SceneError::new(path, number, m);
+        let raw = std::str::from_utf8(raw).map_err(|_| error("not UTF-8 text".into()))?;
+        let mut words = raw.split_whitespace();
         match words.next() {
+            Some(keyword @ ("vt" | "vn")) => {
+                let count = if keyword == "vn" { 3 } else { 2 };
+                let values: Vec<&str> = words.take(count).collect();
+                if values.len() < count {
+                    return Err(error(format!("{keyword} needs {count} numbers")));
+                }
+                if let Some(w) = values.iter().find(|w| w.parse::<f32>().is_err()) {
+                    return Err(error(format!("'{w}' is not a number")));
+                }
+            }
+            Some("usemtl") if words.next().is_none() => {
+                return Err(error("usemtl needs a material name".into()));
+            }
             Some("v") => {
                 let values: Vec<&str> = words.collect();
                 if values.len() < 3 {
                     return Err(error("a vertex needs three coordinates".into()));
                 }
-                for w in &values[..3] {
-                    match w.parse::<f64>() {
+                if !matches!(values.len(), 3 | 4 | 6) {
+                    return Err(error(format!(
+                        "a vertex has x y z [w] or x y z r g b, not {} numbers",
+                        values.len()
+                    )));
+                }
+                if values.len() == 4 && values[3].parse::<f32>().is_ok_and(|w| w == 0.0) {
+                    return Err(error("vertex weight w is zero".into()));
+                }
+                for w in &values {
+                    match w.parse::<f32>() {
                         Ok(v) if v.is_finite() => {}
                         Ok(_) => return Err(error(format!("number '{w}' is not finite"))),
                         Err(_) => return Err(error(format!("'{w}' is not a number"))),
@@ -184,6 +280,9 @@ fn check(path: &Path, text: &str) -> Result<Vec<usize>, SceneError> {
                 }
                 if corners.len() >= 3 {
                     faces.push(number);
+                }
+                if faces.len() > super::MAX_POLYGONS {
+                    return Err(error(format!("more than {} faces", super::MAX_POLYGONS)));
                 }
             }
             _ => {}

@@ -16,6 +16,8 @@ const MERGE_TOLERANCE: f64 = 1e-9;
 const AREA_TOLERANCE: f64 = 1e-12;
 /// A polygon whose vertices leave its mean plane by more than this fraction of its size is non-planar.
 pub const PLANARITY_TOLERANCE: f64 = 1e-3;
+/// Most vertices of one polygon (ear clipping is quadratic in them).
+pub const MAX_VERTICES: usize = 10_000;
 
 /// Why a polygon was rejected.
 #[derive(Clone, Debug, PartialEq)]
@@ -26,6 +28,8 @@ pub enum PolygonError {
     NotFinite,
     /// The polygon encloses no area (collinear or coincident vertices).
     ZeroArea,
+    /// More than [`MAX_VERTICES`] vertices.
+    TooManyVertices(usize),
 }
 
 impl fmt::Display for PolygonError {
@@ -36,6 +40,9 @@ impl fmt::Display for PolygonError {
             }
             PolygonError::NotFinite => write!(f, "polygon has a non-finite coordinate"),
             PolygonError::ZeroArea => write!(f, "degenerate polygon: zero area"),
+            PolygonError::TooManyVertices(n) => {
+                write!(f, "polygon has {n} vertices, more than {MAX_VERTICES}")
+            }
         }
     }
 }
@@ -50,6 +57,9 @@ pub struct Polygonized {
 /// Splits `points` (the boundary in order; its winding gives the front side by the right-hand rule) into
 /// triangles and convex quads with the same front side. Non-planar polygons become triangles only.
 pub fn polygonize(points: &[DVec3]) -> Result<Polygonized, PolygonError> {
+    if points.len() > MAX_VERTICES {
+        return Err(PolygonError::TooManyVertices(points.len()));
+    }
     if points.iter().any(|p| !p.is_finite()) {
         return Err(PolygonError::NotFinite);
     }
@@ -205,6 +215,9 @@ fn on_segment(p: DVec2, a: DVec2, b: DVec2, eps: f64) -> bool {
 fn ear_clip(p: &[DVec2], eps: f64, same: f64) -> Vec<[usize; 3]> {
     let mut ring: Vec<usize> = (0..p.len()).collect();
     let mut triangles = Vec::with_capacity(p.len().saturating_sub(2));
+    // The search for the next ear starts where the last one was clipped (linear per ear on the
+    // polygons met in practice instead of rescanning the same reflex corners).
+    let mut start = 0;
     while ring.len() > 3 {
         let m = ring.len();
         let corner = |k: usize| (ring[(k + m - 1) % m], ring[k], ring[(k + 1) % m]);
@@ -234,7 +247,7 @@ fn ear_clip(p: &[DVec2], eps: f64, same: f64) -> Vec<[usize; 3]> {
         };
         // Prefer the best-shaped ear on small polygons; take the first one on large ones.
         let mut chosen: Option<(usize, f64)> = None;
-        for k in 0..m {
+        for k in (start.min(m)..m).chain(0..start.min(m)) {
             if is_ear(k) {
                 let (a, b, c) = corner(k);
                 let quality = shape_quality(p[a], p[b], p[c]);
@@ -262,6 +275,7 @@ fn ear_clip(p: &[DVec2], eps: f64, same: f64) -> Vec<[usize; 3]> {
             triangles.push([a, b, c]);
         }
         ring.remove(k);
+        start = k.saturating_sub(1);
     }
     if let [a, b, c] = ring[..] {
         if cross(p[a], p[b], p[c]) > eps {
@@ -281,14 +295,28 @@ fn shape_quality(a: DVec2, b: DVec2, c: DVec2) -> f64 {
 fn merge_quads(p: &[DVec2], triangles: Vec<[usize; 3]>, eps: f64) -> Vec<Vec<usize>> {
     let mut used = vec![false; triangles.len()];
     let mut out = Vec::with_capacity(triangles.len());
+    // Directed edge -> triangle holding it, so that neighbours are found without a quadratic search.
+    let mut edges = std::collections::HashMap::with_capacity(3 * triangles.len());
+    for (j, t) in triangles.iter().enumerate() {
+        for r in 0..3 {
+            edges.entry((t[r], t[(r + 1) % 3])).or_insert(j);
+        }
+    }
     for i in 0..triangles.len() {
         if used[i] {
             continue;
         }
         used[i] = true;
         let mut merged = None;
-        'search: for j in i + 1..triangles.len() {
-            if used[j] {
+        let mut neighbours: Vec<usize> = (0..3)
+            .filter_map(|r| {
+                let (a, b) = (triangles[i][r], triangles[i][(r + 1) % 3]);
+                edges.get(&(b, a)).copied()
+            })
+            .collect();
+        neighbours.sort_unstable();
+        'search: for j in neighbours {
+            if used[j] || j <= i {
                 continue;
             }
             for r in 0..3 {

@@ -7,7 +7,12 @@
 //! (MGF 2.0 face with holes), and the solids `sph` `cyl` `cone` `prism` `ring` `torus`, tessellated as
 //! [`solids`] describes. Named contexts follow MGF scoping: `m name =` (re)defines, `m name` reuses,
 //! the bare `m`/`c` is the default black material / neutral colour. Unknown entities are ignored with a
-//! warning (as MGF prescribes); malformed known entities are errors.
+//! warning (as MGF prescribes); malformed known entities are errors. The comment
+//! `# camera: eye x y z look_at x y z up x y z fov f` that [`writer`] leaves sets the scene camera.
+//!
+//! Limits (errors naming the line): files of at most [`MAX_FILE_BYTES`](super::MAX_FILE_BYTES), regular
+//! files only, include cycles (reported with the include chain), include depth, entities run and
+//! polygons made (see [`MAX_POLYGONS`](super::MAX_POLYGONS)).
 //!
 //! Units: geometry keeps the file's units. Reflectance is `rd` times the colour normalised to luminance 1
 //! (see [`color`]). Emission: MGF's `ed` is the diffuse emittance in lumens per m² (luminous exitance).
@@ -22,11 +27,12 @@ pub mod writer;
 
 use self::color::Xyz;
 use self::transform::XfSpec;
-use super::polygonize::polygonize;
-use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError};
+use super::polygonize::{polygonize, PolygonError};
+use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError, MAX_POLYGONS};
 use glam::{DAffine3, DVec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
 /// Luminous efficacy of equal-energy white light, lm/W (Radiance and RenderPark).
 pub const WHITE_EFFICACY: f64 = 179.0;
@@ -41,6 +47,11 @@ const MAX_ENTITIES: usize = 20_000_000;
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let lines = read_lines(path).map_err(|e| SceneError::new(path, 0, e))?;
     let mut reader = Reader::new(options);
+    reader.includes.push(Include {
+        canonical: std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+        file: path.to_path_buf(),
+        line: 0,
+    });
     reader.run_file(path, &lines)?;
     Ok(reader.scene)
 }
@@ -62,7 +73,7 @@ struct Line {
 
 /// Splits a file into entities, joining lines continued with a backslash.
 fn read_lines(path: &Path) -> Result<Vec<Line>, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read file: {e}"))?;
+    let bytes = super::read_bounded(path)?;
     let text = String::from_utf8_lossy(&bytes);
     let mut lines = Vec::new();
     let mut pending: Option<Line> = None;
@@ -142,8 +153,19 @@ struct XfFrame {
     depth: usize,
 }
 
+/// A file being read, and the line of its including file that included it.
+struct Include {
+    canonical: PathBuf,
+    file: PathBuf,
+    line: usize,
+}
+
 struct Reader<'a> {
     options: &'a LoadOptions,
+    /// The chain of files being read, outermost first (include cycles are errors).
+    includes: Vec<Include>,
+    /// Files already read, by canonical path: an include in an array is read once.
+    read_cache: HashMap<PathBuf, Rc<Vec<Line>>>,
     scene: Scene,
     file: PathBuf,
     depth: usize,
@@ -171,6 +193,8 @@ impl<'a> Reader<'a> {
     fn new(options: &'a LoadOptions) -> Self {
         Reader {
             options,
+            includes: Vec::new(),
+            read_cache: HashMap::new(),
             scene: Scene::default(),
             file: PathBuf::new(),
             depth: 0,
@@ -289,6 +313,9 @@ impl<'a> Reader<'a> {
         let n = line.number;
         let keyword = w[0].as_str();
         if keyword.starts_with('#') {
+            if keyword == "#" && w.get(1).is_some_and(|c| c == "camera:") && self.depth == 0 {
+                self.camera_comment(line)?;
+            }
             return Ok(());
         }
         match keyword {
@@ -403,8 +430,7 @@ impl<'a> Reader<'a> {
                     .iter()
                     .map(|name| self.vertex(n, name).map(|v| v.p))
                     .collect::<Result<Vec<_>>>()?;
-                self.add_polygons(n, vec![points]);
-                Ok(())
+                self.add_polygons(n, vec![points])
             }
             "fh" => self.face_with_holes(line),
             "sph" => {
@@ -413,8 +439,7 @@ impl<'a> Reader<'a> {
                 let r = self.number(n, &w[2])?;
                 let loops =
                     solids::sphere(c.p, r, self.segments()).map_err(|e| self.error(n, e))?;
-                self.add_polygons(n, loops);
-                Ok(())
+                self.add_polygons(n, loops)
             }
             "cyl" | "cone" => {
                 let (v1, r1, v2, r2) = if keyword == "cyl" {
@@ -432,8 +457,7 @@ impl<'a> Reader<'a> {
                 };
                 let loops = solids::cone(v1.p, r1, v2.p, r2, self.segments())
                     .map_err(|e| self.error(n, e))?;
-                self.add_polygons(n, loops);
-                Ok(())
+                self.add_polygons(n, loops)
             }
             "ring" | "torus" => {
                 self.arity(line, 3)?;
@@ -445,8 +469,7 @@ impl<'a> Reader<'a> {
                     solids::torus(c.p, c.n, r0, r1, self.segments())
                 }
                 .map_err(|e| self.error(n, e))?;
-                self.add_polygons(n, loops);
-                Ok(())
+                self.add_polygons(n, loops)
             }
             "prism" => {
                 if w.len() < 5 {
@@ -458,14 +481,49 @@ impl<'a> Reader<'a> {
                     .map(|name| self.vertex(n, name).map(|v| v.p))
                     .collect::<Result<Vec<_>>>()?;
                 let loops = solids::prism(&base, length).map_err(|e| self.error(n, e))?;
-                self.add_polygons(n, loops);
-                Ok(())
+                self.add_polygons(n, loops)
             }
             other => {
                 self.warn(n, format!("unknown entity '{other}' ignored"));
                 Ok(())
             }
         }
+    }
+
+    /// `# camera: eye x y z look_at x y z up x y z fov degrees`, as [`writer`] keeps the scene camera.
+    fn camera_comment(&mut self, line: &Line) -> Result<()> {
+        let n = line.number;
+        let w = &line.words[2..];
+        let labels = ["eye", "look_at", "up", "fov"];
+        let well_formed = w.len() == 14
+            && [0usize, 4, 8, 12]
+                .iter()
+                .zip(labels)
+                .all(|(&k, label)| w[k] == label);
+        if !well_formed {
+            self.warn(n, "malformed camera comment ignored");
+            return Ok(());
+        }
+        let number = |k: usize| self.number(n, &w[k]);
+        let vector = |k: usize| -> Result<DVec3> {
+            Ok(DVec3::new(number(k)?, number(k + 1)?, number(k + 2)?))
+        };
+        let camera = super::CameraSpec {
+            eye: vector(1)?,
+            look_at: vector(5)?,
+            up: vector(9)?,
+            fov_degrees: number(13)?,
+        };
+        let usable = camera.eye != camera.look_at
+            && camera.up.cross(camera.look_at - camera.eye).length() > 0.0
+            && camera.fov_degrees > 0.0
+            && camera.fov_degrees < 180.0;
+        if usable {
+            self.scene.camera = Some(camera);
+        } else {
+            self.warn(n, "degenerate camera comment ignored");
+        }
+        Ok(())
     }
 
     fn segments(&self) -> usize {
@@ -543,27 +601,72 @@ impl<'a> Reader<'a> {
         if line.words.len() < 2 {
             return Err(self.error(n, "i needs a file name"));
         }
-        if self.depth >= MAX_INCLUDE_DEPTH {
-            return Err(self.error(n, "includes nested too deeply (recursive include?)"));
-        }
         let name = &line.words[1];
         let target = match self.file.parent() {
             Some(dir) => dir.join(name),
             None => PathBuf::from(name),
         };
-        let lines = read_lines(&target)
-            .map_err(|e| self.error(n, format!("cannot include '{}': {e}", target.display())))?;
+        let canonical = std::fs::canonicalize(&target).unwrap_or_else(|_| target.clone());
+        if self.includes.iter().any(|i| i.canonical == canonical) {
+            return Err(self.error(
+                n,
+                format!("include cycle: {}", self.include_chain(n, &target)),
+            ));
+        }
+        if self.depth >= MAX_INCLUDE_DEPTH {
+            return Err(self.error(
+                n,
+                format!(
+                    "includes nested deeper than {MAX_INCLUDE_DEPTH}: {}",
+                    self.include_chain(n, &target)
+                ),
+            ));
+        }
+        let lines = match self.read_cache.get(&canonical) {
+            Some(lines) => Rc::clone(lines),
+            None => {
+                let lines = Rc::new(read_lines(&target).map_err(|e| {
+                    self.error(n, format!("cannot include '{}': {e}", target.display()))
+                })?);
+                self.read_cache.insert(canonical.clone(), Rc::clone(&lines));
+                lines
+            }
+        };
+        self.includes.push(Include {
+            canonical,
+            file: target.clone(),
+            line: n,
+        });
+        let result = self.include_lines(line, &target, &lines);
+        self.includes.pop();
+        result
+    }
+
+    /// "a.mgf:3 -> b.mgf:7 -> a.mgf": the files being read, each with its including line, then `target`.
+    fn include_chain(&self, line: usize, target: &Path) -> String {
+        let mut chain: Vec<String> = Vec::new();
+        for (k, include) in self.includes.iter().enumerate() {
+            let at = self.includes.get(k + 1).map_or(line, |next| next.line);
+            chain.push(format!("{}:{at}", include.file.display()));
+        }
+        chain.push(target.display().to_string());
+        chain.join(" -> ")
+    }
+
+    /// Runs an included file's lines, once or once per instance of its transform array.
+    fn include_lines(&mut self, line: &Line, target: &Path, lines: &[Line]) -> Result<()> {
+        let n = line.number;
         let spec = if line.words.len() > 2 {
             Some(transform::parse(&line.words[2..]).map_err(|e| self.error(n, e))?)
         } else {
             None
         };
         match spec {
-            None => self.run_include(&target, &lines),
+            None => self.run_include(target, lines),
             Some(spec) => {
                 self.push_xf(spec, 0);
                 loop {
-                    self.run_include(&target, &lines)?;
+                    self.run_include(target, lines)?;
                     let Some(frame) = self.xf.last_mut() else {
                         break;
                     };
@@ -788,13 +891,18 @@ impl<'a> Reader<'a> {
             seamed.extend(&outline[i..]);
             outline = seamed;
         }
-        self.add_polygons(n, vec![outline]);
-        Ok(())
+        self.add_polygons(n, vec![outline])
     }
 
     /// Transforms polygons given in the current (untransformed) coordinates, splits them into shapes and
     /// adds them with the current material and object.
-    fn add_polygons(&mut self, line: usize, loops: Vec<Vec<DVec3>>) {
+    fn add_polygons(&mut self, line: usize, loops: Vec<Vec<DVec3>>) -> Result<()> {
+        if self.scene.polygons.len() >= MAX_POLYGONS {
+            return Err(self.error(
+                line,
+                format!("more than {MAX_POLYGONS} polygons (runaway transform arrays?)"),
+            ));
+        }
         let xf = self.current_transform();
         let mirrored = xf.matrix3.determinant() < 0.0;
         for local in loops {
@@ -823,8 +931,12 @@ impl<'a> Reader<'a> {
                             two_sided,
                         }));
                 }
+                Err(e @ PolygonError::TooManyVertices(_)) => {
+                    return Err(self.error(line, e.to_string()))
+                }
                 Err(e) => self.warn(line, format!("{e}: polygon dropped")),
             }
         }
+        Ok(())
     }
 }

@@ -43,9 +43,7 @@ impl XfSpec {
                 Repeat::Times(n) => n,
                 Repeat::Array(d) => index[d],
             };
-            for _ in 0..n {
-                m = g.step * m;
-            }
+            m = power(g.step, n) * m;
         }
         m
     }
@@ -61,6 +59,19 @@ impl XfSpec {
         }
         false
     }
+}
+
+/// `step` applied `n` times, by repeated squaring (an array of a million instances stays linear).
+fn power(step: DAffine3, mut n: usize) -> DAffine3 {
+    let (mut result, mut base) = (DAffine3::IDENTITY, step);
+    while n > 0 {
+        if n & 1 == 1 {
+            result = base * result;
+        }
+        base = base * base;
+        n >>= 1;
+    }
+    result
 }
 
 fn number(args: &[String], k: usize, flag: &str) -> Result<f64, String> {

@@ -11,7 +11,7 @@
 //!
 //! Structure: one `m` per (material, sidedness) pair in use, one `o` block per run of polygons of the same
 //! object (a reopened object name maps back to the same object), shared vertices `v`/`p`, faces `f`. The
-//! scene's camera, which MGF cannot express, is kept as a comment.
+//! scene's camera, which MGF cannot express, is kept as a comment that the reader reads back.
 
 use super::color;
 use super::WHITE_EFFICACY;
