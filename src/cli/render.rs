@@ -5,7 +5,7 @@ use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
 use crate::output::mesh_values::VertexRadiosity;
 use crate::output::false_colour;
-use crate::output::render::{render_with, Quantity, RenderOptions, Shading};
+use crate::output::render::{emitter_mask, render_with, Quantity, RenderOptions, Shading};
 use crate::output::tonemap::{write_png, Curve, Exposure, ToneMap};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
@@ -52,6 +52,9 @@ pub struct RenderCommand {
     /// Write the illuminated mesh (.ply or .glb; repeatable).
     #[arg(long, value_name = "FILE")]
     pub export: Vec<PathBuf>,
+    /// Write a PNG mask of the pixels that see a light source (white), for `compare --mask`.
+    #[arg(long, value_name = "FILE.png")]
+    pub emitter_mask: Option<PathBuf>,
     /// Write run statistics as JSON.
     #[arg(long, value_name = "FILE.json")]
     pub stats: Option<PathBuf>,
@@ -112,6 +115,10 @@ impl RenderCommand {
                 let errors: Vec<Option<f64>> = image.pixels.iter().map(|c| Some(c.r)).collect();
                 false_colour::write_png(&self.output, &errors, image.width, image.height)?;
             }
+        }
+        if let Some(path) = &self.emitter_mask {
+            emitter_mask(&solution.hierarchy, solution.visibility.as_ref(), &camera)
+                .write_png(path, None)?;
         }
         if let Some(path) = &self.hdr {
             image.write_exr(path)?;
@@ -188,6 +195,11 @@ impl RenderCommand {
         outputs.extend(self.hdr.iter().map(|p| ("--hdr", p.as_path())));
         outputs.extend(self.export.iter().map(|p| ("--export", p.as_path())));
         outputs.extend(self.stats.iter().map(|p| ("--stats", p.as_path())));
+        outputs.extend(
+            self.emitter_mask
+                .iter()
+                .map(|p| ("--emitter-mask", p.as_path())),
+        );
         let input = self
             .scene
             .scene

@@ -7,7 +7,9 @@
 //! A third term is the visibility error of the link (`LinkCoupling::visibility_error`, the term §7
 //! proposes to add for partial occlusion): where it dominates, the source is split, since that term
 //! scales with the source's form factor and splitting the receiver leaves it as it is (the receiver's
-//! own term then resolves the shadow's shape on it).
+//! own term then resolves the shadow's shape on it). A partially occluded link whose source is larger
+//! than its receiver splits the source too: the visibility seen from each receiver node is then sampled
+//! by only a few source nodes, and the steps this puts into `δ_j` are not removed by a finer receiver.
 //! Works with every basis; its estimate is a radiance, compared with each receiver's link error
 //! threshold `Δ_i` of algorithm 6.1.
 
@@ -88,7 +90,13 @@ impl RefinementOracle for LinkErrorOracle {
         let visibility = rho.max_channel()
             * source_element.average_radiance().max_channel().abs()
             * f64::from(coupling.visibility_error);
-        let split = if own >= propagated.max(visibility) {
+        let (r_area, s_area) = (h.element(receiver).area, source_element.area);
+        let partially_visible = coupling.visibility_error > 0.0;
+        let split = if partially_visible && s_area > r_area {
+            // The receiver's own error then comes mostly from the coarse sampling of the occlusion by
+            // the source's nodes (steps of 1/m across the receiver), which only a finer source removes.
+            Decision::SubdivideSource
+        } else if own >= propagated.max(visibility) {
             Decision::SubdivideReceiver
         } else {
             Decision::SubdivideSource

@@ -9,6 +9,7 @@ use super::mesh_values::VertexRadiosity;
 use crate::color::Rgb;
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::Hierarchy;
+use crate::measures::fbem::Mask;
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -215,6 +216,41 @@ fn stratified(n: u32, rng: &mut Pcg64Mcg) -> Vec<(f64, f64)> {
         .into_iter()
         .map(|(x0, y0, w, h)| (x0 + rng.random::<f64>() * w, y0 + rng.random::<f64>() * h))
         .collect()
+}
+
+/// Pixels that see an emitting surface through any of 16 stratified points, and their 8 neighbours (so
+/// that a pixel the emitter's outline grazes is masked whatever the jitter of either image): the mask
+/// that leaves light sources out of an image comparison, where their radiance, orders of magnitude above
+/// the rest, would dominate every norm.
+pub fn emitter_mask(hierarchy: &Hierarchy, visibility: &dyn Visibility, camera: &Camera) -> Mask {
+    let hits_emitter = |x: f64, y: f64| {
+        let ray = camera.ray(x, y);
+        visibility
+            .intersect(&ray, 0.0, f64::INFINITY)
+            .and_then(|hit| hierarchy.patch_for_side(hit.polygon, hit.front))
+            .is_some_and(|p| !hierarchy.patches[p as usize].emission.is_black())
+    };
+    let rows: Vec<Vec<bool>> = (0..camera.height)
+        .into_par_iter()
+        .map(|y| {
+            (0..camera.width)
+                .map(|x| {
+                    strata(16).into_iter().any(|(x0, y0, w, h)| {
+                        hits_emitter(x as f64 + x0 + 0.5 * w, y as f64 + y0 + 0.5 * h)
+                    })
+                })
+                .collect()
+        })
+        .collect();
+    let (w, h) = (camera.width as isize, camera.height as isize);
+    Mask::from_fn(camera.width, camera.height, |x, y| {
+        (-1..=1).any(|dy| {
+            (-1..=1).any(|dx| {
+                let (nx, ny) = (x as isize + dx, y as isize + dy);
+                (0..w).contains(&nx) && (0..h).contains(&ny) && rows[ny as usize][nx as usize]
+            })
+        })
+    })
 }
 
 /// SplitMix64 finaliser of (seed, pixel): independent per-pixel streams whatever the thread schedule.

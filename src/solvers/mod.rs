@@ -192,7 +192,7 @@ pub fn solve(
                 report.error.stopped_by = "element budget".into();
                 break;
             }
-            lower_thresholds(hierarchy, control);
+            lower_thresholds(hierarchy, control, settings.refine.min_area);
         } else if outcome.subdivisions == 0 && outcome.refined_links == 0 && pass > 1 {
             report.converged = swept_to_tolerance;
             report.error.stopped_by = "stable".into();
@@ -215,20 +215,22 @@ fn initialise_thresholds(hierarchy: &mut Hierarchy, accuracy: f64) {
 }
 
 /// Extended push-pull, steps 1c and 2f: leaves whose estimate exceeds ε get their threshold divided by
-/// the factor, and every inner element takes the smallest threshold below it.
-fn lower_thresholds(hierarchy: &mut Hierarchy, control: &ErrorControl) {
-    fn visit(h: &mut Hierarchy, id: ElementId, control: &ErrorControl) -> f64 {
+/// the factor, and every inner element takes the smallest threshold below it. Leaves at the minimum
+/// area keep theirs: no refinement can help them (they are reported as failing), and lowering their
+/// threshold would only drag the links of all their ancestors down.
+fn lower_thresholds(hierarchy: &mut Hierarchy, control: &ErrorControl, min_area: f64) {
+    fn visit(h: &mut Hierarchy, id: ElementId, control: &ErrorControl, min_area: f64) -> f64 {
         let children = h.elements[id as usize].children.clone();
         let e = &mut h.elements[id as usize];
         if children.is_empty() {
-            if e.error > control.accuracy {
+            if e.error > control.accuracy && e.area > min_area {
                 e.threshold /= control.threshold_factor;
             }
             return e.threshold;
         }
         let lowest = children
             .iter()
-            .map(|&c| visit(h, c, control))
+            .map(|&c| visit(h, c, control, min_area))
             .fold(f64::INFINITY, f64::min);
         let e = &mut h.elements[id as usize];
         e.threshold = e.threshold.min(lowest);
@@ -236,6 +238,6 @@ fn lower_thresholds(hierarchy: &mut Hierarchy, control: &ErrorControl) {
     }
     for p in 0..hierarchy.patches.len() {
         let root = hierarchy.patches[p].root;
-        visit(hierarchy, root, control);
+        visit(hierarchy, root, control, min_area);
     }
 }

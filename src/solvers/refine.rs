@@ -266,7 +266,8 @@ impl Verdict {
 }
 
 /// The oracle's verdict, with the minimum-area rule: if the element it wants to split is too small the
-/// other one is split instead, and if both are too small the link is admissible. A cached oracle factor
+/// other one is split instead (the link error oracle: the link is admissible), and if both are too small
+/// the link is admissible. A cached oracle factor
 /// or coupling is reused (see the contract of [`RefinementOracle::estimate`]).
 fn decide(
     context: &OracleContext,
@@ -322,11 +323,17 @@ fn decide(
     if error <= threshold || verdict.no_interaction {
         return verdict;
     }
-    let split = split.unwrap_or_else(|| oracle.element_to_split(context, c.receiver, c.source));
     verdict.decision = match split {
-        Decision::SubdivideReceiver if !splittable(c.receiver) => Decision::SubdivideSource,
-        Decision::SubdivideSource if !splittable(c.source) => Decision::SubdivideReceiver,
-        other => other,
+        // The link error oracle names the element whose subdivision reduces the error (§5): splitting
+        // the other one instead would only multiply links without helping.
+        Some(Decision::SubdivideReceiver) if !splittable(c.receiver) => Decision::Admissible,
+        Some(Decision::SubdivideSource) if !splittable(c.source) => Decision::Admissible,
+        Some(decision) => decision,
+        None => match oracle.element_to_split(context, c.receiver, c.source) {
+            Decision::SubdivideReceiver if !splittable(c.receiver) => Decision::SubdivideSource,
+            Decision::SubdivideSource if !splittable(c.source) => Decision::SubdivideReceiver,
+            other => other,
+        },
     };
     verdict
 }
