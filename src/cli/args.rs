@@ -1,13 +1,13 @@
 //! Argument groups shared by several subcommands.
 
-use crate::geometry::DVec3;
 use crate::bases::BasisKind;
+use crate::geometry::DVec3;
 use crate::pipeline::{
     default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
-    VisibilityKind,
+    VisibilityKind, DEFAULT_RELATIVE_ACCURACY,
 };
-use crate::solvers::error_estimate::EstimateKind;
 use crate::scene::{self, LoadOptions, Scene};
+use crate::solvers::error_estimate::EstimateKind;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -80,10 +80,11 @@ pub struct SolveArgs {
     /// Solution method: deterministic hierarchical radiosity, or hierarchical Monte Carlo radiosity.
     #[arg(long, value_enum, default_value_t = MethodKind::Deterministic)]
     pub method: MethodKind,
-    /// Refinement oracle; `error` (the default) is the link error oracle with error control to
-    /// --accuracy.
-    #[arg(long, value_enum, default_value_t = OracleKind::Error)]
-    pub oracle: OracleKind,
+    /// Refinement oracle: power (eq. (1) of Feixas et al., the default), smoothness, mi, or error (the
+    /// Bekaert–Willems link error oracle with error control to --accuracy; the default when --accuracy
+    /// is given).
+    #[arg(long, value_enum)]
+    pub oracle: Option<OracleKind>,
     /// Radiance basis on every element (Bekaert–Willems §2).
     #[arg(long, value_enum, default_value_t = BasisKind::Linear)]
     pub basis: BasisKind,
@@ -91,10 +92,11 @@ pub struct SolveArgs {
     /// (2·order + 2, slightly above the minimum 2·order + 1 of §4.3).
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=12), value_name = "D")]
     pub cubature_degree: Option<u8>,
-    /// Error control's target: an absolute radiance error in W/(m² sr) (e.g. 0.05), or a percentage of
-    /// the scene's mean radiance (e.g. 2%). Used with --oracle error.
-    #[arg(long, value_parser = parse_accuracy, default_value = "2%", value_name = "EPS|P%")]
-    pub accuracy: Accuracy,
+    /// Error control (Bekaert–Willems algorithm 6.1) to this largest radiance error per element: an
+    /// absolute radiance in W/(m² sr) (e.g. 0.05), or a percentage of the scene's mean radiance (e.g.
+    /// 10%). Implies --oracle error; with --oracle error alone it is 10%.
+    #[arg(long, value_parser = parse_accuracy, value_name = "EPS|P%")]
+    pub accuracy: Option<Accuracy>,
     /// Factor by which error control lowers a failing element's link error threshold per pass.
     #[arg(long, default_value_t = 1.4, value_name = "F")]
     pub threshold_factor: f64,
@@ -115,7 +117,7 @@ pub struct SolveArgs {
     pub visibility: VisibilityKind,
     /// Refinement threshold ε of the power, smoothness and mi oracles, relative to the scene's total
     /// emission (Σ A·max(E)); smaller is finer.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 3e-5)]
     pub eps: f64,
     /// Smallest splittable element area, relative to the total surface area.
     #[arg(long, default_value_t = 1e-5)]
@@ -165,14 +167,20 @@ impl SolveArgs {
         anyhow::ensure!(self.rays >= 1, "--rays must be at least 1");
         Ok(SimulationSettings {
             method: self.method,
-            oracle: self.oracle,
+            oracle: self.oracle.unwrap_or(if self.accuracy.is_some() {
+                OracleKind::Error
+            } else {
+                OracleKind::Power
+            }),
             solver: self.solver,
             visibility: self.visibility,
             eps: self.eps,
             min_area: self.min_area,
             basis: self.basis,
             cubature_degree: self.cubature_degree.map(usize::from),
-            accuracy: self.accuracy,
+            accuracy: self
+                .accuracy
+                .unwrap_or(Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY)),
             threshold_factor: self.threshold_factor,
             estimate: self.error_estimate,
             max_elements: self.max_elements,
