@@ -258,7 +258,10 @@ pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
 /// The deterministic solver's settings for `hierarchy`: absolute refinement threshold and minimum area
 /// from the relative `eps` and `min_area`, the element budget from `max_elements` and `max_memory`, and
 /// error control (with the link error oracle) at the absolute accuracy.
-pub fn deterministic_settings(settings: &SimulationSettings, hierarchy: &Hierarchy) -> SolveSettings {
+pub fn deterministic_settings(
+    settings: &SimulationSettings,
+    hierarchy: &Hierarchy,
+) -> SolveSettings {
     let bytes_per_element = hierarchy.memory_bytes() / hierarchy.elements.len().max(1)
         + LINKS_PER_ELEMENT_ESTIMATE * link_bytes(settings.basis, settings.cubature_degree());
     let memory_elements = settings.max_memory / bytes_per_element.max(1);

@@ -1,13 +1,13 @@
 //! Argument groups shared by several subcommands.
 
-use crate::geometry::DVec3;
 use crate::bases::BasisKind;
+use crate::geometry::DVec3;
 use crate::pipeline::{
     default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
     VisibilityKind,
 };
-use crate::solvers::error_estimate::EstimateKind;
 use crate::scene::{self, LoadOptions, Scene};
+use crate::solvers::error_estimate::EstimateKind;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -15,7 +15,7 @@ use std::path::PathBuf;
 /// Which scene to read.
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
-    /// Scene file (.mgf or .obj); the built-in Cornell box when omitted.
+    /// Scene file (.mgf, .obj, .gltf or .glb); the built-in Cornell box when omitted.
     pub scene: Option<PathBuf>,
     /// Treat every surface as two-sided, whatever the file says.
     #[arg(long, conflicts_with = "one_sided")]

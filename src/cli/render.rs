@@ -3,8 +3,8 @@
 use super::args::{CameraArgs, SceneArgs, SolveArgs};
 use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
-use crate::output::mesh_values::VertexRadiosity;
 use crate::output::false_colour;
+use crate::output::mesh_values::VertexRadiosity;
 use crate::output::render::{emitter_mask, render_with, Quantity, RenderOptions, Shading};
 use crate::output::tonemap::{write_png, Curve, Exposure, ToneMap};
 use crate::pipeline::simulate;

@@ -263,7 +263,9 @@ impl Hierarchy {
         let domain = surface.shape.domain();
         let first = self.elements.len() as ElementId;
         for (k, shape) in surface.shape.subdivide().into_iter().enumerate() {
-            let radiance = self.basis.push_rgb(domain, k, &self.elements[id as usize].radiance);
+            let radiance = self
+                .basis
+                .push_rgb(domain, k, &self.elements[id as usize].radiance);
             self.elements.push(Element {
                 kind: ElementKind::Surface(Surface {
                     patch: surface.patch,
@@ -336,7 +338,11 @@ impl Hierarchy {
         let mut phi = [0.0; crate::bases::MAX_BASIS_SIZE];
         let phi = &mut phi[..e.radiance.len()];
         self.basis.eval(domain, uv, phi);
-        e.radiance.iter().zip(phi.iter()).map(|(&c, &f)| c * f).sum()
+        e.radiance
+            .iter()
+            .zip(phi.iter())
+            .map(|(&c, &f)| c * f)
+            .sum()
     }
 
     /// Sum of the patch areas: the total surface area A_T (a two-sided polygon counts twice).
@@ -366,7 +372,10 @@ impl Hierarchy {
                     + coefficients
                     + e.children.len() * 4
                     + e.links.capacity() * std::mem::size_of::<Link>()
-                    + e.links.iter().map(|l| l.coupling.heap_bytes()).sum::<usize>()
+                    + e.links
+                        .iter()
+                        .map(|l| l.coupling.heap_bytes())
+                        .sum::<usize>()
             })
             .sum()
     }

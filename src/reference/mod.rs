@@ -481,8 +481,7 @@ impl<'a> PathTracer<'a> {
             let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
                 continue;
             };
-            let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front)
-            else {
+            let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front) else {
                 continue;
             };
             // Emission is added per batch: each batch may see a different surface.

@@ -65,7 +65,10 @@ pub fn couple(
     let x_nodes = nodes_on(r_shape, rule(r_shape.domain(), degree));
     let y_nodes = nodes_on(
         s_shape,
-        rule(s_shape.domain(), crate::bases::source_cubature_degree(degree)),
+        rule(
+            s_shape.domain(),
+            crate::bases::source_cubature_degree(degree),
+        ),
     );
     let phi_x = basis_values(basis, r_shape, &x_nodes);
     let phi_y = basis_values(basis, s_shape, &y_nodes);

@@ -94,7 +94,8 @@ fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
                         .map(|(&l, &d)| l * d as f64)
                         .sum::<Rgb>();
                     if let Some(bounds) = propagated {
-                        spread += bounds[link.source as usize] * link.coupling.node_factors[k] as f64;
+                        spread +=
+                            bounds[link.source as usize] * link.coupling.node_factors[k] as f64;
                     }
                 }
                 for (rho_c, sum_c) in [(rho.r, sum.r), (rho.g, sum.g), (rho.b, sum.b)] {

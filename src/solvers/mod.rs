@@ -209,7 +209,10 @@ pub fn solve(
 /// constant per patch) and ρ_p the patch's largest channel.
 fn initialise_thresholds(hierarchy: &mut Hierarchy, accuracy: f64) {
     for id in 0..hierarchy.elements.len() {
-        let rho = hierarchy.patch_of(id as ElementId).reflectance.max_channel();
+        let rho = hierarchy
+            .patch_of(id as ElementId)
+            .reflectance
+            .max_channel();
         hierarchy.elements[id].threshold = (1.0 - rho).max(0.0) * accuracy;
     }
 }

@@ -283,7 +283,13 @@ fn decide(
     let mut verdict = Verdict::admissible(None);
     let (error, threshold, split) = if oracle.judges_couplings() {
         if c.coupling.is_none() {
-            let mut k = couple(h, context.visibility, c.receiver, c.source, &settings.coupling);
+            let mut k = couple(
+                h,
+                context.visibility,
+                c.receiver,
+                c.source,
+                &settings.coupling,
+            );
             if let Some(v) = c.inherited_visibility {
                 if k.coupling.visibility == 0.0 || k.coupling.visibility == 1.0 {
                     k.coupling.visibility_error =
