@@ -416,11 +416,11 @@ fn camera_through_the_node_graph() {
 /// A GLB: 12-byte header, JSON chunk padded with spaces, BIN chunk padded with zeros.
 fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
     let mut json = serde_json::to_vec(doc).unwrap();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut bin = bin.to_vec();
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();
@@ -476,7 +476,7 @@ fn binary_gltf_with_an_embedded_texture() {
     let mut no_bin = Vec::new();
     let json_bytes = {
         let mut j = serde_json::to_vec(&doc).unwrap();
-        while j.len() % 4 != 0 {
+        while !j.len().is_multiple_of(4) {
             j.push(b' ');
         }
         j

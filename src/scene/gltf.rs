@@ -601,7 +601,7 @@ impl Reader<'_> {
                     .map(|i| [indices[i], indices[i + 1], indices[0]])
                     .collect(),
                 _ => {
-                    if n % 3 != 0 {
+                    if !n.is_multiple_of(3) {
                         self.warn(format!(
                             "{at}: {n} indices is not a multiple of 3: the last {} ignored",
                             n % 3
