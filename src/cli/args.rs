@@ -15,7 +15,7 @@ use std::path::PathBuf;
 /// Which scene to read.
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
-    /// Scene file (.mgf or .obj); the built-in Cornell box when omitted.
+    /// Scene file (.mgf, .obj, .gltf or .glb); the built-in Cornell box when omitted.
     pub scene: Option<PathBuf>,
     /// Treat every surface as two-sided, whatever the file says.
     #[arg(long, conflicts_with = "one_sided")]

@@ -1,5 +1,5 @@
 //! Scene model: planar convex polygons with Lambertian materials, grouped into named objects, and the
-//! loaders that build it (MGF, OBJ/MTL, the built-in Cornell box).
+//! loaders that build it (MGF, OBJ/MTL, glTF 2.0, the built-in Cornell box).
 //!
 //! Units: reflectance is a fraction per channel (< 1); emission is the emitted *radiance*
 //! L_e in W/(m² sr) (radiant exitance is π L_e). Radiosity is solved as exitant radiance throughout, so
@@ -7,6 +7,7 @@
 
 pub mod cornell;
 pub mod generators;
+pub mod gltf;
 pub mod mgf;
 pub mod obj;
 pub mod polygonize;
@@ -235,7 +236,7 @@ impl Scene {
     }
 }
 
-/// Reads a scene, choosing the reader by extension (`.mgf`, `.obj`).
+/// Reads a scene, choosing the reader by extension (`.mgf`, `.obj`, `.gltf`, `.glb`).
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let extension = path
         .extension()
@@ -245,11 +246,12 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let mut scene = match extension.as_str() {
         "mgf" => mgf::load(path, options)?,
         "obj" => obj::load(path, options)?,
+        "gltf" | "glb" => gltf::load(path, options)?,
         other => {
             return Err(SceneError::new(
                 path,
                 0,
-                format!("unknown scene format '.{other}' (expected .mgf or .obj)"),
+                format!("unknown scene format '.{other}' (expected .mgf, .obj, .gltf or .glb)"),
             ))
         }
     };
