@@ -9,7 +9,7 @@ use radiosity::output::camera::Camera;
 use radiosity::output::render::{render, RenderOptions, Shading};
 use radiosity::pipeline::{simulate, SimulationSettings};
 use radiosity::progress::Progress;
-use radiosity::reference::{render_reference, ReferenceSettings};
+use radiosity::reference::{render_reference, PixelFilter, ReferenceSettings};
 use radiosity::scene::cornell::cornell_box;
 
 #[test]
@@ -39,6 +39,7 @@ fn cornell_radiosity_agrees_with_the_path_traced_reference() {
     let settings = ReferenceSettings {
         spp: 4096,
         seed: 7,
+        filter: PixelFilter::Centre,
         ..Default::default()
     };
     let reference = render_reference(

@@ -7,7 +7,9 @@ use radiosity::geometry::DVec3;
 use radiosity::output::camera::Camera;
 use radiosity::pipeline::{build_visibility, VisibilityKind};
 use radiosity::progress::Progress;
-use radiosity::reference::{render_reference, Estimate, PathTracer, ReferenceSettings};
+use radiosity::reference::{
+    render_reference, Estimate, PathTracer, PixelFilter, ReferenceSettings,
+};
 use radiosity::scene::{generators, CameraSpec};
 
 fn quiet() -> Progress {
@@ -46,6 +48,7 @@ fn furnace_pixels_converge_to_e_over_one_minus_rho() {
     let settings = ReferenceSettings {
         spp: 4000,
         seed: 3,
+        filter: PixelFilter::Centre,
         ..Default::default()
     };
     let image = render_reference(&scene, visibility.as_ref(), &camera, &settings, &quiet());
@@ -92,6 +95,7 @@ fn parallel_plates_centre_radiance_is_rho_e_times_the_point_form_factor() {
     let settings = ReferenceSettings {
         spp: 20_000,
         seed: 9,
+        filter: PixelFilter::Centre,
         ..Default::default()
     };
     let image = render_reference(&scene, visibility.as_ref(), &camera, &settings, &quiet());
@@ -125,6 +129,7 @@ fn results_are_identical_for_one_and_two_threads() {
     let settings = ReferenceSettings {
         spp: 16,
         seed: 11,
+        filter: PixelFilter::Centre,
         ..Default::default()
     };
     let run = |threads: usize| {

@@ -88,8 +88,9 @@ pub struct SolveArgs {
     /// Radiance basis on every element (Bekaert–Willems §2).
     #[arg(long, value_enum, default_value_t = BasisKind::Linear)]
     pub basis: BasisKind,
-    /// Polynomial degree the coupling cubature integrates exactly (1-12); default: the basis's
-    /// (2·order + 2, slightly above the minimum 2·order + 1 of §4.3).
+    /// Polynomial degree the receiver's coupling cubature integrates exactly (1-12); default: 2·order + 4
+    /// with --oracle error (order + 3 nodes per direction, so that the error at the nodes does not
+    /// vanish by superconvergence or symmetry), 2·order + 2 otherwise. The source rule is coarser.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=12), value_name = "D")]
     pub cubature_degree: Option<u8>,
     /// Error control (Bekaert–Willems algorithm 6.1) to this largest radiance error per element: an

@@ -190,6 +190,8 @@ impl OraclesExperiment {
         let settings = ReferenceSettings {
             spp: self.reference_spp.max(2),
             seed,
+            // The experiment's renders sample pixel centres.
+            filter: crate::reference::PixelFilter::Centre,
             ..Default::default()
         };
         let reference = render_reference(scene, visibility.as_ref(), camera, &settings, progress);
