@@ -36,9 +36,9 @@ pub struct RenderCommand {
     /// Draw the element mesh on top.
     #[arg(long)]
     pub mesh: bool,
-    /// Samples per pixel, stratified and box-filtered (antialiased edges, comparable with
+    /// Samples per pixel, stratified and box-filtered (antialiased edges; use 16 or more to compare with
     /// `reference`); 1 = pixel centres (comparable with `reference --filter centre`).
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=65_536))]
     pub spp: u32,
     /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
     #[arg(long)]
