@@ -4,7 +4,7 @@
 use super::{derive_seed, Estimate, PathTracer};
 use crate::color::Rgb;
 use crate::geometry::{convex_contains, DVec3, Ray};
-use crate::hierarchy::Hierarchy;
+use crate::hierarchy::{ElementId, Hierarchy};
 use crate::scene::{Diagnostic, Scene};
 use crate::visibility::Visibility;
 use std::path::{Path, PathBuf};
@@ -175,16 +175,19 @@ fn nearest_containing(
     best.map(|(_, index, front, point)| (index, front, point))
 }
 
+/// The leaf element containing a surface point; `None` on the back of a one-sided polygon.
+fn solution_leaf(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Option<ElementId> {
+    hierarchy
+        .patch_for_side(surface.polygon, surface.front)
+        .map(|patch| hierarchy.locate(patch, surface.point))
+}
+
 /// The radiosity solution's radiance at a surface point: the basis expansion of the leaf element
 /// containing it, evaluated there.
 pub fn solution_radiance(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Rgb {
-    match hierarchy.patch_for_side(surface.polygon, surface.front) {
-        Some(patch) => {
-            let leaf = hierarchy.locate(patch, surface.point);
-            hierarchy.radiance_at(leaf, surface.point)
-        }
-        None => Rgb::BLACK,
-    }
+    solution_leaf(hierarchy, surface).map_or(Rgb::BLACK, |leaf| {
+        hierarchy.radiance_at(leaf, surface.point)
+    })
 }
 
 /// One probe's results.
@@ -199,6 +202,8 @@ pub struct ProbeResult {
     pub front: bool,
     /// Radiance of the radiosity solution there.
     pub radiosity: Rgb,
+    /// The a-posteriori error estimate of the leaf element there (Bekaert–Willems §4, W/(m² sr)).
+    pub estimated_error: f64,
     /// Unbiased path-traced radiance with its standard error, when asked for.
     pub reference: Option<Estimate>,
 }
@@ -253,6 +258,8 @@ pub fn probe_points(
                 polygon: surface.polygon,
                 front: surface.front,
                 radiosity: solution_radiance(hierarchy, &surface),
+                estimated_error: solution_leaf(hierarchy, &surface)
+                    .map_or(0.0, |leaf| hierarchy.element(leaf).error),
                 reference,
             })
         })
