@@ -126,3 +126,53 @@ fn probes_compare_the_solution_with_the_reference_on_parallel_plates() {
         "{error}"
     );
 }
+
+#[test]
+fn random_points_lie_on_non_emitting_surfaces_uniformly_by_area() {
+    use radiosity::reference::probe::random_points;
+    let scene = radiosity::scene::cornell::cornell_box();
+    let points = random_points(&scene, 2000, 5);
+    assert_eq!(points.len(), 2000);
+    assert_eq!(points, random_points(&scene, 2000, 5), "seeded");
+    let areas: Vec<f64> = scene.polygons.iter().map(|p| p.shape.area()).collect();
+    let mut counts = vec![0usize; scene.polygons.len()];
+    for p in &points {
+        // On exactly one polygon's plane and inside it, with that polygon's normal.
+        let owner = scene
+            .polygons
+            .iter()
+            .position(|q| {
+                let n = q.shape.normal();
+                (n.dot(p.point - q.shape.vertices()[0])).abs() < 1e-6
+                    && n.dot(p.normal) > 0.999
+                    && radiosity::geometry::convex_contains(
+                        q.shape.parameter_corners(),
+                        q.shape.parameters_of(p.point),
+                        1e-9,
+                    )
+            })
+            .expect("on a polygon");
+        assert!(scene.material_of(&scene.polygons[owner]).emission.is_black());
+        counts[owner] += 1;
+    }
+    // Counts follow the areas: binomial, within 4 standard deviations.
+    let total: f64 = scene
+        .polygons
+        .iter()
+        .zip(&areas)
+        .filter(|(p, _)| scene.material_of(p).emission.is_black())
+        .map(|(_, a)| a)
+        .sum();
+    for (k, &c) in counts.iter().enumerate() {
+        if !scene.material_of(&scene.polygons[k]).emission.is_black() {
+            continue;
+        }
+        let p = areas[k] / total;
+        let sd = (2000.0 * p * (1.0 - p)).sqrt();
+        assert!(
+            (c as f64 - 2000.0 * p).abs() <= 4.0 * sd + 1.0,
+            "polygon {k}: {c} points, expected {}",
+            2000.0 * p
+        );
+    }
+}

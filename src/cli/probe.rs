@@ -4,7 +4,7 @@
 use super::args::{SceneArgs, SolveArgs};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
-use crate::reference::probe::{probe_points, read_points, ProbeReference};
+use crate::reference::probe::{probe_points, random_points, read_points, ProbeReference};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -17,8 +17,12 @@ pub struct ProbeCommand {
     pub solve: SolveArgs,
     /// Points file: one `x y z nx ny nz` per line (whitespace or commas, `#` comments); the normal points
     /// out of the probed side.
-    #[arg(long, value_name = "FILE")]
-    pub points: PathBuf,
+    #[arg(long, value_name = "FILE", required_unless_present = "random")]
+    pub points: Option<PathBuf>,
+    /// Instead of a points file: N points uniform by area over the surfaces that do not emit (each side
+    /// of a two-sided polygon by its area), from --seed.
+    #[arg(long, value_name = "N", conflicts_with = "points", value_parser = super::args::count(1, 1_000_000))]
+    pub random: Option<usize>,
     /// Also estimate the radiance by unbiased path tracing, with its standard error.
     #[arg(long)]
     pub reference: bool,
@@ -36,8 +40,15 @@ impl ProbeCommand {
             !self.reference || self.spp >= 2,
             "--spp must be at least 2 (the standard error needs two samples)"
         );
-        let points = read_points(&self.points)?;
         let (scene, name) = self.scene.load_for_solving(progress)?;
+        let (points, file) = match (&self.points, self.random) {
+            (Some(path), _) => (read_points(path)?, path.clone()),
+            (None, Some(n)) => (
+                random_points(&scene, n, seed),
+                PathBuf::from("random points"),
+            ),
+            (None, None) => anyhow::bail!("give --points FILE or --random N"),
+        };
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
         let reference = self.reference.then_some(ProbeReference {
@@ -50,7 +61,7 @@ impl ProbeCommand {
             &solution.hierarchy,
             &points,
             reference,
-            &self.points,
+            &file,
         )?;
         if self.json {
             outln!("{}", serde_json::to_string_pretty(&results)?)?;
@@ -106,6 +117,30 @@ impl ProbeCommand {
             }
             outln!()?;
         }
+        if let (true, Some(accuracy)) = (self.reference, solution.report.error.accuracy) {
+            let within = results
+                .iter()
+                .filter(|r| r.reference.is_some_and(|e| within_accuracy(r.radiosity, e, accuracy)))
+                .count();
+            outln!(
+                "# {within} of {} points within the accuracy {accuracy:.4} W/m²sr (largest channel, \
+                 allowing two standard errors of the reference); Bekaert–Willems promise at least 95%",
+                results.len()
+            )?;
+        }
         Ok(())
     }
+}
+
+/// Whether the solution is within `accuracy` of the reference in every channel, up to twice the
+/// reference's standard error (its resolution).
+fn within_accuracy(
+    radiosity: crate::color::Rgb,
+    reference: crate::reference::Estimate,
+    accuracy: f64,
+) -> bool {
+    (0..3).all(|c| {
+        let d = (radiosity.to_array()[c] - reference.mean.to_array()[c]).abs();
+        d <= accuracy + 2.0 * reference.stderr.to_array()[c]
+    })
 }

@@ -3,7 +3,7 @@
 
 use super::{derive_seed, Estimate, PathTracer};
 use crate::color::Rgb;
-use crate::geometry::{convex_contains, DVec3, Ray};
+use crate::geometry::{convex_contains, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::scene::{Diagnostic, Scene};
 use crate::visibility::Visibility;
@@ -16,6 +16,54 @@ pub struct ProbePoint {
     pub point: DVec3,
     /// Unit normal pointing out of the probed side.
     pub normal: DVec3,
+}
+
+/// `n` points uniform by area over the sides of the polygons that do not emit (a two-sided polygon's
+/// sides each by its area), with the normal of the side: a seeded sample for checking a solution against
+/// the reference anywhere in a scene. `line` numbers the points from 1.
+pub fn random_points(scene: &Scene, n: usize, seed: u64) -> Vec<ProbePoint> {
+    use rand::{Rng, SeedableRng};
+    let sides: Vec<(f64, usize, bool)> = scene
+        .polygons
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| scene.material_of(p).emission.is_black())
+        .flat_map(|(i, p)| {
+            let area = p.shape.area();
+            let back = p.two_sided.then_some((area, i, false));
+            std::iter::once((area, i, true)).chain(back)
+        })
+        .filter(|(area, _, _)| *area > 0.0 && area.is_finite())
+        .collect();
+    let total: f64 = sides.iter().map(|s| s.0).sum();
+    if sides.is_empty() || total <= 0.0 {
+        return Vec::new();
+    }
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(derive_seed(seed, u64::MAX));
+    (0..n)
+        .map(|k| {
+            let mut target = rng.random::<f64>() * total;
+            let &(_, index, front) = sides
+                .iter()
+                .find(|s| {
+                    target -= s.0;
+                    target <= 0.0
+                })
+                .unwrap_or(&sides[sides.len() - 1]);
+            let shape = &scene.polygons[index].shape;
+            let point = shape.sample_uniform(DVec2::new(rng.random(), rng.random()));
+            let normal = if front {
+                shape.normal()
+            } else {
+                -shape.normal()
+            };
+            ProbePoint {
+                line: k + 1,
+                point,
+                normal,
+            }
+        })
+        .collect()
 }
 
 /// A malformed points file: file, line and reason.
