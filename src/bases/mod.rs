@@ -122,6 +122,26 @@ pub fn child_parameters(domain: Domain, child: usize, uv: DVec2) -> DVec2 {
     origin + sign * 0.5 * uv
 }
 
+/// The child (0..4) whose parameter domain contains the parent parameters `uv`, and the parameters
+/// there: the inverse of [`child_parameters`]. Points on a shared edge go to the first child in the
+/// order below; points slightly outside (rounding) to the nearest child.
+pub fn child_containing(domain: Domain, uv: DVec2) -> (usize, DVec2) {
+    let child = match domain {
+        Domain::Square => match (uv.x >= 0.5, uv.y >= 0.5) {
+            (false, false) => 0,
+            (true, false) => 1,
+            (true, true) => 2,
+            (false, true) => 3,
+        },
+        Domain::Triangle if uv.x >= 0.5 => 1,
+        Domain::Triangle if uv.y >= 0.5 => 2,
+        Domain::Triangle if uv.x + uv.y <= 0.5 => 0,
+        Domain::Triangle => 3,
+    };
+    let (origin, sign) = child_map(domain, child);
+    (child, (uv - origin) / (0.5 * sign))
+}
+
 fn child_map(domain: Domain, child: usize) -> (DVec2, f64) {
     const SQUARE: [(DVec2, f64); 4] = [
         (DVec2::new(0.0, 0.0), 1.0),
@@ -516,6 +536,23 @@ mod tests {
                     .sum::<f64>()
                     / domain.area();
                 assert!((c[0] - avg).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn child_containing_inverts_child_parameters() {
+        for domain in [Domain::Square, Domain::Triangle] {
+            for child in 0..4 {
+                for uv in [DVec2::new(0.2, 0.3), DVec2::new(0.6, 0.1), DVec2::new(0.1, 0.7)] {
+                    if domain == Domain::Triangle && uv.x + uv.y > 1.0 {
+                        continue;
+                    }
+                    let parent = child_parameters(domain, child, uv);
+                    let (found, back) = child_containing(domain, parent);
+                    assert_eq!(found, child, "{domain:?} {uv}");
+                    assert!((back - uv).length() < 1e-14);
+                }
             }
         }
     }

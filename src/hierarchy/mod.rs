@@ -314,16 +314,18 @@ impl Hierarchy {
         self.polygon_patches[polygon][usize::from(!front)]
     }
 
-    /// The leaf element of `patch` containing the world point `p` (which lies on the patch).
+    /// The leaf element of `patch` containing the world point `p` (which lies on the patch): its
+    /// parameters on the root, then one child per level by the two-scale map of the parameters
+    /// ([`crate::bases::child_containing`]), with no geometry below the root.
     pub fn locate(&self, patch: u32, p: DVec3) -> ElementId {
         let mut id = self.patches[patch as usize].root;
-        let normal = self.patches[patch as usize].normal;
-        while let Some(&child) = self.elements[id as usize].children.iter().max_by(|a, b| {
-            let da = inside_margin(self.elements[**a as usize].shape(), normal, p);
-            let db = inside_margin(self.elements[**b as usize].shape(), normal, p);
-            da.total_cmp(&db)
-        }) {
-            id = child;
+        let shape = self.elements[id as usize].shape();
+        let domain = shape.domain();
+        let mut uv = domain.clamp(shape.parameters_of(p));
+        while let [_, ..] = self.elements[id as usize].children[..] {
+            let (child, child_uv) = crate::bases::child_containing(domain, uv);
+            id = self.elements[id as usize].children[child];
+            uv = child_uv;
         }
         id
     }
@@ -383,17 +385,4 @@ impl Hierarchy {
     pub fn leaf_count(&self) -> usize {
         self.elements.iter().filter(|e| e.is_leaf()).count()
     }
-}
-
-/// Signed distance of `p` inside the convex shape's boundary, measured in its plane (negative outside):
-/// the child with the largest margin contains the point, robustly even on shared edges.
-fn inside_margin(shape: &Shape, normal: DVec3, p: DVec3) -> f64 {
-    let v = shape.vertices();
-    (0..v.len())
-        .map(|k| {
-            let edge = v[(k + 1) % v.len()] - v[k];
-            let inward = normal.cross(edge).normalize_or_zero();
-            inward.dot(p - v[k])
-        })
-        .fold(f64::INFINITY, f64::min)
 }
