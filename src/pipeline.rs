@@ -351,6 +351,13 @@ pub fn simulate(
         &solve_settings,
         progress,
     );
+    if report.refused_by_budget > 0 && !progress.quiet {
+        eprintln!(
+            "warning: the element budget ({} elements, from --max-elements and --max-memory) stopped \
+             refinement: {} splits refused, the solution is coarser than the settings ask",
+            solve_settings.refine.max_elements, report.refused_by_budget
+        );
+    }
     Ok(Solution {
         hierarchy,
         visibility,

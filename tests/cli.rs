@@ -337,3 +337,63 @@ fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
         / (3.0 * image.pixels().len() as f64);
     assert!(mean > 30.0, "mean pixel value {mean}");
 }
+
+#[test]
+fn error_control_reports_its_accuracy_and_draws_its_estimate() {
+    let dir = temp_dir("accuracy");
+    let (png, stats, errors) = (dir.join("c.png"), dir.join("c.json"), dir.join("e.png"));
+    let out = radiosity(&[
+        "render",
+        "--accuracy",
+        "40%",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "-o",
+        png.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = String::from_utf8_lossy(&out.stderr);
+    assert!(summary.contains("accuracy"), "{summary}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["settings"]["oracle"], "error");
+    assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
+    assert!(json["residuals"].as_array().is_some_and(|r| !r.is_empty()));
+    let out = radiosity(&[
+        "render",
+        "-q",
+        "--basis",
+        "quadratic",
+        "--show",
+        "error-estimate",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "-o",
+        errors.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(errors.exists());
+    let out = radiosity(&[
+        "render",
+        "-q",
+        "--accuracy=-3%",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("accuracy"));
+}

@@ -334,3 +334,36 @@ fn the_white_furnace_is_solved_to_the_accuracy_with_every_solver() {
         );
     }
 }
+
+/// Eq. (11) adds the propagated error `Σ_j ε̄_j ∫ K` to the realistic estimate's sources, so it bounds the
+/// realistic estimate from above on every element, strictly where light is reflected onto it, and it
+/// stays finite (the Jacobi iteration converges since Σ_j ∫ K = ρ < 1).
+#[test]
+fn the_conservative_estimate_bounds_the_realistic_one() {
+    use radiosity::solvers::error_estimate::{estimate_errors, EstimateKind};
+    let scene = generators::lit_box(DVec3::new(2.0, 1.0, 1.5), Rgb::new(0.5, 0.4, 0.3), 10.0);
+    let settings = SimulationSettings {
+        basis: BasisKind::Linear,
+        eps: 1e-3,
+        ..Default::default()
+    };
+    let mut solution = simulate(&scene, &settings, &quiet()).expect("solve");
+    let h = &mut solution.hierarchy;
+    estimate_errors(h, EstimateKind::Realistic);
+    let realistic: Vec<f64> = h.elements.iter().map(|e| e.error).collect();
+    estimate_errors(h, EstimateKind::Conservative);
+    let mut larger = 0;
+    for (e, &r) in h.elements.iter().zip(&realistic) {
+        assert!(e.error.is_finite());
+        assert!(
+            e.error >= r - 1e-12,
+            "conservative {} < realistic {r}",
+            e.error
+        );
+        larger += usize::from(e.error > r * (1.0 + 1e-9));
+    }
+    assert!(
+        larger * 2 > h.elements.len(),
+        "propagation adds error almost everywhere"
+    );
+}

@@ -152,7 +152,10 @@ fn random_points_lie_on_non_emitting_surfaces_uniformly_by_area() {
                     )
             })
             .expect("on a polygon");
-        assert!(scene.material_of(&scene.polygons[owner]).emission.is_black());
+        assert!(scene
+            .material_of(&scene.polygons[owner])
+            .emission
+            .is_black());
         counts[owner] += 1;
     }
     // Counts follow the areas: binomial, within 4 standard deviations.

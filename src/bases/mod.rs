@@ -544,7 +544,11 @@ mod tests {
     fn child_containing_inverts_child_parameters() {
         for domain in [Domain::Square, Domain::Triangle] {
             for child in 0..4 {
-                for uv in [DVec2::new(0.2, 0.3), DVec2::new(0.6, 0.1), DVec2::new(0.1, 0.7)] {
+                for uv in [
+                    DVec2::new(0.2, 0.3),
+                    DVec2::new(0.6, 0.1),
+                    DVec2::new(0.1, 0.7),
+                ] {
                     if domain == Domain::Triangle && uv.x + uv.y > 1.0 {
                         continue;
                     }

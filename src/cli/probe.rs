@@ -120,7 +120,10 @@ impl ProbeCommand {
         if let (true, Some(accuracy)) = (self.reference, solution.report.error.accuracy) {
             let within = results
                 .iter()
-                .filter(|r| r.reference.is_some_and(|e| within_accuracy(r.radiosity, e, accuracy)))
+                .filter(|r| {
+                    r.reference
+                        .is_some_and(|e| within_accuracy(r.radiosity, e, accuracy))
+                })
                 .count();
             outln!(
                 "# {within} of {} points within the accuracy {accuracy:.4} W/m²sr (largest channel, \
