@@ -79,17 +79,6 @@ pub struct LinkCoupling {
 }
 
 impl LinkCoupling {
-    /// A constant-basis link with form factor `f` and no error information.
-    pub fn constant(form_factor: f64) -> Self {
-        LinkCoupling {
-            block: Box::new([form_factor]),
-            errors: Box::new([]),
-            node_factors: Box::new([]),
-            visibility: 1.0,
-            visibility_error: 0.0,
-        }
-    }
-
     /// Heap bytes held by this coupling (for memory budgets and reports).
     pub fn heap_bytes(&self) -> usize {
         self.block.len() * 8 + (self.errors.len() + self.node_factors.len()) * 4
