@@ -112,7 +112,12 @@ impl RenderCommand {
         match self.show {
             Quantity::Radiance => write_png(&self.output, &image, &tone)?,
             Quantity::ErrorEstimate => {
-                let errors: Vec<Option<f64>> = image.pixels.iter().map(|c| Some(c.r)).collect();
+                // Pixels that see no solution (NaN) have no value and show grey.
+                let errors: Vec<Option<f64>> = image
+                    .pixels
+                    .iter()
+                    .map(|c| c.r.is_finite().then_some(c.r))
+                    .collect();
                 false_colour::write_png(&self.output, &errors, image.width, image.height)?;
             }
         }

@@ -142,11 +142,11 @@ impl Tracer<'_> {
     fn radiance(&self, x: f64, y: f64) -> Rgb {
         let ray = self.camera.ray(x, y);
         let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
-            return Rgb::BLACK;
+            return self.nothing();
         };
         // The back of a one-sided polygon is an opaque black surface.
         let Some(patch) = self.hierarchy.patch_for_side(hit.polygon, hit.front) else {
-            return Rgb::BLACK;
+            return self.nothing();
         };
         let patch_ref = &self.hierarchy.patches[patch as usize];
         // Project onto the patch plane so that parameter inversion sees an in-plane point.
@@ -168,6 +168,15 @@ impl Tracer<'_> {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
             (Shading::Basis, _) => self.hierarchy.radiance_at(leaf, p),
             _ => element.radiance[0],
+        }
+    }
+
+    /// What a pixel shows where no surface of the solution is seen (the background, the black back of
+    /// a one-sided polygon): black radiance, or no error estimate at all (NaN, shown grey).
+    fn nothing(&self) -> Rgb {
+        match self.options.quantity {
+            Quantity::Radiance => Rgb::BLACK,
+            Quantity::ErrorEstimate => Rgb::new(f64::NAN, f64::NAN, f64::NAN),
         }
     }
 }
