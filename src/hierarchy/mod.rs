@@ -79,6 +79,17 @@ pub struct LinkCoupling {
 }
 
 impl LinkCoupling {
+    /// `δ_j(x_k) / ρ_i = Σ_β L_{j,β} δ_{j,β}(x_k)` at receiver node `k`, for the source's radiance
+    /// coefficients `source` (Bekaert–Willems §4.2).
+    pub fn node_error(&self, k: usize, source: &[Rgb]) -> Rgb {
+        let size = source.len();
+        source
+            .iter()
+            .zip(&self.errors[k * size..(k + 1) * size])
+            .map(|(&l, &d)| l * f64::from(d))
+            .sum()
+    }
+
     /// Heap bytes held by this coupling (for memory budgets and reports).
     pub fn heap_bytes(&self) -> usize {
         self.block.len() * 8 + (self.errors.len() + self.node_factors.len()) * 4

@@ -70,15 +70,9 @@ impl RefinementOracle for LinkErrorOracle {
         let source_element = h.element(source);
         let radiance = &source_element.radiance;
         let propagated_error = source_element.error;
-        let size = radiance.len();
         let (mut own, mut propagated, mut total) = (0.0f64, 0.0f64, 0.0f64);
         for (k, &factor) in coupling.node_factors.iter().enumerate() {
-            let deltas = &coupling.errors[k * size..(k + 1) * size];
-            let delta = radiance
-                .iter()
-                .zip(deltas)
-                .map(|(&l, &d)| l * d as f64)
-                .sum::<crate::color::Rgb>();
+            let delta = coupling.node_error(k, radiance);
             for (rho_c, delta_c) in [(rho.r, delta.r), (rho.g, delta.g), (rho.b, delta.b)] {
                 let d = rho_c * delta_c.abs();
                 let p = rho_c * propagated_error * factor as f64;

@@ -58,7 +58,6 @@ pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
 /// The error of each element's own links, per element: `max_k |Σ_j δ_j(x_k) (+ Σ_j ε̄_j K_{j,1}(x_k))|`,
 /// largest channel; `propagated` holds the sources' current conservative estimates.
 fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
-    let size = h.basis_size();
     (0..h.elements.len())
         .into_par_iter()
         .map(|id| {
@@ -86,13 +85,9 @@ fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
                 let mut sum = Rgb::BLACK;
                 let mut spread = 0.0;
                 for link in &e.links {
-                    let deltas = &link.coupling.errors[k * size..(k + 1) * size];
-                    let source = &h.element(link.source).radiance;
-                    sum += source
-                        .iter()
-                        .zip(deltas)
-                        .map(|(&l, &d)| l * d as f64)
-                        .sum::<Rgb>();
+                    sum += link
+                        .coupling
+                        .node_error(k, &h.element(link.source).radiance);
                     if let Some(bounds) = propagated {
                         spread +=
                             bounds[link.source as usize] * link.coupling.node_factors[k] as f64;
