@@ -352,11 +352,11 @@ pub fn simulate(
         progress,
     );
     if report.refused_by_budget > 0 && !progress.quiet {
-        eprintln!(
+        crate::progress::stderr_line(format_args!(
             "warning: the element budget ({} elements, from --max-elements and --max-memory) stopped \
              refinement: {} splits refused, the solution is coarser than the settings ask",
             solve_settings.refine.max_elements, report.refused_by_budget
-        );
+        ));
     }
     Ok(Solution {
         hierarchy,

@@ -3,6 +3,13 @@
 
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// Writes one line to stderr (warnings, summaries, the final error), ignoring write errors: `eprintln!`
+/// panics when stderr is closed (`2>&-`) or a closed pipe, and a message must never crash the run.
+pub fn stderr_line(line: std::fmt::Arguments) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
+}
+
 /// Creates progress bars, or hidden ones when quiet.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Progress {

@@ -26,6 +26,10 @@ pub struct SceneArgs {
     /// Segments per full circle when tessellating MGF spheres, cylinders, cones, rings and tori.
     #[arg(long, default_value_t = 16, value_name = "N", value_parser = count(0, 1024))]
     pub tessellation: usize,
+    /// Keep exact duplicate polygons (same vertices and material, e.g. furniture included twice)
+    /// instead of one of each.
+    #[arg(long)]
+    pub keep_duplicates: bool,
 }
 
 impl SceneArgs {
@@ -38,7 +42,7 @@ impl SceneArgs {
         let (scene, name) = self.load()?;
         if !progress.quiet {
             for warning in &scene.warnings {
-                eprintln!("warning: {warning}");
+                crate::progress::stderr_line(format_args!("warning: {warning}"));
             }
         }
         anyhow::ensure!(
@@ -46,7 +50,9 @@ impl SceneArgs {
             "{name}: the scene has no polygons"
         );
         if scene.emitter_count() == 0 && !progress.quiet {
-            eprintln!("warning: {name}: no surface emits light: the solution is black");
+            crate::progress::stderr_line(format_args!(
+                "warning: {name}: no surface emits light: the solution is black"
+            ));
         }
         Ok((scene, name))
     }
@@ -57,6 +63,7 @@ impl SceneArgs {
             force_two_sided: self.two_sided,
             force_one_sided: self.one_sided,
             tessellation: self.tessellation.max(3),
+            keep_duplicates: self.keep_duplicates,
         };
         match &self.scene {
             Some(path) => {
@@ -269,8 +276,7 @@ impl CameraArgs {
 
 /// Widest or tallest image, in pixels.
 pub const MAX_IMAGE_SIDE: u64 = 32_768;
-/// Most pixels in one image (8192 x 4096): a larger image needs gigabytes.
-pub const MAX_PIXELS: usize = 1 << 25;
+pub use crate::output::image::MAX_PIXELS;
 /// Most samples (pixels times samples per pixel) one image may take.
 pub const MAX_SAMPLES: u128 = 1 << 32;
 
@@ -364,12 +370,13 @@ pub fn parse_bytes(text: &str) -> Result<usize> {
     Ok((value * scale as f64) as usize)
 }
 
-/// Checks an output path before any work: not a scene file (`.mgf`, `.obj`, `.mtl`, or the same file as
-/// the input `scene`), not a directory, and in a directory that exists.
+/// Checks an output path before it is written: not a scene file (`.mgf`, `.obj`, `.mtl`), not one of
+/// the files read (`inputs`: the scene and every file it includes or names, images, points, stats),
+/// not a directory, and in a directory that exists.
 pub fn check_output(
     option: &str,
     path: &std::path::Path,
-    scene: Option<&std::path::Path>,
+    inputs: &[std::path::PathBuf],
 ) -> Result<()> {
     let shown = path.display();
     let ext = path
@@ -381,10 +388,10 @@ pub fn check_output(
         !matches!(ext.as_str(), "mgf" | "obj" | "mtl"),
         "{option} {shown}: refusing to write an output over a scene file (.{ext})"
     );
-    if let (Some(scene), Ok(output)) = (scene, path.canonicalize()) {
-        anyhow::ensure!(
-            output != scene,
-            "{option} {shown}: is the input scene; refusing to overwrite it"
+    if let Some(input) = inputs.iter().find(|input| same_file(path, input)) {
+        anyhow::bail!(
+            "{option} {shown}: is an input ({}); refusing to overwrite it",
+            input.display()
         );
     }
     anyhow::ensure!(!path.is_dir(), "{option} {shown}: is a directory");
@@ -396,4 +403,34 @@ pub fn check_output(
         );
     }
     Ok(())
+}
+
+/// Checks every output (option, path) with [`check_output`] and refuses one file written twice.
+pub fn check_outputs(
+    outputs: &[(&str, &std::path::Path)],
+    inputs: &[std::path::PathBuf],
+) -> Result<()> {
+    for (k, &(option, path)) in outputs.iter().enumerate() {
+        check_output(option, path, inputs)?;
+        anyhow::ensure!(
+            !outputs[..k]
+                .iter()
+                .any(|&(_, p)| p == path || same_file(p, path)),
+            "{option} {}: the same file is written twice",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// Whether two paths name one existing file (the same device and inode: links and `..` included).
+pub fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(a), Ok(b)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return a.dev() == b.dev() && a.ino() == b.ino();
+        }
+    }
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }

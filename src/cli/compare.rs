@@ -79,6 +79,7 @@ impl CompareCommand {
             self.mask_out.is_none() || !self.fbem.is_empty(),
             "--mask-out needs --fbem SIZE"
         );
+        self.check_outputs()?;
         let a = Image::read_exr(&self.a)?;
         let b = Image::read_exr(&self.b)?;
         image_metrics::ensure_same_size(&a, &b)
@@ -107,12 +108,7 @@ impl CompareCommand {
             fbem_mask = Some(kind);
             for &size in &self.fbem {
                 results.push(fbem::fbem(&a, &b, &features, size, self.fbem_p, ignore)?);
-                if let Some(out) = &self.mask_out {
-                    let path = if self.fbem.len() > 1 {
-                        with_size_suffix(out, size)
-                    } else {
-                        out.clone()
-                    };
+                if let Some(path) = self.mask_out_path(size) {
                     fbem::feature_mask(&features, size).write_png(&path, ignore)?;
                 }
             }
@@ -183,6 +179,35 @@ impl CompareCommand {
 }
 
 /// `mask.png` → `mask-s12.png`.
+impl CompareCommand {
+    /// Refuses a --diff or --mask-out file that is one of the images read (or that is written twice).
+    fn check_outputs(&self) -> Result<()> {
+        let mut inputs = vec![self.a.clone(), self.b.clone()];
+        inputs.extend(self.mask.iter().chain(&self.unoccluded).cloned());
+        let masks: Vec<PathBuf> = self
+            .fbem
+            .iter()
+            .filter_map(|&size| self.mask_out_path(size))
+            .collect();
+        let mut outputs: Vec<(&str, &Path)> =
+            self.diff.iter().map(|p| ("--diff", p.as_path())).collect();
+        outputs.extend(masks.iter().map(|p| ("--mask-out", p.as_path())));
+        super::args::check_outputs(&outputs, &inputs)
+    }
+}
+
+impl CompareCommand {
+    /// The --mask-out file of feature size `size` (suffixed with the size when there are several).
+    fn mask_out_path(&self, size: usize) -> Option<PathBuf> {
+        let out = self.mask_out.as_ref()?;
+        Some(if self.fbem.len() > 1 {
+            with_size_suffix(out, size)
+        } else {
+            out.clone()
+        })
+    }
+}
+
 fn with_size_suffix(path: &Path, size: usize) -> PathBuf {
     let stem = path.file_stem().unwrap_or_default().to_string_lossy();
     let name = match path.extension() {

@@ -85,6 +85,7 @@ impl OraclesExperiment {
             "--samples must be at least 2"
         );
         let (scene, name) = self.scene.load_for_solving(progress)?;
+        self.check_outputs(&scene.sources)?;
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("creating {}", self.out.display()))?;
         let camera = self.camera.camera(&scene, 256)?;
@@ -126,13 +127,13 @@ impl OraclesExperiment {
                         progress,
                     )?;
                     if !progress.quiet {
-                        eprintln!(
+                        crate::progress::stderr_line(format_args!(
                             "{name}: {} ({samples} samples) target {target}: {} leaves at eps {:.3e}, rel. RMSE {:.2}%",
                             oracle_name(oracle),
                             run.leaf_elements,
                             run.eps,
                             run.relative_rmse * 100.0
-                        );
+                        ));
                     }
                     runs.push(run);
                     meshes.push(images.mesh);
@@ -140,7 +141,7 @@ impl OraclesExperiment {
                 }
                 let columns = meshes.len();
                 let all: Vec<&Image> = meshes.iter().chain(smooth.iter()).collect();
-                let path = self.out.join(format!("oracles-{target}-s{samples}.png"));
+                let path = self.tiles_path(target, samples);
                 write_png(&path, &tile(&all, columns), &tone)?;
             }
         }
@@ -150,12 +151,37 @@ impl OraclesExperiment {
              smooth shading.\n\n",
             self.oracles.iter().map(|&o| oracle_name(o)).collect::<Vec<_>>().join(", ")
         );
-        std::fs::write(self.out.join("table.md"), header + &table)?;
-        std::fs::write(
-            self.out.join("table.json"),
-            serde_json::to_string_pretty(&runs)? + "\n",
-        )?;
+        let json = serde_json::to_string_pretty(&runs)? + "\n";
+        for (name, text) in [("table.md", header + &table), ("table.json", json)] {
+            let path = self.out.join(name);
+            crate::output::write_atomically(&path, |to| {
+                std::fs::write(to, text).with_context(|| format!("writing {}", path.display()))
+            })?;
+        }
         out!("{table}")?;
+        Ok(())
+    }
+
+    fn tiles_path(&self, target: usize, samples: usize) -> PathBuf {
+        self.out.join(format!("oracles-{target}-s{samples}.png"))
+    }
+
+    /// Refuses an output folder whose tables or images would overwrite a file the scene is read from.
+    fn check_outputs(&self, inputs: &[PathBuf]) -> Result<()> {
+        let mut outputs = vec![self.out.join("table.md"), self.out.join("table.json")];
+        for &samples in &self.samples {
+            outputs.extend(self.targets.iter().map(|&t| self.tiles_path(t, samples)));
+        }
+        for path in &outputs {
+            if let Some(input) = inputs.iter().find(|i| super::args::same_file(path, i)) {
+                anyhow::bail!(
+                    "--out {}: {} is an input ({}); refusing to overwrite it",
+                    self.out.display(),
+                    path.display(),
+                    input.display()
+                );
+            }
+        }
         Ok(())
     }
 

@@ -17,7 +17,7 @@ impl InfoCommand {
     pub fn run(&self) -> Result<()> {
         let (scene, name) = self.scene.load()?;
         for warning in &scene.warnings {
-            eprintln!("warning: {warning}");
+            crate::progress::stderr_line(format_args!("warning: {warning}"));
         }
         outln!("scene: {name}")?;
         outln!("{}", crate::scene::summary(&scene))?;

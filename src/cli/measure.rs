@@ -46,6 +46,9 @@ impl MeasureCommand {
     pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
         anyhow::ensure!(self.lines >= 2, "--lines must be at least 2");
         let (scene, name) = self.scene.load_for_solving(progress)?;
+        if let Some(path) = &self.stats {
+            super::args::check_output("--stats", path, &scene.sources)?;
+        }
         let settings = self.solve.settings(seed)?;
         let eps_levels = match &self.sweep {
             None => vec![settings.eps],
@@ -79,11 +82,11 @@ impl MeasureCommand {
             let measures = measure(&scene, &solution.hierarchy, lines)
                 .with_context(|| format!("{name}: measuring the solution at eps {eps}"))?;
             if !self.json && !progress.quiet && levels.is_empty() {
-                eprintln!(
+                crate::progress::stderr_line(format_args!(
                     "{name}: {} global lines, {} chords",
                     lines.lines,
                     lines.chords.len()
-                );
+                ));
             }
             if !self.json {
                 if levels.is_empty() {
@@ -131,8 +134,10 @@ impl MeasureCommand {
         }
         if let (Some(path), Some(stats)) = (&self.stats, &last_stats) {
             let json = serde_json::to_string_pretty(stats)?;
-            std::fs::write(path, json + "\n")
-                .with_context(|| format!("writing {}", path.display()))?;
+            crate::output::write_atomically(path, |to| {
+                std::fs::write(to, json + "\n")
+                    .with_context(|| format!("writing {}", path.display()))
+            })?;
         }
         Ok(())
     }

@@ -87,7 +87,7 @@ pub fn main() -> i32 {
         // A reader that went away (`radiosity info ... | head`) is not a failure: stop quietly.
         Err(error) if is_broken_pipe(&error) => 0,
         Err(error) => {
-            eprintln!("error: {error:#}");
+            crate::progress::stderr_line(format_args!("error: {error:#}"));
             1
         }
     }

@@ -43,6 +43,7 @@ impl PlotCommand {
             log_y: self.log_y,
             title: self.title.clone(),
         };
+        super::args::check_output("--output", &self.output, &self.files)?;
         let series = plot(&self.files, &spec, &self.output)?;
         let points: usize = series.iter().map(|s| s.points.len()).sum();
         outln!(

@@ -47,11 +47,9 @@ impl ReferenceCommand {
             "--spp must be at least 2 (the standard error needs two samples)"
         );
         let (scene, name) = self.scene.load_for_solving(progress)?;
-        if !progress.quiet {
-            for warning in &scene.warnings {
-                eprintln!("warning: {warning}");
-            }
-        }
+        let mut outputs = vec![("--hdr", self.hdr.as_path())];
+        outputs.extend(self.stderr.iter().map(|p| ("--stderr", p.as_path())));
+        super::args::check_outputs(&outputs, &scene.sources)?;
         anyhow::ensure!(scene.emitter_count() > 0, "{name} has no emitting surface");
         let camera = self.camera.camera(&scene, 512)?;
         super::args::check_samples(camera.width, camera.height, self.spp)?;

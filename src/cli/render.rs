@@ -76,9 +76,10 @@ impl RenderCommand {
                 "--exposure must be a positive number"
             );
         }
-        self.check_outputs()?;
+        self.check_outputs(self.scene.scene.as_slice())?;
         let start = Instant::now();
         let (scene, name) = self.scene.load_for_solving(progress)?;
+        self.check_outputs(&scene.sources)?;
         let load_seconds = start.elapsed().as_secs_f64();
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene, 512)?;
@@ -146,7 +147,7 @@ impl RenderCommand {
         }
         if !progress.quiet {
             let s = &stats.seconds;
-            eprintln!(
+            crate::progress::stderr_line(format_args!(
                 "{name}: {}; {} elements ({} leaves), {} links, {} rays, {} passes, {} sweeps; \
                  load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
                 error_summary(&solution.report.error),
@@ -162,7 +163,7 @@ impl RenderCommand {
                 s.solve,
                 s.render,
                 self.output.display()
-            );
+            ));
         }
         Ok(())
     }
@@ -193,9 +194,9 @@ pub fn error_summary(error: &crate::solvers::ErrorReport) -> String {
 }
 
 impl RenderCommand {
-    /// Refuses, before any work, outputs that would overwrite the scene (or any scene file) or each
-    /// other, or that go into a directory that does not exist.
-    fn check_outputs(&self) -> Result<()> {
+    /// Refuses outputs that would overwrite the scene, a file it reads, any scene file or each other,
+    /// or that go into a directory that does not exist.
+    fn check_outputs(&self, inputs: &[PathBuf]) -> Result<()> {
         let mut outputs: Vec<(&str, &Path)> = vec![("--output", self.output.as_path())];
         outputs.extend(self.hdr.iter().map(|p| ("--hdr", p.as_path())));
         outputs.extend(self.export.iter().map(|p| ("--export", p.as_path())));
@@ -205,28 +206,8 @@ impl RenderCommand {
                 .iter()
                 .map(|p| ("--emitter-mask", p.as_path())),
         );
-        let input = self
-            .scene
-            .scene
-            .as_deref()
-            .and_then(|p| p.canonicalize().ok());
-        let mut seen = Vec::new();
-        for (option, path) in outputs {
-            super::args::check_output(option, path, input.as_deref())?;
-            let same = |p: &PathBuf| p == path || same_file(p, path);
-            anyhow::ensure!(
-                !seen.iter().any(same),
-                "{option} {}: the same file is written twice",
-                path.display()
-            );
-            seen.push(path.to_path_buf());
-        }
-        Ok(())
+        super::args::check_outputs(&outputs, inputs)
     }
-}
-
-fn same_file(a: &Path, b: &Path) -> bool {
-    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }
 
 fn extension(path: &Path) -> String {

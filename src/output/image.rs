@@ -49,23 +49,50 @@ impl Image {
         })
     }
 
-    /// Reads the first RGB(A) layer of an OpenEXR file.
+    /// Reads the first RGB(A) layer of an OpenEXR file of at most
+    /// [`MAX_FILE_BYTES`](crate::scene::MAX_FILE_BYTES).
     pub fn read_exr(path: &Path) -> Result<Image> {
-        let image = exr::prelude::read_first_rgba_layer_from_file(
-            path,
-            |resolution, _| Image::new(resolution.width(), resolution.height()),
-            |image: &mut Image, position, (r, g, b, _a): (f32, f32, f32, f32)| {
-                image.set(
-                    position.x(),
-                    position.y(),
-                    Rgb::new(r as f64, g as f64, b as f64),
-                )
-            },
-        )
-        .with_context(|| format!("reading {}", path.display()))?;
+        let bytes = crate::scene::read_bounded(path)
+            .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+        Image::from_exr_bytes(&bytes).with_context(|| format!("reading {}", path.display()))
+    }
+
+    /// Decodes the first RGB(A) layer of OpenEXR bytes. Layers of more than [`MAX_PIXELS`] pixels
+    /// are refused before any pixel memory is allocated.
+    pub fn from_exr_bytes(bytes: &[u8]) -> Result<Image> {
+        use exr::prelude::*;
+        let meta = exr::meta::MetaData::read_from_buffered(bytes, false)?;
+        for header in &meta.headers {
+            let size = header.layer_size;
+            anyhow::ensure!(
+                size.width() as u128 * size.height() as u128 <= MAX_PIXELS as u128,
+                "a layer of {}x{} pixels is larger than the {MAX_PIXELS} pixels read",
+                size.width(),
+                size.height()
+            );
+        }
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(
+                |resolution, _| Self::new(resolution.width(), resolution.height()),
+                |image: &mut Self, position, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    image.set(
+                        position.x(),
+                        position.y(),
+                        Rgb::new(r as f64, g as f64, b as f64),
+                    )
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(std::io::Cursor::new(bytes))?;
         Ok(image.layer_data.channel_data.pixels)
     }
 }
+
+/// Most pixels in one image (8192 x 4096): a larger image needs gigabytes.
+pub const MAX_PIXELS: usize = 1 << 25;
 
 #[cfg(test)]
 mod tests {

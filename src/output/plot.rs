@@ -68,51 +68,68 @@ pub fn json_label(value: &Value, path: &str) -> Option<String> {
 /// Reads the runs of every file and groups their points into series (in order of first appearance).
 pub fn collect_series(files: &[PathBuf], spec: &PlotSpec) -> Result<Vec<Series>> {
     ensure!(!files.is_empty(), "no stats files to plot");
+    let mut labelled = Vec::new();
+    for file in files {
+        let bytes = crate::scene::read_bounded(file)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+        labelled.extend(run_points(&bytes, file, spec)?);
+    }
+    Ok(group_series(labelled))
+}
+
+/// Groups labelled points into series, in order of first appearance, each sorted by x.
+pub fn group_series(labelled: Vec<(String, (f64, f64))>) -> Vec<Series> {
     let mut order: Vec<String> = Vec::new();
     let mut points: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    for file in files {
-        let text = std::fs::read_to_string(file)
-            .with_context(|| format!("{}: cannot read", file.display()))?;
-        let json: Value = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not valid JSON", file.display()))?;
-        let runs: Vec<&Value> = match &json {
-            Value::Array(items) => items.iter().collect(),
-            other => vec![other],
-        };
-        for (i, run) in runs.into_iter().enumerate() {
-            let at = if matches!(json, Value::Array(_)) {
-                format!("{} (run {i})", file.display())
-            } else {
-                file.display().to_string()
-            };
-            let x = json_number(run, &spec.x).map_err(|e| anyhow::anyhow!("{at}: x: {e}"))?;
-            let y = json_number(run, &spec.y).map_err(|e| anyhow::anyhow!("{at}: y: {e}"))?;
-            for (axis, v, log) in [("x", x, spec.log_x), ("y", y, spec.log_y)] {
-                ensure!(v.is_finite(), "{at}: {axis} value {v} is not finite");
-                ensure!(
-                    !log || v > 0.0,
-                    "{at}: {axis} value {v} cannot be shown on a log scale"
-                );
-            }
-            let label = match &spec.label {
-                Some(path) => json_label(run, path)
-                    .ok_or_else(|| anyhow::anyhow!("{at}: label: no field '{path}'"))?,
-                None => file_label(file),
-            };
-            if !points.contains_key(&label) {
-                order.push(label.clone());
-            }
-            points.entry(label).or_default().push((x, y));
+    for (label, point) in labelled {
+        if !points.contains_key(&label) {
+            order.push(label.clone());
         }
+        points.entry(label).or_default().push(point);
     }
-    Ok(order
+    order
         .into_iter()
         .map(|label| {
             let mut p = points.remove(&label).unwrap_or_default();
             p.sort_by(|a, b| a.0.total_cmp(&b.0));
             Series { label, points: p }
         })
-        .collect())
+        .collect()
+}
+
+/// The (label, (x, y)) point of every run in one stats file's bytes; `file` names it in messages and
+/// labels its runs when `spec.label` is `None`.
+pub fn run_points(bytes: &[u8], file: &Path, spec: &PlotSpec) -> Result<Vec<(String, (f64, f64))>> {
+    let json: Value = serde_json::from_slice(bytes)
+        .with_context(|| format!("{}: not valid JSON", file.display()))?;
+    let runs: Vec<&Value> = match &json {
+        Value::Array(items) => items.iter().collect(),
+        other => vec![other],
+    };
+    let mut points = Vec::with_capacity(runs.len());
+    for (i, run) in runs.into_iter().enumerate() {
+        let at = if matches!(json, Value::Array(_)) {
+            format!("{} (run {i})", file.display())
+        } else {
+            file.display().to_string()
+        };
+        let x = json_number(run, &spec.x).map_err(|e| anyhow::anyhow!("{at}: x: {e}"))?;
+        let y = json_number(run, &spec.y).map_err(|e| anyhow::anyhow!("{at}: y: {e}"))?;
+        for (axis, v, log) in [("x", x, spec.log_x), ("y", y, spec.log_y)] {
+            ensure!(v.is_finite(), "{at}: {axis} value {v} is not finite");
+            ensure!(
+                !log || v > 0.0,
+                "{at}: {axis} value {v} cannot be shown on a log scale"
+            );
+        }
+        let label = match &spec.label {
+            Some(path) => json_label(run, path)
+                .ok_or_else(|| anyhow::anyhow!("{at}: label: no field '{path}'"))?,
+            None => file_label(file),
+        };
+        points.push((label, (x, y)));
+    }
+    Ok(points)
 }
 
 fn file_label(file: &Path) -> String {
@@ -262,7 +279,9 @@ pub fn plot(files: &[PathBuf], spec: &PlotSpec, output: &Path) -> Result<Vec<Ser
     }
     let series = collect_series(files, spec)?;
     let text = svg(&series, spec)?;
-    std::fs::write(output, text).with_context(|| format!("{}: cannot write", output.display()))?;
+    super::write_atomically(output, |to| {
+        std::fs::write(to, &text).with_context(|| format!("{}: cannot write", output.display()))
+    })?;
     Ok(series)
 }
 

@@ -125,8 +125,10 @@ pub fn parse_points(text: &str, file: &Path) -> Result<Vec<ProbePoint>, PointsEr
 
 /// Reads and parses a points file.
 pub fn read_points(path: &Path) -> anyhow::Result<Vec<ProbePoint>> {
-    let text = std::fs::read_to_string(path)
+    let bytes = crate::scene::read_bounded(path)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| anyhow::anyhow!("reading {}: not UTF-8 text", path.display()))?;
     Ok(parse_points(&text, path)?)
 }
 

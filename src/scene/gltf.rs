@@ -62,8 +62,15 @@ const MAX_SHOWN_URI: usize = 80;
 
 /// Reads a glTF 2.0 file (JSON or binary, told apart by content).
 pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
+    let bytes = read_bounded(path).map_err(|e| SceneError::new(path, 0, e))?;
+    let mut scene = parse_bytes(&bytes, path)?;
+    scene.sources[0] = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    Ok(scene)
+}
+
+/// Reads glTF JSON or GLB held in memory: `path` names it in messages and anchors relative URIs.
+pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let error = |message: String| SceneError::new(path, 0, message);
-    let bytes = read_bounded(path).map_err(error)?;
     let (json_bytes, bin) = if bytes.starts_with(b"glTF") {
         let (json_bytes, bin) =
             split_glb(&bytes).map_err(|e| error(format!("invalid GLB: {e}")))?;
@@ -83,7 +90,10 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
         document: &document,
         buffers: Vec::new(),
         loaded_bytes: 0,
-        scene: Scene::default(),
+        scene: Scene {
+            sources: vec![path.to_path_buf()],
+            ..Scene::default()
+        },
         materials: HashMap::new(),
         textures: HashMap::new(),
         meshes: HashMap::new(),
@@ -357,7 +367,10 @@ impl Reader<'_> {
                 .path
                 .parent()
                 .map_or_else(|| relative.clone().into(), |dir| dir.join(&relative));
-            read_bounded(&file).map_err(|e| format!("'{shown}': {e}"))?
+            let data = read_bounded(&file).map_err(|e| format!("'{shown}': {e}"))?;
+            let canonical = std::fs::canonicalize(&file).unwrap_or(file);
+            self.scene.sources.push(canonical);
+            data
         };
         self.loaded_bytes += data.len() as u64;
         if self.loaded_bytes > MAX_LOADED_BYTES {
@@ -765,14 +778,20 @@ impl Reader<'_> {
         }
         let e = m.emissive_factor();
         let strength = m.emissive_strength().unwrap_or(1.0) as f64;
-        let emission =
-            (Rgb::new(e[0] as f64, e[1] as f64, e[2] as f64) * strength).map(|c| c.max(0.0));
+        let raw_emission = Rgb::new(e[0] as f64, e[1] as f64, e[2] as f64) * strength;
+        let emission = raw_emission.map(|c| c.max(0.0));
+        if emission != raw_emission && raw_emission.is_finite() {
+            self.warn(format!(
+                "material '{name}': negative emission ({}, {}, {}) clamped to 0",
+                raw_emission.r, raw_emission.g, raw_emission.b
+            ));
+        }
         if m.emissive_texture().is_some() {
             self.warn(format!(
                 "material '{name}': emissiveTexture ignored (emissiveFactor used alone)"
             ));
         }
-        if !base.is_finite() || !emission.is_finite() {
+        if !base.is_finite() || !raw_emission.is_finite() {
             return Err(self.error(format!(
                 "material '{name}' has a non-finite colour or emission"
             )));
@@ -830,6 +849,8 @@ impl Reader<'_> {
                 "{n} primitive(s) of {kind} skipped: only triangles are read"
             ));
         }
+        let count = self.scene.polygons.len();
+        self.scene.origins.record(self.path, 0, count);
         self.scene
     }
 }

@@ -6,6 +6,7 @@
 //! a closed box of reflectance ρ emitting L_e everywhere converges to L_e / (1 - ρ).
 
 pub mod cornell;
+pub mod duplicates;
 pub mod generators;
 pub mod gltf;
 pub mod mgf;
@@ -170,6 +171,8 @@ pub struct LoadOptions {
     /// (4 per quarter circle, RenderPark's setting) loses about 2.6% of a sphere's area; 64 loses 0.16%.
     /// Values below 3 are read as 3. See [`mgf::solids`].
     pub tessellation: usize,
+    /// Keep exact duplicate polygons (see [`duplicates`]) instead of one of each.
+    pub keep_duplicates: bool,
 }
 
 impl Default for LoadOptions {
@@ -178,6 +181,7 @@ impl Default for LoadOptions {
             force_two_sided: false,
             force_one_sided: false,
             tessellation: 16,
+            keep_duplicates: false,
         }
     }
 }
@@ -191,6 +195,11 @@ pub struct Scene {
     pub camera: Option<CameraSpec>,
     /// Warnings collected while loading (ignored entities, dropped degenerate polygons, ...).
     pub warnings: Vec<Diagnostic>,
+    /// Every file the scene was read from (the scene, its includes, material libraries, buffers,
+    /// images, photometric files it names), canonical where possible: no output may overwrite one.
+    pub sources: Vec<PathBuf>,
+    /// Where each polygon was read (file or include chain, and line), for messages about polygons.
+    pub origins: duplicates::Origins,
 }
 
 impl Scene {
@@ -257,6 +266,9 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     };
     if options.force_two_sided || options.force_one_sided {
         scene.set_two_sided(options.force_two_sided);
+    }
+    if !options.keep_duplicates {
+        duplicates::remove_duplicates(&mut scene);
     }
     Ok(scene)
 }

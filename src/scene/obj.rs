@@ -18,10 +18,29 @@ use std::path::Path;
 const DEFAULT_GREY: f64 = 0.5;
 const MAX_REFLECTANCE: f64 = 0.999;
 
-/// Reads an OBJ file and its MTL libraries.
+/// Reads an OBJ file and its MTL libraries (named relative to it; an absent one gives a warning).
 pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     let text = super::read_bounded(path).map_err(|e| SceneError::new(path, 0, e))?;
-    let face_lines = check(path, &text)?;
+    let mut scene = parse_bytes(&text, path, |mtl_path| {
+        if !mtl_path.exists() {
+            return Ok(None);
+        }
+        super::read_bounded(mtl_path).map(Some)
+    })?;
+    for source in &mut scene.sources {
+        *source = std::fs::canonicalize(&*source).unwrap_or_else(|_| source.clone());
+    }
+    Ok(scene)
+}
+
+/// Reads OBJ text held in memory: `path` names it in messages and anchors `mtllib` names, whose bytes
+/// `library` returns (`Ok(None)`: absent, the faces get a default grey with a warning).
+pub fn parse_bytes(
+    text: &[u8],
+    path: &Path,
+    library: impl Fn(&Path) -> Result<Option<Vec<u8>>, String>,
+) -> Result<Scene, SceneError> {
+    let face_lines = check(path, text)?;
     let load_options = tobj::LoadOptions {
         triangulate: false,
         single_index: false,
@@ -31,14 +50,25 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     // Material libraries are read and checked here (tobj panics on short colour lines); the first
     // problem found with a line number wins over tobj's line-less error.
     let mtl_error: std::cell::RefCell<Option<SceneError>> = Default::default();
-    let loaded = tobj::load_obj_buf(&mut text.as_slice(), &load_options, |name| {
+    let sources = std::cell::RefCell::new(vec![path.to_path_buf()]);
+    let loaded = tobj::load_obj_buf(&mut &text[..], &load_options, |name| {
         let mtl_path = path
             .parent()
             .map_or(name.to_path_buf(), |dir| dir.join(name));
-        match read_mtl(&mtl_path) {
-            Ok(bytes) => tobj::load_mtl_buf(&mut bytes.as_slice()),
-            Err(MtlProblem::Missing) => Err(tobj::LoadError::OpenFileFailed),
-            Err(MtlProblem::Invalid(e)) => {
+        let bytes = match library(&mtl_path) {
+            Ok(Some(bytes)) => bytes,
+            Ok(None) => return Err(tobj::LoadError::OpenFileFailed),
+            Err(e) => {
+                mtl_error
+                    .borrow_mut()
+                    .get_or_insert(SceneError::new(&mtl_path, 0, e));
+                return Err(tobj::LoadError::MaterialParseError);
+            }
+        };
+        sources.borrow_mut().push(mtl_path.clone());
+        match check_mtl(&mtl_path, &bytes) {
+            Ok(()) => tobj::load_mtl_buf(&mut bytes.as_slice()),
+            Err(e) => {
                 mtl_error.borrow_mut().get_or_insert(e);
                 Err(tobj::LoadError::MaterialParseError)
             }
@@ -49,7 +79,10 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     }
     let (models, materials) =
         loaded.map_err(|e| SceneError::new(path, 0, format!("invalid OBJ: {e}")))?;
-    let mut scene = Scene::default();
+    let mut scene = Scene {
+        sources: sources.into_inner(),
+        ..Scene::default()
+    };
     let warn = |scene: &mut Scene, line: usize, message: String| {
         scene.warnings.push(Diagnostic {
             file: path.to_path_buf(),
@@ -84,10 +117,21 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
                 ),
             );
         }
-        let emission = m.emissive.map_or(Rgb::BLACK, |e| {
-            Rgb::new(e[0] as f64, e[1] as f64, e[2] as f64).map(|c| c.max(0.0))
+        let raw_emission = m.emissive.map_or(Rgb::BLACK, |e| {
+            Rgb::new(e[0] as f64, e[1] as f64, e[2] as f64)
         });
-        if !emission.is_finite() || !reflectance.is_finite() {
+        let emission = raw_emission.map(|c| c.max(0.0));
+        if emission != raw_emission && raw_emission.is_finite() {
+            warn(
+                &mut scene,
+                0,
+                format!(
+                    "material '{}': negative Ke ({}, {}, {}) clamped to 0",
+                    m.name, raw_emission.r, raw_emission.g, raw_emission.b
+                ),
+            );
+        }
+        if !raw_emission.is_finite() || !kd.is_finite() {
             return Err(SceneError::new(
                 path,
                 0,
@@ -152,6 +196,8 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
                             object,
                             two_sided: false,
                         }));
+                    let count = scene.polygons.len();
+                    scene.origins.record(path, line, count);
                 }
                 Err(e @ PolygonError::TooManyVertices(_)) => {
                     return Err(SceneError::new(path, line, e.to_string()))
@@ -163,23 +209,10 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
-/// Why a material library was not read.
-enum MtlProblem {
-    /// Absent or unreadable: the scene falls back to grey with a warning.
-    Missing,
-    /// Present but refused (not a regular file, too large, malformed): an error at file:line.
-    Invalid(SceneError),
-}
-
-/// Reads an MTL file and checks the statements `tobj` parses: colours need three numbers, scalars one.
-fn read_mtl(path: &Path) -> Result<Vec<u8>, MtlProblem> {
-    if !path.exists() {
-        return Err(MtlProblem::Missing);
-    }
-    let bytes =
-        super::read_bounded(path).map_err(|e| MtlProblem::Invalid(SceneError::new(path, 0, e)))?;
+/// Checks the MTL statements `tobj` parses: colours need three numbers, scalars one.
+fn check_mtl(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
     for (k, raw) in bytes.split(|&b| b == b'\n').enumerate() {
-        let error = |m: String| MtlProblem::Invalid(SceneError::new(path, k + 1, m));
+        let error = |m: String| SceneError::new(path, k + 1, m);
         let line = std::str::from_utf8(raw).map_err(|_| error("not UTF-8 text".into()))?;
         let mut words = line.split_whitespace();
         let Some(keyword) = words.next() else {
@@ -210,7 +243,7 @@ fn read_mtl(path: &Path) -> Result<Vec<u8>, MtlProblem> {
             }
         }
     }
-    Ok(bytes)
+    Ok(())
 }
 
 /// Checks vertex and face lines (and the UTF-8 `tobj` needs); returns the line number of every face

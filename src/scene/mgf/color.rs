@@ -19,6 +19,15 @@ pub type Xyz = DVec3;
 /// MGF's neutral colour: equal-energy white with Y = 1.
 pub const NEUTRAL: Xyz = DVec3::ONE;
 
+/// A colour without luminance (see [`is_black_edge`]).
+pub const BLACK: Xyz = DVec3::ZERO;
+
+/// Whether (x, y) lies on the lower edge y = 0 of the chromaticity square: MGF's parser accepts it,
+/// but no XYZ with Y = 1 has it; RenderPark reads it as black, and so do we.
+pub fn is_black_edge(x: f64, y: f64) -> bool {
+    y == 0.0 && (0.0..=1.0).contains(&x)
+}
+
 /// Chromaticity (x, y) as XYZ with Y = 1.
 pub fn from_xy(x: f64, y: f64) -> Result<Xyz, String> {
     if !(x >= 0.0 && y > 0.0 && x + y <= 1.0) {
@@ -73,8 +82,11 @@ pub fn mix(parts: &[(f64, Xyz)]) -> Result<Xyz, String> {
     if parts.iter().any(|(w, _)| *w < 0.0) {
         return Err("cmix weights must not be negative".into());
     }
-    // Each colour has Y = 1, so weight w contributes luminance w.
+    // Each colour has Y = 1 (or is black), so weight w contributes luminance w (or none).
     let sum: Xyz = parts.iter().map(|(w, c)| *w * *c).sum();
+    if parts.iter().all(|(_, c)| *c == BLACK) {
+        return Ok(BLACK);
+    }
     normalise(sum, "cmix")
 }
 

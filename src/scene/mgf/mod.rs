@@ -45,14 +45,27 @@ const MAX_ENTITIES: usize = 20_000_000;
 
 /// Reads an MGF file and its includes.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
-    let lines = read_lines(path).map_err(|e| SceneError::new(path, 0, e))?;
+    let bytes = super::read_bounded(path).map_err(|e| SceneError::new(path, 0, e))?;
+    parse_bytes(bytes, path, options)
+}
+
+/// Reads MGF text held in memory: `path` names it in messages and anchors relative includes.
+pub fn parse_bytes(
+    bytes: impl Into<Vec<u8>>,
+    path: &Path,
+    options: &LoadOptions,
+) -> Result<Scene, SceneError> {
+    let entities = Entities::split(bytes.into()).map_err(|e| SceneError::new(path, 0, e))?;
     let mut reader = Reader::new(options);
+    let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    reader.scene.sources.push(canonical.clone());
     reader.includes.push(Include {
-        canonical: std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+        canonical,
         file: path.to_path_buf(),
         line: 0,
     });
-    reader.run_file(path, &lines)?;
+    reader.place = path.to_path_buf();
+    reader.run_file(path, &entities)?;
     Ok(reader.scene)
 }
 
@@ -66,43 +79,87 @@ pub(crate) fn parse_number(word: &str) -> Result<f64, String> {
 }
 
 /// One entity: its words and the number of the physical line it starts on.
-struct Line {
+struct Line<'t> {
     number: usize,
-    words: Vec<String>,
+    words: Vec<&'t str>,
 }
 
-/// Splits a file into entities, joining lines continued with a backslash.
-fn read_lines(path: &Path) -> Result<Vec<Line>, String> {
-    let bytes = super::read_bounded(path)?;
-    let text = String::from_utf8_lossy(&bytes);
-    let mut lines = Vec::new();
-    let mut pending: Option<Line> = None;
-    for (k, raw) in text.lines().enumerate() {
-        let trimmed = raw.trim_end();
-        let (body, continued) = match trimmed.strip_suffix('\\') {
-            Some(b) => (b, true),
-            None => (trimmed, false),
-        };
-        let line = pending.get_or_insert_with(|| Line {
-            number: k + 1,
-            words: Vec::new(),
-        });
-        line.words
-            .extend(body.split_whitespace().map(str::to_string));
-        if !continued {
-            if let Some(l) = pending.take() {
-                if !l.words.is_empty() {
-                    lines.push(l);
+/// A file split into entities. The text is kept once and words are byte ranges into it: one owned
+/// string per word made a 64 MiB file take about 1.5 GB.
+struct Entities {
+    text: String,
+    /// Byte range of every word, in file order.
+    words: Vec<(u32, u32)>,
+    /// Each entity: the physical line it starts on and its range in `words`.
+    entities: Vec<(usize, std::ops::Range<u32>)>,
+}
+
+impl Entities {
+    /// Splits text into entities, joining lines continued with a backslash.
+    fn split(bytes: Vec<u8>) -> Result<Entities, String> {
+        if bytes.len() as u64 > super::MAX_FILE_BYTES {
+            return Err(format!(
+                "file larger than {} MiB refused",
+                super::MAX_FILE_BYTES >> 20
+            ));
+        }
+        let text = String::from_utf8(bytes)
+            .unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned());
+        let mut words = Vec::new();
+        let mut entities = Vec::new();
+        let mut pending: Option<(usize, u32)> = None;
+        let base = text.as_ptr() as usize;
+        for (k, raw) in text.lines().enumerate() {
+            let trimmed = raw.trim_end();
+            let (body, continued) = match trimmed.strip_suffix('\\') {
+                Some(b) => (b, true),
+                None => (trimmed, false),
+            };
+            let (number, first) = *pending.get_or_insert((k + 1, words.len() as u32));
+            // Offsets fit in u32: the text is at most MAX_FILE_BYTES long.
+            words.extend(body.split_whitespace().map(|w| {
+                let start = (w.as_ptr() as usize - base) as u32;
+                (start, start + w.len() as u32)
+            }));
+            if !continued {
+                pending = None;
+                if words.len() as u32 > first {
+                    entities.push((number, first..words.len() as u32));
                 }
             }
         }
+        if let Some((number, first)) = pending {
+            if words.len() as u32 > first {
+                entities.push((number, first..words.len() as u32));
+            }
+        }
+        Ok(Entities {
+            text,
+            words,
+            entities,
+        })
     }
-    if let Some(l) = pending.take() {
-        if !l.words.is_empty() {
-            lines.push(l);
+
+    fn len(&self) -> usize {
+        self.entities.len()
+    }
+
+    fn line(&self, k: usize) -> Line<'_> {
+        let (number, range) = &self.entities[k];
+        let words = self.words[range.start as usize..range.end as usize]
+            .iter()
+            .map(|&(a, b)| &self.text[a as usize..b as usize])
+            .collect();
+        Line {
+            number: *number,
+            words,
         }
     }
-    Ok(lines)
+
+    /// The line of the last entity (0 for an empty file).
+    fn last_line(&self) -> usize {
+        self.entities.last().map_or(0, |e| e.0)
+    }
 }
 
 /// An MGF vertex context: position and (optional, zero when absent) normal, untransformed.
@@ -165,9 +222,12 @@ struct Reader<'a> {
     /// The chain of files being read, outermost first (include cycles are errors).
     includes: Vec<Include>,
     /// Files already read, by canonical path: an include in an array is read once.
-    read_cache: HashMap<PathBuf, Rc<Vec<Line>>>,
+    read_cache: HashMap<PathBuf, Rc<Entities>>,
     scene: Scene,
     file: PathBuf,
+    /// The file being read as messages about its polygons name it: its include chain (see
+    /// [`Origins`](super::duplicates::Origins)).
+    place: PathBuf,
     depth: usize,
     colours: HashMap<String, Xyz>,
     colour: Xyz,
@@ -197,6 +257,7 @@ impl<'a> Reader<'a> {
             read_cache: HashMap::new(),
             scene: Scene::default(),
             file: PathBuf::new(),
+            place: PathBuf::new(),
             depth: 0,
             colours: HashMap::new(),
             colour: color::NEUTRAL,
@@ -227,12 +288,12 @@ impl<'a> Reader<'a> {
         });
     }
 
-    fn run_file(&mut self, path: &Path, lines: &[Line]) -> Result<()> {
+    fn run_file(&mut self, path: &Path, lines: &Entities) -> Result<()> {
         let outer_file = std::mem::replace(&mut self.file, path.to_path_buf());
         let frames_before = self.xf.len();
         let mut k = 0;
         while k < lines.len() {
-            let line = &lines[k];
+            let line = lines.line(k);
             self.entities += 1;
             if self.entities > MAX_ENTITIES {
                 return Err(self.error(
@@ -241,15 +302,15 @@ impl<'a> Reader<'a> {
                 ));
             }
             if line.words[0] == "xf" {
-                k = self.xf_entity(line, k)?;
+                k = self.xf_entity(&line, k)?;
                 continue;
             }
-            self.entity(line)?;
+            self.entity(&line)?;
             k += 1;
         }
         let open = self.xf.len() - frames_before;
         if open > 0 {
-            let last = lines.last().map_or(0, |l| l.number);
+            let last = lines.last_line();
             self.warn(
                 last,
                 format!("{open} xf context(s) left open at end of file: closed"),
@@ -311,9 +372,9 @@ impl<'a> Reader<'a> {
     fn entity(&mut self, line: &Line) -> Result<()> {
         let w = &line.words;
         let n = line.number;
-        let keyword = w[0].as_str();
+        let keyword = w[0];
         if keyword.starts_with('#') {
-            if keyword == "#" && w.get(1).is_some_and(|c| c == "camera:") && self.depth == 0 {
+            if keyword == "#" && w.get(1) == Some(&"camera:") && self.depth == 0 {
                 self.camera_comment(line)?;
             }
             return Ok(());
@@ -322,13 +383,31 @@ impl<'a> Reader<'a> {
             "o" => self.object(line),
             "i" => self.include(line),
             "ies" => {
+                if let Some(name) = w.get(1) {
+                    // Not read, but named: protected from being overwritten by an output.
+                    let file = self.file.parent().map_or(name.into(), |d| d.join(name));
+                    let canonical = std::fs::canonicalize(&file).unwrap_or(file);
+                    self.scene.sources.push(canonical);
+                }
                 self.warn(n, "IES luminaires (ies) are not supported: ignored");
                 Ok(())
             }
             "c" => self.colour_context(line),
             "cxy" => {
                 let v = self.numbers(line, 2)?;
-                let c = color::from_xy(v[0], v[1]).map_err(|e| self.error(n, e))?;
+                let c = if color::is_black_edge(v[0], v[1]) {
+                    self.warn(
+                        n,
+                        format!(
+                            "chromaticity ({}, {}) has no luminance (y = 0): read as black, as \
+                             RenderPark does",
+                            v[0], v[1]
+                        ),
+                    );
+                    color::BLACK
+                } else {
+                    color::from_xy(v[0], v[1]).map_err(|e| self.error(n, e))?
+                };
                 self.set_colour(c);
                 Ok(())
             }
@@ -351,7 +430,7 @@ impl<'a> Reader<'a> {
             "m" => self.material_context(line),
             "sides" => {
                 self.arity(line, 1)?;
-                let two = match w[1].as_str() {
+                let two = match w[1] {
                     "1" => false,
                     "2" => true,
                     other => {
@@ -571,7 +650,7 @@ impl<'a> Reader<'a> {
                     return Err(self.error(line.number, "o end without a matching o"));
                 }
             }
-            2 => self.objects.push(line.words[1].clone()),
+            2 => self.objects.push(line.words[1].to_string()),
             _ => return Err(self.error(line.number, "o takes at most one name")),
         }
         self.object_index = None;
@@ -625,13 +704,20 @@ impl<'a> Reader<'a> {
         let lines = match self.read_cache.get(&canonical) {
             Some(lines) => Rc::clone(lines),
             None => {
-                let lines = Rc::new(read_lines(&target).map_err(|e| {
-                    self.error(n, format!("cannot include '{}': {e}", target.display()))
-                })?);
+                let lines = super::read_bounded(&target)
+                    .and_then(Entities::split)
+                    .map_err(|e| {
+                        self.error(n, format!("cannot include '{}': {e}", target.display()))
+                    })?;
+                let lines = Rc::new(lines);
                 self.read_cache.insert(canonical.clone(), Rc::clone(&lines));
+                self.scene.sources.push(canonical.clone());
                 lines
             }
         };
+        let mut place = self.place.clone().into_os_string();
+        place.push(format!(":{n} -> {}", target.display()));
+        let outer_place = std::mem::replace(&mut self.place, place.into());
         self.includes.push(Include {
             canonical,
             file: target.clone(),
@@ -639,6 +725,7 @@ impl<'a> Reader<'a> {
         });
         let result = self.include_lines(line, &target, &lines);
         self.includes.pop();
+        self.place = outer_place;
         result
     }
 
@@ -654,7 +741,7 @@ impl<'a> Reader<'a> {
     }
 
     /// Runs an included file's lines, once or once per instance of its transform array.
-    fn include_lines(&mut self, line: &Line, target: &Path, lines: &[Line]) -> Result<()> {
+    fn include_lines(&mut self, line: &Line, target: &Path, lines: &Entities) -> Result<()> {
         let n = line.number;
         let spec = if line.words.len() > 2 {
             Some(transform::parse(&line.words[2..]).map_err(|e| self.error(n, e))?)
@@ -688,7 +775,7 @@ impl<'a> Reader<'a> {
         }
     }
 
-    fn run_include(&mut self, target: &Path, lines: &[Line]) -> Result<()> {
+    fn run_include(&mut self, target: &Path, lines: &Entities) -> Result<()> {
         self.depth += 1;
         let result = self.run_file(target, lines);
         self.depth -= 1;
@@ -703,22 +790,22 @@ impl<'a> Reader<'a> {
                 self.colour_name = None;
             }
             2 => {
-                let Some(c) = self.colours.get(&w[1]) else {
+                let Some(c) = self.colours.get(w[1]) else {
                     return Err(self.error(line.number, format!("undefined colour '{}'", w[1])));
                 };
                 self.colour = *c;
-                self.colour_name = Some(w[1].clone());
+                self.colour_name = Some(w[1].to_string());
             }
             3 | 4 if w[2] == "=" => {
                 let c = match w.get(3) {
                     None => color::NEUTRAL,
-                    Some(t) => *self.colours.get(t).ok_or_else(|| {
+                    Some(t) => *self.colours.get(*t).ok_or_else(|| {
                         self.error(line.number, format!("undefined colour template '{t}'"))
                     })?,
                 };
-                self.colours.insert(w[1].clone(), c);
+                self.colours.insert(w[1].to_string(), c);
                 self.colour = c;
-                self.colour_name = Some(w[1].clone());
+                self.colour_name = Some(w[1].to_string());
             }
             _ => return Err(self.error(line.number, "expected c [name [= [template]]]")),
         }
@@ -743,7 +830,7 @@ impl<'a> Reader<'a> {
             let weight = self.number(n, &pair[0])?;
             let c = self
                 .colours
-                .get(&pair[1])
+                .get(pair[1])
                 .ok_or_else(|| self.error(n, format!("undefined colour '{}'", pair[1])))?;
             parts.push((weight, *c));
         }
@@ -760,22 +847,22 @@ impl<'a> Reader<'a> {
                 self.material_name = None;
             }
             2 => {
-                let Some(m) = self.materials.get(&w[1]) else {
+                let Some(m) = self.materials.get(w[1]) else {
                     return Err(self.error(line.number, format!("undefined material '{}'", w[1])));
                 };
                 self.material = m.clone();
-                self.material_name = Some(w[1].clone());
+                self.material_name = Some(w[1].to_string());
             }
             3 | 4 if w[2] == "=" => {
                 let m = match w.get(3) {
                     None => MgfMaterial::default(),
-                    Some(t) => self.materials.get(t).cloned().ok_or_else(|| {
+                    Some(t) => self.materials.get(*t).cloned().ok_or_else(|| {
                         self.error(line.number, format!("undefined material template '{t}'"))
                     })?,
                 };
-                self.materials.insert(w[1].clone(), m.clone());
+                self.materials.insert(w[1].to_string(), m.clone());
                 self.material = m;
-                self.material_name = Some(w[1].clone());
+                self.material_name = Some(w[1].to_string());
             }
             _ => return Err(self.error(line.number, "expected m [name [= [template]]]")),
         }
@@ -842,7 +929,7 @@ impl<'a> Reader<'a> {
         let w = &line.words;
         match w.len() {
             2 => {
-                if !self.vertices.contains_key(&w[1]) {
+                if !self.vertices.contains_key(w[1]) {
                     return Err(self.error(line.number, format!("undefined vertex '{}'", w[1])));
                 }
             }
@@ -851,11 +938,11 @@ impl<'a> Reader<'a> {
                     None => Vertex::default(),
                     Some(t) => self.vertex(line.number, t)?,
                 };
-                self.vertices.insert(w[1].clone(), v);
+                self.vertices.insert(w[1].to_string(), v);
             }
             _ => return Err(self.error(line.number, "expected v name [= [template]]")),
         }
-        self.vertex_name = Some(w[1].clone());
+        self.vertex_name = Some(w[1].to_string());
         Ok(())
     }
 
@@ -865,7 +952,7 @@ impl<'a> Reader<'a> {
         let n = line.number;
         let mut contours: Vec<Vec<DVec3>> = vec![Vec::new()];
         for name in &line.words[1..] {
-            if name == "-" {
+            if *name == "-" {
                 contours.push(Vec::new());
             } else if let Some(last) = contours.last_mut() {
                 last.push(self.vertex(n, name)?.p);
@@ -930,6 +1017,8 @@ impl<'a> Reader<'a> {
                             object,
                             two_sided,
                         }));
+                    let count = self.scene.polygons.len();
+                    self.scene.origins.record(&self.place, line, count);
                 }
                 Err(e @ PolygonError::TooManyVertices(_)) => {
                     return Err(self.error(line, e.to_string()))

@@ -74,14 +74,14 @@ fn power(step: DAffine3, mut n: usize) -> DAffine3 {
     result
 }
 
-fn number(args: &[String], k: usize, flag: &str) -> Result<f64, String> {
+fn number(args: &[&str], k: usize, flag: &str) -> Result<f64, String> {
     let word = args
         .get(k)
         .ok_or_else(|| format!("transform flag {flag} is missing an argument"))?;
     super::parse_number(word)
 }
 
-fn count(args: &[String], k: usize, flag: &str) -> Result<usize, String> {
+fn count(args: &[&str], k: usize, flag: &str) -> Result<usize, String> {
     let word = args
         .get(k)
         .ok_or_else(|| format!("transform flag {flag} is missing its count"))?;
@@ -90,7 +90,7 @@ fn count(args: &[String], k: usize, flag: &str) -> Result<usize, String> {
 }
 
 /// Parses transform arguments (the words after `xf`, or after the file name of `i`).
-pub fn parse(args: &[String]) -> Result<XfSpec, String> {
+pub fn parse(args: &[&str]) -> Result<XfSpec, String> {
     let mut groups = Vec::new();
     let mut dims = Vec::new();
     let mut current = Group {
@@ -99,7 +99,7 @@ pub fn parse(args: &[String]) -> Result<XfSpec, String> {
     };
     let mut k = 0;
     while k < args.len() {
-        let flag = args[k].as_str();
+        let flag = args[k];
         let op = match flag {
             "-t" => {
                 let v = DVec3::new(
@@ -178,8 +178,8 @@ pub fn parse(args: &[String]) -> Result<XfSpec, String> {
 mod tests {
     use super::*;
 
-    fn words(s: &str) -> Vec<String> {
-        s.split_whitespace().map(String::from).collect()
+    fn words(s: &str) -> Vec<&str> {
+        s.split_whitespace().collect()
     }
 
     #[test]

@@ -204,10 +204,12 @@ pub fn to_mgf(scene: &Scene) -> Result<String, String> {
     Ok(out)
 }
 
-/// Writes the scene to an MGF file.
+/// Writes the scene to an MGF file, through a temporary file renamed into place: a failed write
+/// leaves no truncated scene behind.
 pub fn save(scene: &Scene, path: &Path) -> Result<(), SceneError> {
     let text = to_mgf(scene).map_err(|e| SceneError::new(path, 0, e))?;
-    std::fs::write(path, text).map_err(|e| SceneError::new(path, 0, format!("cannot write: {e}")))
+    crate::output::write_atomically(path, |to| Ok(std::fs::write(to, &text)?))
+        .map_err(|e| SceneError::new(path, 0, format!("cannot write: {e:#}")))
 }
 
 #[cfg(test)]
