@@ -52,7 +52,10 @@ impl ReferenceCommand {
                 eprintln!("warning: {warning}");
             }
         }
-        anyhow::ensure!(scene.emitter_count() > 0, "{name} has no emitting surface");
+        anyhow::ensure!(
+            scene.emitter_count() > 0 || !scene.luminaires.is_empty(),
+            "{name} has no emitting surface or luminaire"
+        );
         let camera = self.camera.camera(&scene, 512)?;
         super::args::check_samples(camera.width, camera.height, self.spp)?;
         let settings = ReferenceSettings {
