@@ -315,6 +315,11 @@ pub fn simulate(
     let oracle = make_oracle(settings, &hierarchy);
     if settings.method == MethodKind::StochasticJacobi {
         anyhow::ensure!(
+            scene.luminaires.is_empty(),
+            "hierarchical Monte Carlo radiosity does not handle IES luminaires (goniometric emission) \
+             yet: use --method deterministic"
+        );
+        anyhow::ensure!(
             settings.basis == BasisKind::Constant && settings.oracle != OracleKind::Error,
             "hierarchical Monte Carlo radiosity works with the constant basis and the power, smoothness \
              or mi oracle (use --basis constant and --oracle power|smoothness|mi)"

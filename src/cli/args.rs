@@ -30,6 +30,10 @@ pub struct SceneArgs {
     /// instead of one of each.
     #[arg(long)]
     pub keep_duplicates: bool,
+    /// Adds an IES (LM-63) luminaire at X,Y,Z, aimed along DX,DY,DZ (default 0,0,-1: its nadir down a
+    /// z-up scene) and spun SPIN degrees about that direction; repeatable.
+    #[arg(long, value_name = "FILE.ies@X,Y,Z[@DX,DY,DZ[@SPIN]]")]
+    pub luminaire: Vec<scene::luminaire::Placement>,
 }
 
 impl SceneArgs {
@@ -49,7 +53,7 @@ impl SceneArgs {
             !scene.polygons.is_empty(),
             "{name}: the scene has no polygons"
         );
-        if scene.emitter_count() == 0 && !progress.quiet {
+        if scene.emitter_count() == 0 && scene.luminaires.is_empty() && !progress.quiet {
             crate::progress::stderr_line(format_args!(
                 "warning: {name}: no surface emits light: the solution is black"
             ));
@@ -59,6 +63,23 @@ impl SceneArgs {
 
     /// Loads the scene (or builds the Cornell box) and returns it with a display name.
     pub fn load(&self) -> Result<(Scene, String)> {
+        let (mut scene, name) = self.load_file()?;
+        anyhow::ensure!(
+            scene.luminaires.len() + self.luminaire.len() <= scene::luminaire::MAX_LUMINAIRES,
+            "more than {} luminaires",
+            scene::luminaire::MAX_LUMINAIRES
+        );
+        for placement in &self.luminaire {
+            let luminaire = placement.load()?;
+            scene
+                .warnings
+                .extend(luminaire.photometry.warnings.iter().cloned());
+            scene.luminaires.push(luminaire);
+        }
+        Ok((scene, name))
+    }
+
+    fn load_file(&self) -> Result<(Scene, String)> {
         let options = LoadOptions {
             force_two_sided: self.two_sided,
             force_one_sided: self.one_sided,

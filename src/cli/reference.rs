@@ -50,7 +50,10 @@ impl ReferenceCommand {
         let mut outputs = vec![("--hdr", self.hdr.as_path())];
         outputs.extend(self.stderr.iter().map(|p| ("--stderr", p.as_path())));
         super::args::check_outputs(&outputs, &scene.sources)?;
-        anyhow::ensure!(scene.emitter_count() > 0, "{name} has no emitting surface");
+        anyhow::ensure!(
+            scene.emitter_count() > 0 || !scene.luminaires.is_empty(),
+            "{name} has no emitting surface or luminaire"
+        );
         let camera = self.camera.camera(&scene, 512)?;
         super::args::check_samples(camera.width, camera.height, self.spp)?;
         let settings = ReferenceSettings {

@@ -13,6 +13,7 @@
 use crate::bases::{Basis, BasisKind};
 use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec3, Shape};
+use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
 use std::sync::Arc;
 
@@ -181,6 +182,11 @@ pub struct Hierarchy {
     pub polygon_patches: Vec<[Option<u32>; 2]>,
     /// The radiance basis of every element (Bekaert–Willems §2).
     pub basis: Arc<Basis>,
+    /// The scene's goniometric luminaires, whose light reaches the elements by a first gather.
+    pub luminaires: Vec<Luminaire>,
+    /// Irradiance coefficients (divided by π, like gathered ones) from the luminaires, `basis size` per
+    /// element, on leaves only; empty without luminaires ([`crate::solvers::direct`]).
+    pub direct: Vec<Rgb>,
 }
 
 impl Hierarchy {
@@ -192,6 +198,8 @@ impl Hierarchy {
             elements: Vec::new(),
             polygon_patches: vec![[None, None]; scene.polygons.len()],
             basis: Arc::new(Basis::new(basis)),
+            luminaires: scene.luminaires.clone(),
+            direct: Vec::new(),
         };
         for (index, polygon) in scene.polygons.iter().enumerate() {
             let material = scene.material_of(polygon);
@@ -352,12 +360,28 @@ impl Hierarchy {
         self.patches.iter().map(|p| self.element(p.root).area).sum()
     }
 
-    /// Σ A·max(E) over patches: the scale relative refinement thresholds are given in.
+    /// Σ A·max(E) over patches, plus Φ/π (the same radiance × area) of each luminaire: the scale
+    /// relative refinement thresholds are given in.
     pub fn total_emission(&self) -> f64 {
-        self.patches
+        let surfaces: f64 = self
+            .patches
             .iter()
             .map(|p| p.emission.max_channel() * self.element(p.root).area)
-            .sum()
+            .sum();
+        let luminaires: f64 = self
+            .luminaires
+            .iter()
+            .map(|l| l.power().max_channel() / std::f64::consts::PI)
+            .sum();
+        surfaces + luminaires
+    }
+
+    /// The luminaires' irradiance coefficients at leaf `id` (empty when there are none).
+    pub fn direct_at(&self, id: ElementId) -> &[Rgb] {
+        let size = self.basis_size();
+        self.direct
+            .get(id as usize * size..(id as usize + 1) * size)
+            .unwrap_or(&[])
     }
 
     pub fn link_count(&self) -> usize {

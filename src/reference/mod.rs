@@ -5,6 +5,8 @@
 //! cos θ dω, evaluated by path tracing with
 //! - next-event estimation: at every vertex one emitting polygon side is chosen with probability
 //!   proportional to its power π L_e A, a point on it uniformly by area, and a shadow segment tests it;
+//!   every goniometric luminaire ([`crate::scene::luminaire`]) gets a shadow segment to a uniform point
+//!   of its opening, weighted by its intensity toward the vertex;
 //! - cosine-weighted bounce directions, so the throughput only picks up ρ;
 //! - Russian roulette after [`ReferenceSettings::roulette_depth`] bounces with survival probability
 //!   max(ρ) (unbiased: the surviving throughput is divided by it).
@@ -35,6 +37,7 @@ use crate::geometry::{DVec2, DVec3, Ray, Shape};
 use crate::output::camera::Camera;
 use crate::output::image::Image;
 use crate::progress::Progress;
+use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
 use rand::{Rng, RngCore, SeedableRng};
@@ -161,6 +164,8 @@ pub struct PathTracer<'a> {
     /// Smallest accepted hit distance for rays leaving a surface, relative to the scene size.
     t_min: f64,
     roulette_depth: usize,
+    /// Goniometric luminaires (not hittable: reached by next-event estimation only).
+    luminaires: Vec<Luminaire>,
 }
 
 /// Relative (to the scene diagonal) distance below which a hit of a ray leaving a surface is taken to be
@@ -249,6 +254,7 @@ impl<'a> PathTracer<'a> {
             emitter_sides,
             t_min: SELF_HIT_EPSILON * if diagonal > 0.0 { diagonal } else { 1.0 },
             roulette_depth,
+            luminaires: scene.luminaires.clone(),
         }
     }
 
@@ -294,6 +300,7 @@ impl<'a> PathTracer<'a> {
             if let Some(direct) = self.sample_emitter(&vertex, light_u, rng) {
                 radiance += throughput * vertex.reflectance * direct;
             }
+            radiance += throughput * vertex.reflectance * self.sample_luminaires(&vertex, light_u);
             // Cosine-weighted bounce: pdf cos θ / π cancels the ρ/π cos θ of the integrand, leaving ρ.
             throughput = throughput * vertex.reflectance;
             depth += 1;
@@ -363,6 +370,28 @@ impl<'a> PathTracer<'a> {
         let bounce_pdf = cos_x / (PI * r);
         let weight = power_heuristic(light_pdf, bounce_pdf);
         Some(emitter.emission * (bounce_pdf * weight / light_pdf))
+    }
+
+    /// Next-event estimation of every luminaire: I(ω) cos θx / (π r²) toward one opening point, uniform
+    /// over the opening from `point_u` (the luminaire model spreads the intensity evenly over its
+    /// opening); the BRDF's ρ is applied by the caller. Luminaires cannot be hit, so no MIS is needed.
+    fn sample_luminaires(&self, vertex: &Vertex, point_u: DVec2) -> Rgb {
+        let mut sum = Rgb::BLACK;
+        for luminaire in &self.luminaires {
+            let y = luminaire.opening_point(point_u);
+            let d = vertex.point - y;
+            let r2 = d.length_squared();
+            let cos_x = -vertex.normal.dot(d);
+            if r2 <= 0.0 || cos_x <= 0.0 {
+                continue;
+            }
+            let intensity = luminaire.intensity(d);
+            if intensity.is_black() || self.visibility.segment_occluded(vertex.point, y) {
+                continue;
+            }
+            sum += intensity * (cos_x / (PI * r2 * r2.sqrt()));
+        }
+        sum
     }
 
     /// Sum of `n` samples of the reflected radiance leaving `start`: one randomised quasi-Monte Carlo

@@ -9,6 +9,8 @@ pub mod cornell;
 pub mod duplicates;
 pub mod generators;
 pub mod gltf;
+pub mod ies;
+pub mod luminaire;
 pub mod mgf;
 pub mod obj;
 pub mod polygonize;
@@ -200,6 +202,8 @@ pub struct Scene {
     pub sources: Vec<PathBuf>,
     /// Where each polygon was read (file or include chain, and line), for messages about polygons.
     pub origins: duplicates::Origins,
+    /// Goniometric light sources (IES luminaires: MGF `ies`, `--luminaire`).
+    pub luminaires: Vec<luminaire::Luminaire>,
 }
 
 impl Scene {
@@ -218,15 +222,18 @@ impl Scene {
             .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()))
     }
 
-    /// Total emitted power Φ = Σ π L_e A over emitting sides (W per channel).
+    /// Total emitted power Φ = Σ π L_e A over emitting sides, plus the luminaires' flux (W per
+    /// channel).
     pub fn emitted_power(&self) -> Rgb {
-        self.polygons
+        let surfaces: Rgb = self
+            .polygons
             .iter()
             .map(|p| {
                 let sides = if p.two_sided { 2.0 } else { 1.0 };
                 self.material_of(p).emission * (PI * p.shape.area() * sides)
             })
-            .sum()
+            .sum();
+        surfaces + self.luminaires.iter().map(|l| l.power()).sum::<Rgb>()
     }
 
     /// Polygons whose material emits.
@@ -287,7 +294,13 @@ pub struct SceneSummary {
     pub bounds: Aabb,
     /// Polygons whose material emits.
     pub emitters: usize,
-    /// Φ = Σ π L_e A over emitting sides, per channel.
+    /// IES luminaires.
+    pub luminaires: usize,
+    /// Their flux ∫ I dΩ from the intensity tables (lm, multipliers applied), and the lamps' rated
+    /// lumens × multipliers where every file gives them (not for absolute photometry).
+    pub luminaire_lumens: f64,
+    pub rated_lumens: Option<f64>,
+    /// Φ = Σ π L_e A over emitting sides plus the luminaires' flux, per channel.
     pub emitted_power: Rgb,
     pub warnings: usize,
 }
@@ -309,6 +322,17 @@ pub fn summary(scene: &Scene) -> SceneSummary {
         total_area: scene.total_area(),
         bounds: scene.bounds(),
         emitters: scene.emitter_count(),
+        luminaires: scene.luminaires.len(),
+        luminaire_lumens: scene
+            .luminaires
+            .iter()
+            .map(|l| l.photometry.flux() * l.multiplier)
+            .sum(),
+        rated_lumens: scene
+            .luminaires
+            .iter()
+            .map(|l| Some(l.photometry.rated_lumens()? * l.multiplier))
+            .sum(),
         emitted_power: scene.emitted_power(),
         warnings: scene.warnings.len(),
     }
@@ -335,6 +359,15 @@ impl fmt::Display for SceneSummary {
             )?;
         }
         writeln!(f, "emitters:      {}", self.emitters)?;
+        write!(f, "luminaires:    {}", self.luminaires)?;
+        if self.luminaires > 0 {
+            write!(f, " ({:.1} lm from the tables", self.luminaire_lumens)?;
+            if let Some(rated) = self.rated_lumens {
+                write!(f, "; lamps rated {rated:.1} lm")?;
+            }
+            write!(f, ")")?;
+        }
+        writeln!(f)?;
         let p = self.emitted_power;
         writeln!(f, "emitted power: ({:.6}, {:.6}, {:.6}) W", p.r, p.g, p.b)?;
         write!(f, "warnings:      {}", self.warnings)

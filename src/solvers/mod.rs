@@ -4,6 +4,7 @@
 //! Monte Carlo radiosity ([`stochastic`]) replaces links by power-carrying random lines.
 
 pub mod coupling;
+pub mod direct;
 pub mod error_estimate;
 pub mod gathering;
 pub mod push_pull;
@@ -102,13 +103,14 @@ pub struct SolveReport {
     pub refused_by_budget: usize,
 }
 
-/// Total self-emitted power Σ π A E of the patches.
+/// Total self-emitted power Σ π A E of the patches plus the luminaires' flux.
 pub fn emitted_power(hierarchy: &Hierarchy) -> Rgb {
-    hierarchy
+    let patches: Rgb = hierarchy
         .patches
         .iter()
         .map(|p| p.emission * (PI * hierarchy.element(p.root).area))
-        .sum()
+        .sum();
+    patches + hierarchy.luminaires.iter().map(|l| l.power()).sum::<Rgb>()
 }
 
 /// Hierarchical radiosity: refine with `oracle`, sweep with `solver` to convergence, re-refine with the
@@ -131,6 +133,7 @@ pub fn solve(
         initialise_thresholds(hierarchy, control.accuracy);
     }
     report.error.stopped_by = "pass limit".into();
+    let mut first_gather = direct::FirstGather::default();
     for pass in 1..=settings.max_passes.max(1) {
         report.passes = pass;
         // Later passes re-judge every link with the new radiance; the links stay in the hierarchy
@@ -152,11 +155,17 @@ pub fn solve(
                 spinner.set_message(format!("pass {pass}, round {round}: {n} candidate links"))
             },
         );
+        let direct = first_gather.refine_and_gather(
+            hierarchy,
+            visibility,
+            &settings.refine,
+            settings.error_control.is_some(),
+        );
         spinner.finish_and_clear();
         report.refine_seconds += start.elapsed().as_secs_f64();
         report.oracle_rays += outcome.oracle_rays;
-        report.form_factor_rays += outcome.form_factor_rays;
-        report.refused_by_budget += outcome.refused_by_budget;
+        report.form_factor_rays += outcome.form_factor_rays + direct.rays;
+        report.refused_by_budget += outcome.refused_by_budget + direct.refused_by_budget;
 
         let start = Instant::now();
         let bar = progress.bar(settings.max_iterations as u64, "solve");
@@ -188,12 +197,15 @@ pub fn solve(
                 report.error.stopped_by = "accuracy reached".into();
                 break;
             }
-            if outcome.refused_by_budget > 0 {
+            if outcome.refused_by_budget + direct.refused_by_budget > 0 {
                 report.error.stopped_by = "element budget".into();
                 break;
             }
             lower_thresholds(hierarchy, control, settings.refine.min_area);
-        } else if outcome.subdivisions == 0 && outcome.refined_links == 0 && pass > 1 {
+        } else if outcome.subdivisions + direct.subdivisions == 0
+            && outcome.refined_links == 0
+            && pass > 1
+        {
             report.converged = swept_to_tolerance;
             report.error.stopped_by = "stable".into();
             break;

@@ -77,6 +77,10 @@ impl Walk<'_> {
         let e = h.element(id);
         (self.gathered)(id, &mut incident);
         let radiance = if e.is_leaf() {
+            // The luminaires' first gather, a fixed part of the leaf's irradiance.
+            for (h, &d) in incident.iter_mut().zip(h.direct_at(id)) {
+                *h += d;
+            }
             let mut b: Vec<Rgb> = incident.iter().map(|&x| self.reflectance * x).collect();
             // Emission is constant over a patch: the constant function represents it exactly (δ_e = 0).
             b[0] += self.emission;

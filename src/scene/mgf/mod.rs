@@ -3,7 +3,7 @@
 //! Supported: comments, `o` (objects named by their full path, "office/desk"), `xf` with every flag and
 //! arrays, `i` (relative to the including file, with a transform), colours `c` `cxy` `cspec` `cct` `cmix`,
 //! materials `m` `sides` `rd` `ed` (`rs` `ts` `td` are read and ignored with one warning per material,
-//! `ir` is ignored), vertices `v` `p` `n`, faces `f` (any planar polygon, seam holes included) and `fh`
+//! `ir` is ignored), IES luminaires `ies` ([`super::ies`], [`super::luminaire`]), vertices `v` `p` `n`, faces `f` (any planar polygon, seam holes included) and `fh`
 //! (MGF 2.0 face with holes), and the solids `sph` `cyl` `cone` `prism` `ring` `torus`, tessellated as
 //! [`solids`] describes. Named contexts follow MGF scoping: `m name =` (re)defines, `m name` reuses,
 //! the bare `m`/`c` is the default black material / neutral colour. Unknown entities are ignored with a
@@ -27,6 +27,7 @@ pub mod writer;
 
 use self::color::Xyz;
 use self::transform::XfSpec;
+use super::luminaire::MAX_LUMINAIRES;
 use super::polygonize::{polygonize, PolygonError};
 use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError, MAX_POLYGONS};
 use glam::{DAffine3, DVec3};
@@ -382,16 +383,7 @@ impl<'a> Reader<'a> {
         match keyword {
             "o" => self.object(line),
             "i" => self.include(line),
-            "ies" => {
-                if let Some(name) = w.get(1) {
-                    // Not read, but named: protected from being overwritten by an output.
-                    let file = self.file.parent().map_or(name.into(), |d| d.join(name));
-                    let canonical = std::fs::canonicalize(&file).unwrap_or(file);
-                    self.scene.sources.push(canonical);
-                }
-                self.warn(n, "IES luminaires (ies) are not supported: ignored");
-                Ok(())
-            }
+            "ies" => self.ies(line),
             "c" => self.colour_context(line),
             "cxy" => {
                 let v = self.numbers(line, 2)?;
@@ -727,6 +719,76 @@ impl<'a> Reader<'a> {
         self.includes.pop();
         self.place = outer_place;
         result
+    }
+
+    /// `ies file [-m multiplier] [transform]`: a goniometric luminaire ([`super::luminaire`]) per
+    /// instance of the transform (inside the enclosing ones), white, candela values times the multiplier.
+    /// The file's `[LUMINOUSGEOMETRY]` fixture model is not loaded: it encloses the lamps that the
+    /// intensity table already accounts for, so its surfaces would shadow the luminaire's own light and
+    /// its emitters would count that light twice.
+    fn ies(&mut self, line: &Line) -> Result<()> {
+        let (n, w) = (line.number, &line.words);
+        if w.len() < 2 {
+            return Err(self.error(n, "ies needs a file name"));
+        }
+        let (multiplier, rest) = if w.get(2).is_some_and(|f| *f == "-m") {
+            let word = w
+                .get(3)
+                .ok_or_else(|| self.error(n, "ies -m needs a multiplier"))?;
+            let m = self.number(n, word)?;
+            if m < 0.0 {
+                return Err(self.error(n, "ies -m multiplier must be non-negative"));
+            }
+            (m, &w[4..])
+        } else {
+            (1.0, &w[2..])
+        };
+        let spec = transform::parse(rest).map_err(|e| self.error(n, e))?;
+        let target = match self.file.parent() {
+            Some(dir) => dir.join(&w[1]),
+            None => PathBuf::from(&w[1]),
+        };
+        // Read, so protected from being overwritten by an output.
+        let canonical = std::fs::canonicalize(&target).unwrap_or_else(|_| target.clone());
+        self.scene.sources.push(canonical);
+        let photometry = std::sync::Arc::new(
+            super::ies::load(&target)
+                .map_err(|e| self.error(n, format!("in luminaire file: {e}")))?,
+        );
+        self.scene
+            .warnings
+            .extend(photometry.warnings.iter().cloned());
+        if let Some((_, fixture)) = photometry
+            .keywords
+            .iter()
+            .find(|(k, _)| k == "LUMINOUSGEOMETRY")
+        {
+            self.warn(
+                n,
+                format!(
+                    "luminaire fixture geometry '{fixture}' not loaded: the intensity table carries \
+                     the light (render the fixture file on its own to see the fixture)"
+                ),
+            );
+        }
+        let mut index = vec![0; spec.dims.len()];
+        loop {
+            if self.scene.luminaires.len() >= MAX_LUMINAIRES {
+                return Err(self.error(n, format!("more than {MAX_LUMINAIRES} luminaires")));
+            }
+            let placement = self.current_transform() * spec.matrix(&index);
+            self.scene
+                .luminaires
+                .push(super::luminaire::Luminaire::place(
+                    std::sync::Arc::clone(&photometry),
+                    placement,
+                    crate::color::Rgb::WHITE,
+                    multiplier,
+                ));
+            if !spec.advance(&mut index) {
+                return Ok(());
+            }
+        }
     }
 
     /// "a.mgf:3 -> b.mgf:7 -> a.mgf": the files being read, each with its including line, then `target`.

@@ -1,0 +1,164 @@
+//! Direct light from goniometric luminaires ([`crate::scene::luminaire`]) by a first gather: at every
+//! leaf's cubature nodes x_k the irradiance E(x_k) = Σ_luminaires I(ω) cos θ_x / d² × transmittance is
+//! evaluated (with the opening sampled by several points when the receiver is near), divided by π and
+//! projected on the leaf's basis like a gathered term (`H_α = (1/A) Σ_k w_k φ_α(x_k) E(x_k)/π`, the
+//! coupling of Bekaert–Willems eq. (3) with a point source). The coefficients are a fixed part of the
+//! leaf's irradiance in every sweep ([`super::push_pull`] adds them, so L = E_self + ρ (H + H_direct)).
+//!
+//! Refinement: a leaf whose projected direct term misses its own node values by more than the threshold
+//! is split, max_k |E(x_k)/π − Ê(x_k)/π| × A against the power oracle's threshold (radiance × area), or
+//! that residual against the leaf's error-control threshold (algorithm 6.1), until the minimum area or
+//! the element budget stops it. The receiver's reflectance is left out (the leaf is judged as if white)
+//! so that illuminance comes out accurate on black surfaces too. Elements never merge and luminaires do not move, so a leaf's
+//! coefficients are computed once and kept across passes.
+
+use super::refine::RefineSettings;
+use crate::color::Rgb;
+use crate::geometry::cubature::{nodes_on, rule};
+use crate::hierarchy::{ElementId, Hierarchy};
+use crate::visibility::Visibility;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// The first gather's state across solve passes: each computed element's projection residual.
+#[derive(Clone, Debug, Default)]
+pub struct FirstGather {
+    /// `max_k |H(x_k) − Ĥ(x_k)|` (largest channel, irradiance / π) per computed element id.
+    residuals: Vec<f64>,
+}
+
+/// What one call of [`FirstGather::refine_and_gather`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DirectOutcome {
+    pub subdivisions: usize,
+    /// Shadow rays cast toward luminaire openings.
+    pub rays: u64,
+    pub refused_by_budget: usize,
+}
+
+impl FirstGather {
+    /// Computes the direct coefficients of every leaf not yet computed and splits leaves whose direct
+    /// term the basis misses (see the module comment), repeating on the new leaves. With error control
+    /// (`error_control`) the leaf's own threshold is used, else `settings.threshold`.
+    pub fn refine_and_gather(
+        &mut self,
+        hierarchy: &mut Hierarchy,
+        visibility: &dyn Visibility,
+        settings: &RefineSettings,
+        error_control: bool,
+    ) -> DirectOutcome {
+        let mut outcome = DirectOutcome::default();
+        if hierarchy.luminaires.is_empty() {
+            return outcome;
+        }
+        let size = hierarchy.basis_size();
+        let degree = settings.coupling.cubature_degree;
+        loop {
+            let done = self.residuals.len();
+            let h = &*hierarchy;
+            let fresh: Vec<ElementId> = (done..h.elements.len())
+                .filter(|&id| h.elements[id].is_leaf())
+                .map(|id| id as ElementId)
+                .collect();
+            let results: Vec<(Vec<Rgb>, f64, u64)> = fresh
+                .par_iter()
+                .map(|&id| leaf_direct(h, visibility, id, degree))
+                .collect();
+            hierarchy
+                .direct
+                .resize(hierarchy.elements.len() * size, Rgb::BLACK);
+            self.residuals.resize(hierarchy.elements.len(), 0.0);
+            let mut split = Vec::new();
+            for (&id, (coefficients, residual, rays)) in fresh.iter().zip(results) {
+                let i = id as usize;
+                hierarchy.direct[i * size..(i + 1) * size].copy_from_slice(&coefficients);
+                self.residuals[i] = residual;
+                outcome.rays += rays;
+            }
+            // Judge every leaf (thresholds fall between passes under error control), as if it were
+            // white: illuminance is wanted accurate on every surface, black ones included.
+            for id in hierarchy.leaves() {
+                let e = hierarchy.element(id);
+                let error = self.residuals[id as usize];
+                let too_coarse = if error_control {
+                    error > e.threshold
+                } else {
+                    error * e.area > settings.threshold
+                };
+                if too_coarse && e.area > settings.min_area {
+                    split.push(id);
+                }
+            }
+            if split.is_empty() {
+                return outcome;
+            }
+            let before = outcome.subdivisions;
+            for id in split {
+                if hierarchy.elements.len() + 4 > settings.max_elements {
+                    outcome.refused_by_budget += 1;
+                    continue;
+                }
+                hierarchy.subdivide(id);
+                outcome.subdivisions += 1;
+            }
+            if outcome.subdivisions == before {
+                hierarchy
+                    .direct
+                    .resize(hierarchy.elements.len() * size, Rgb::BLACK);
+                return outcome;
+            }
+        }
+    }
+}
+
+/// A leaf's direct coefficients, its projection residual and the rays cast.
+fn leaf_direct(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    id: ElementId,
+    degree: usize,
+) -> (Vec<Rgb>, f64, u64) {
+    let basis = &hierarchy.basis;
+    let size = basis.size();
+    let e = hierarchy.element(id);
+    let shape = e.shape();
+    let normal = hierarchy.patch_of(id).normal;
+    let nodes = nodes_on(shape, rule(shape.domain(), degree));
+    let phi = super::coupling::basis_values(basis, shape, &nodes);
+    let mut rays = 0u64;
+    let values: Vec<Rgb> = nodes
+        .iter()
+        .map(|node| {
+            hierarchy
+                .luminaires
+                .iter()
+                .map(|l| {
+                    l.irradiance(node.point, normal, |from, to| {
+                        rays += 1;
+                        visibility.transmittance(from, to)
+                    })
+                })
+                .sum::<Rgb>()
+                * (1.0 / PI)
+        })
+        .collect();
+    let mut coefficients = vec![Rgb::BLACK; size];
+    for (k, node) in nodes.iter().enumerate() {
+        let w = node.weight / e.area;
+        for (alpha, c) in coefficients.iter_mut().enumerate() {
+            *c += values[k] * (w * phi[k * size + alpha]);
+        }
+    }
+    let residual = values
+        .iter()
+        .enumerate()
+        .map(|(k, &v)| {
+            let projected: Rgb = (0..size)
+                .map(|alpha| coefficients[alpha] * phi[k * size + alpha])
+                .sum();
+            let d = v - projected;
+            d.r.abs().max(d.g.abs()).max(d.b.abs())
+        })
+        .fold(0.0, f64::max);
+    (coefficients, residual, rays)
+}
