@@ -3,6 +3,48 @@
 use serde::{Deserialize, Serialize};
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Sub};
 
+/// Luminous efficacy of equal-energy white light, lm/W (the Radiance and RenderPark convention): the one
+/// factor between our radiometric unit and photometric units. MGF's `ed` (lm/m²) becomes radiance
+/// `ed / (179 π)` W/(m² sr) (`scene::mgf`), so luminance is `179 Y(L)` cd/m² and illuminance `179 Y(E)` lux,
+/// with `Y` the luminance-weighted sum of the linear sRGB channels ([`Rgb::luminance`]).
+pub const WHITE_EFFICACY: f64 = 179.0;
+
+/// The photometric value of a radiometric RGB quantity: luminance in cd/m² of a radiance in W/(m² sr), or
+/// illuminance in lux of an irradiance in W/m² (`179 × Y`).
+pub fn photometric(radiometric: Rgb) -> f64 {
+    WHITE_EFFICACY * radiometric.luminance()
+}
+
+/// Units of reported radiance and irradiance (`--units`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Units {
+    /// Radiance in W/(m² sr), irradiance in W/m², per RGB channel.
+    #[default]
+    Radiometric,
+    /// Luminance in cd/m², illuminance in lux ([`WHITE_EFFICACY`] × the channels, so that the
+    /// luminance-weighted sum of an RGB value is its photometric value).
+    Photometric,
+}
+
+impl Units {
+    /// Factor from radiometric values to these units, applied per channel.
+    pub fn scale(self) -> f64 {
+        match self {
+            Units::Radiometric => 1.0,
+            Units::Photometric => WHITE_EFFICACY,
+        }
+    }
+
+    /// Unit of radiance.
+    pub fn radiance(self) -> &'static str {
+        match self {
+            Units::Radiometric => "W/m²sr",
+            Units::Photometric => "cd/m²",
+        }
+    }
+}
+
 /// A linear RGB value (reflectance, radiance in W/(m^2 sr), or any per-channel quantity).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Rgb {

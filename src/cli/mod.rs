@@ -22,6 +22,7 @@ mod args;
 mod bench;
 mod compare;
 mod experiment;
+mod grid;
 mod info;
 mod measure;
 mod plot;
@@ -77,6 +78,8 @@ pub enum Command {
     Scene(scene::SceneCommand),
     /// Chart one field of run statistics against another (error vs time or elements) as SVG.
     Plot(plot::PlotCommand),
+    /// Illuminance (lux) on a work-plane grid with an error per point: CSV, JSON and an isolux plot.
+    Grid(grid::GridCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -129,5 +132,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Measure(c) => c.run(seed, &progress),
         Command::Scene(c) => c.run(),
         Command::Plot(c) => c.run(),
+        Command::Grid(c) => c.run(seed, &progress),
     })
 }

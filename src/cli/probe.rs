@@ -2,6 +2,8 @@
 //! given surface points, optionally beside the unbiased path-traced estimate.
 
 use super::args::{SceneArgs, SolveArgs};
+use crate::color::Units;
+use crate::measures::illuminance::{probe_photometry, GatherSettings, IrradianceGather};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use crate::reference::probe::{probe_points, random_points, read_points, ProbeReference};
@@ -32,6 +34,10 @@ pub struct ProbeCommand {
     /// Print JSON instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Radiometric: radiance per channel, W/(m² sr). Photometric: also luminance (cd/m²) and the
+    /// illuminance arriving at the point (lux, gathered from the solution, with its estimated error).
+    #[arg(long, value_enum, default_value_t = Units::Radiometric)]
+    pub units: Units,
 }
 
 impl ProbeCommand {
@@ -63,6 +69,57 @@ impl ProbeCommand {
             reference,
             &file,
         )?;
+        if self.units == Units::Photometric {
+            let gather = IrradianceGather::new(
+                &solution.hierarchy,
+                solution.visibility.as_ref(),
+                GatherSettings::default(),
+            );
+            let photometry = probe_photometry(&results, &gather);
+            if self.json {
+                let rows: Vec<_> = results
+                    .iter()
+                    .zip(&photometry)
+                    .map(|(r, p)| serde_json::json!({"probe": r, "photometric": p}))
+                    .collect();
+                outln!("{}", serde_json::to_string_pretty(&rows)?)?;
+                return Ok(());
+            }
+            outln!(
+                "# {name}: {} points; luminance cd/m², illuminance lux (179 lm/W × Y)",
+                results.len()
+            )?;
+            out!(
+                "{:>5} {:>30} {:>6} {:>12} {:>12} {:>10}",
+                "line",
+                "point",
+                "poly",
+                "luminance",
+                "illuminance",
+                "± error"
+            )?;
+            if self.reference {
+                out!(" {:>12} {:>10}", "reference", "stderr")?;
+            }
+            outln!()?;
+            for (r, p) in results.iter().zip(&photometry) {
+                let point = format!("{:.4} {:.4} {:.4}", r.point[0], r.point[1], r.point[2]);
+                let side = if r.front { "" } else { "b" };
+                out!(
+                    "{:>5} {point:>30} {:>6} {:>12.4} {:>12.4} {:>10.4}",
+                    r.line,
+                    format!("{}{side}", r.polygon),
+                    p.luminance,
+                    p.illuminance,
+                    p.illuminance_error
+                )?;
+                if let Some(e) = p.reference_luminance {
+                    out!(" {:>12.4} {:>10.4}", e.value, e.stderr)?;
+                }
+                outln!()?;
+            }
+            return Ok(());
+        }
         if self.json {
             outln!("{}", serde_json::to_string_pretty(&results)?)?;
             return Ok(());

@@ -1,6 +1,7 @@
 //! `radiosity render`: load, solve, render to PNG (and EXR, PLY/GLB, stats JSON).
 
 use super::args::{CameraArgs, SceneArgs, SolveArgs};
+use crate::color::Units;
 use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
 use crate::output::false_colour;
@@ -58,6 +59,11 @@ pub struct RenderCommand {
     /// Write run statistics as JSON.
     #[arg(long, value_name = "FILE.json")]
     pub stats: Option<PathBuf>,
+    /// Units of the EXR values, the error-estimate colour bar and the summary: radiance in W/(m² sr), or
+    /// luminance in cd/m² (179 lm/W × each channel, so that Y of a pixel is its luminance). The PNG's
+    /// tone mapping is the same in both.
+    #[arg(long, value_enum, default_value_t = Units::Radiometric)]
+    pub units: Units,
 }
 
 impl RenderCommand {
@@ -105,6 +111,11 @@ impl RenderCommand {
             vertices.as_ref(),
         );
         let render_seconds = start.elapsed().as_secs_f64();
+        let mut scaled = image.clone();
+        scaled
+            .pixels
+            .iter_mut()
+            .for_each(|c| *c *= self.units.scale());
 
         let tone = ToneMap {
             exposure: self.exposure.map_or(Exposure::Auto, Exposure::Multiplier),
@@ -114,7 +125,7 @@ impl RenderCommand {
             Quantity::Radiance => write_png(&self.output, &image, &tone)?,
             Quantity::ErrorEstimate => {
                 // Pixels that see no solution (NaN) have no value and show grey.
-                let errors: Vec<Option<f64>> = image
+                let errors: Vec<Option<f64>> = scaled
                     .pixels
                     .iter()
                     .map(|c| c.r.is_finite().then_some(c.r))
@@ -127,7 +138,7 @@ impl RenderCommand {
                 .write_png(path, None)?;
         }
         if let Some(path) = &self.hdr {
-            image.write_exr(path)?;
+            scaled.write_exr(path)?;
         }
         for path in &self.export {
             let vertices = vertices.as_ref().context("vertex radiosity")?;
@@ -150,7 +161,7 @@ impl RenderCommand {
             crate::progress::stderr_line(format_args!(
                 "{name}: {}; {} elements ({} leaves), {} links, {} rays, {} passes, {} sweeps; \
                  load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
-                error_summary(&solution.report.error),
+                error_summary(&solution.report.error, self.units),
                 stats.elements,
                 stats.leaf_elements,
                 stats.links,
@@ -169,26 +180,29 @@ impl RenderCommand {
     }
 }
 
-/// "estimated error ≤ X (accuracy Y reached)" or how many leaves missed the accuracy, and by how much.
-pub fn error_summary(error: &crate::solvers::ErrorReport) -> String {
+/// "estimated error ≤ X (accuracy Y reached)" or how many leaves missed the accuracy, and by how much,
+/// in `units` (a radiance error's largest channel bounds the error of its luminance).
+pub fn error_summary(error: &crate::solvers::ErrorReport, units: Units) -> String {
     let s = &error.summary;
-    match error.accuracy {
+    let (k, unit) = (units.scale(), units.radiance());
+    match error.accuracy.map(|a| a * k) {
         Some(accuracy) if s.leaves_above == 0 => format!(
-            "estimated error ≤ {:.3} W/m²sr (accuracy {accuracy:.3} reached)",
-            s.max_estimate
+            "estimated error ≤ {:.3} {unit} (accuracy {accuracy:.3} reached)",
+            k * s.max_estimate
         ),
         Some(accuracy) => format!(
-            "accuracy {accuracy:.3} W/m²sr NOT reached ({}): {} of {} leaves ({:.1}% of the area) \
+            "accuracy {accuracy:.3} {unit} NOT reached ({}): {} of {} leaves ({:.1}% of the area) \
              above it, worst estimate {:.3}",
             error.stopped_by,
             s.leaves_above,
             s.leaves,
             100.0 * s.area_fraction_above,
-            s.max_estimate
+            k * s.max_estimate
         ),
         None => format!(
-            "estimated error: max {:.3}, mean {:.3} W/m²sr",
-            s.max_estimate, s.mean_estimate
+            "estimated error: max {:.3}, mean {:.3} {unit}",
+            k * s.max_estimate,
+            k * s.mean_estimate
         ),
     }
 }

@@ -2,6 +2,7 @@
 
 pub mod fbem;
 pub mod global_lines;
+pub mod illuminance;
 pub mod image_metrics;
 pub mod information;
 pub mod stats;

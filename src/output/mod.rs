@@ -9,6 +9,7 @@ pub mod mesh_values;
 pub mod plot;
 pub mod render;
 pub mod tonemap;
+pub mod work_plane;
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};

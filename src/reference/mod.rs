@@ -90,6 +90,26 @@ pub struct Estimate {
     pub stderr: Rgb,
 }
 
+impl Estimate {
+    /// The photometric value of the estimate (luminance in cd/m² of a radiance, illuminance in lux of
+    /// an irradiance: [`crate::color::photometric`]) and its standard error.
+    pub fn photometric(&self) -> PhotometricEstimate {
+        PhotometricEstimate {
+            value: crate::color::photometric(self.mean),
+            stderr: crate::color::photometric(self.stderr),
+        }
+    }
+}
+
+/// A photometric Monte Carlo estimate: the value and its standard error, `179 Σ_c w_c σ_c`, an upper
+/// bound of the standard error of the luminance-weighted sum whatever the correlation between the
+/// channels' estimates.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct PhotometricEstimate {
+    pub value: f64,
+    pub stderr: f64,
+}
+
 /// A reference image: per pixel the mean radiance and its standard error.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReferenceImage {
@@ -426,9 +446,6 @@ impl<'a> PathTracer<'a> {
     /// Radiance leaving `point` on side `front` of `polygon`, L_e + ρ/π ∫ L_i cos θ dω, from `spp`
     /// paths (a path-traced final gather). `normal` orients the hemisphere; it should be the
     /// unit normal of that side. The back of a one-sided polygon leaves nothing (exactly zero).
-    ///
-    /// The batches, each with its own generator seeded from (seed, batch), run in parallel and are
-    /// combined in batch order: the result does not depend on the thread count.
     pub fn radiance_leaving(
         &self,
         point: DVec3,
@@ -442,6 +459,29 @@ impl<'a> PathTracer<'a> {
             return Estimate::default();
         };
         start.normal = normal.normalize_or(start.normal);
+        self.estimate_leaving(start, emission, spp, seed)
+    }
+
+    /// Irradiance E = ∫ L_i cos θ dω (W/m²) arriving at any point, on a surface or floating in space,
+    /// from the side its `normal` points to, from `spp` paths: π times the reflected radiance of a white
+    /// (ρ = 1) Lambertian vertex there, so the estimator, its batches and its standard error are those of
+    /// [`PathTracer::radiance_leaving`].
+    pub fn irradiance_at(&self, point: DVec3, normal: DVec3, spp: usize, seed: u64) -> Estimate {
+        let start = Vertex {
+            point,
+            normal: normal.normalize_or(DVec3::Z),
+            reflectance: Rgb::WHITE,
+        };
+        let reflected = self.estimate_leaving(start, Rgb::BLACK, spp, seed);
+        Estimate {
+            mean: reflected.mean * PI,
+            stderr: reflected.stderr * PI,
+        }
+    }
+
+    /// The batches of `spp` paths from `start`, each with its own generator seeded from (seed, batch),
+    /// in parallel and combined in batch order: the result does not depend on the thread count.
+    fn estimate_leaving(&self, start: Vertex, emission: Rgb, spp: usize, seed: u64) -> Estimate {
         let (batches, per_batch) = batch_layout(spp);
         let sums: Vec<Rgb> = (0..batches)
             .into_par_iter()

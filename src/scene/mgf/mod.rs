@@ -35,8 +35,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
-/// Luminous efficacy of equal-energy white light, lm/W (Radiance and RenderPark).
-pub const WHITE_EFFICACY: f64 = 179.0;
+pub use crate::color::WHITE_EFFICACY;
 /// Largest reflectance channel; larger values are clamped with a warning.
 const MAX_REFLECTANCE: f64 = 0.999;
 /// Deepest include nesting (guards against recursive includes).

@@ -1,0 +1,762 @@
+//! Irradiance and illuminance at points that are not on a surface (a work plane floating in a room), from
+//! a solved hierarchy, with an error estimate per point; work-plane grids and their statistics.
+//!
+//! Irradiance at `x` with unit normal `n` is `E(x) = ∫ L(y) cos θx dω = Σ_j ∫_j L_j(y) V(x, y) cos θx
+//! cos θy / r² dA_y` (Bekaert–Willems eq. (1) kernel times π, since `K` carries the `1/π` of the
+//! Lambertian BRDF). It is gathered *hierarchically* over each patch's element tree (Hanrahan et al.
+//! 1991), from the roots down, piece by piece. A piece is an element or, below a leaf, a regular
+//! quarter of one (evaluated with the leaf's basis expansion, so shadows finer than the solver's mesh
+//! are resolved). For a piece `p` with projected solid angle `Ω_p = π F(x → p)` (the exact
+//! point-to-polygon factor, Lambert's formula) the contribution is the ratio estimator of
+//! [`crate::solvers::coupling`]: `E_p = Ω_p Σ_l k_l V_l L(y_l) / Σ_l k_l` over the piece's cubature
+//! nodes `y_l` (`k_l` the kernel times the node weight, `V_l` the transmittance of the segment `x y_l`
+//! through the [`Visibility`] trait), exact for a constant, unoccluded piece.
+//!
+//! Descent criterion (stated, deterministic): a piece is used as a whole when
+//! 1. its projected solid angle is small, `Ω_p ≤ Ω_max` (`max_solid_angle`), and
+//! 2. its gather error is small, `g_p ≤ τ L̄ Ω_p`, with `L̄` the scene's mean radiance from the energy
+//!    balance ([`crate::pipeline::mean_radiance_estimate`]) and `τ` the relative `tolerance`: the gather
+//!    error of a point is then at most `τ π L̄`, the mean irradiance, spread over its solid angle;
+//!
+//! otherwise its children (or, below a leaf, its quarters, at most `max_depth` levels) are gathered
+//! instead. Pieces facing away or below the horizon of `x` (`F = 0`) cost nothing, so a point visits
+//! O(π / Ω_max) pieces per layer of depth of the scene plus the refinement near shadow edges and bright
+//! gradients, not every leaf.
+//!
+//! Error model per point (W/m², largest channel), summed over the pieces used:
+//! * solver error propagated through the gather (Bekaert–Willems eq. (11) at a point):
+//!   `Σ_p Ω_p v_p ε_p`, with `ε_p` the element's a-posteriori estimate (`Element::error`; on an inner
+//!   element the largest of its leaves) and `v_p` the piece's sampled visible fraction;
+//! * gather error `g_p`: the visibility sampling error `2 Ω_p L_p √(v (1 − v) / m)` of `m` node rays,
+//!   two binomial standard deviations of the sampled visible fraction (a 95% bound where that sampling
+//!   is the only error; the `√(v(1 − v))` form of `LinkCoupling::visibility_error`). A piece counts as
+//!   partly visible when its nodes disagree or its corners disagree with them (a straight shadow edge
+//!   crossing a convex piece separates its corners); `v` is then the nodes' fraction, or that of nodes
+//!   and corners together when the nodes agree, and the parent's fraction for the children of a partly
+//!   visible piece whose own samples all agree, since a shadow edge may pass between them; plus, for
+//!   an inner element used in place of its leaves, `Ω_p v_p ΔL_p` with `ΔL_p` the largest difference
+//!   between its leaves' and its own average radiance. Both are added linearly (conservative). The cubature error of the ratio estimator for smoothly varying radiance is
+//!   second order in the piece's size and is neglected.
+
+use crate::color::{Rgb, WHITE_EFFICACY};
+use crate::geometry::cubature::{nodes_on, rule};
+use crate::geometry::form_factor::{point_to_point, point_to_polygon};
+use crate::geometry::{Aabb, DVec2, DVec3, Shape};
+use crate::hierarchy::{ElementId, Hierarchy};
+use crate::reference::PhotometricEstimate;
+use crate::visibility::Visibility;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::f64::consts::PI;
+
+/// How the hierarchical gather refines (see the module documentation for the criterion).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct GatherSettings {
+    /// `Ω_max`: largest projected solid angle (sr, of π for the whole hemisphere) a piece may have.
+    pub max_solid_angle: f64,
+    /// `τ`: largest gather error per unit projected solid angle, relative to the scene's mean radiance.
+    pub tolerance: f64,
+    /// Most levels of regular quarters below a leaf element.
+    pub max_depth: u32,
+    /// Degree of the cubature rule on each piece (its nodes are the visibility samples).
+    pub cubature_degree: usize,
+}
+
+impl Default for GatherSettings {
+    fn default() -> Self {
+        GatherSettings {
+            max_solid_angle: 0.02,
+            tolerance: 0.002,
+            max_depth: 5,
+            cubature_degree: 3,
+        }
+    }
+}
+
+/// The irradiance at one point and its estimated error.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct PointIrradiance {
+    /// Irradiance per channel, W/m².
+    pub irradiance: Rgb,
+    /// Solver error propagated to the point, W/m² (largest channel).
+    pub solver_error: f64,
+    /// The gather's own error, W/m² (largest channel).
+    pub gather_error: f64,
+    /// Pieces used and visibility rays cast.
+    pub pieces: u32,
+    pub rays: u32,
+}
+
+impl PointIrradiance {
+    /// Total estimated error, W/m² (largest channel).
+    pub fn error(&self) -> f64 {
+        self.solver_error + self.gather_error
+    }
+
+    /// Illuminance in lux ([`crate::color::photometric`]).
+    pub fn lux(&self) -> f64 {
+        crate::color::photometric(self.irradiance)
+    }
+
+    /// The error in lux: the luminance weights are positive and sum to one, so `|Y(δ)| ≤ max_c |δ_c|`.
+    pub fn error_lux(&self) -> f64 {
+        WHITE_EFFICACY * self.error()
+    }
+}
+
+/// Binomial standard deviations of the visible fraction counted as its error (see the module
+/// documentation).
+const VISIBILITY_DEVIATIONS: f64 = 2.0;
+
+/// A piece of a patch tree: an element, or a regular quarter of a leaf `depth` levels below it.
+#[derive(Clone, Copy, Debug)]
+struct Piece {
+    element: ElementId,
+    shape: Shape,
+    depth: u32,
+    /// Visible fraction of the nearest partly visible ancestor, if any.
+    partial: Option<f64>,
+}
+
+/// Irradiance at arbitrary points of a solved scene (see the module documentation).
+pub struct IrradianceGather<'a> {
+    hierarchy: &'a Hierarchy,
+    visibility: &'a dyn Visibility,
+    settings: GatherSettings,
+    /// `ΔL` per element: largest |leaf average − own average| over its leaves (largest channel).
+    spread: Vec<f64>,
+    /// `τ L̄`: accepted gather error per unit projected solid angle (W/m²/sr).
+    error_per_solid_angle: f64,
+}
+
+impl<'a> IrradianceGather<'a> {
+    pub fn new(
+        hierarchy: &'a Hierarchy,
+        visibility: &'a dyn Visibility,
+        settings: GatherSettings,
+    ) -> Self {
+        let mut spread = vec![0.0; hierarchy.elements.len()];
+        for patch in &hierarchy.patches {
+            let mut leaves = Vec::new();
+            let mut stack = vec![patch.root];
+            while let Some(id) = stack.pop() {
+                let e = hierarchy.element(id);
+                if e.is_leaf() {
+                    continue;
+                }
+                stack.extend(&e.children);
+                leaves.clear();
+                hierarchy.collect_leaves(id, &mut leaves);
+                let own = e.average_radiance();
+                spread[id as usize] = leaves
+                    .iter()
+                    .map(|&l| {
+                        let d = hierarchy.element(l).average_radiance() - own;
+                        d.map(f64::abs).max_channel()
+                    })
+                    .fold(0.0, f64::max);
+            }
+        }
+        IrradianceGather {
+            hierarchy,
+            visibility,
+            settings,
+            spread,
+            error_per_solid_angle: settings.tolerance
+                * crate::pipeline::mean_radiance_estimate(hierarchy),
+        }
+    }
+
+    /// The irradiance at `x` on the side its unit `normal` points to.
+    pub fn at(&self, x: DVec3, normal: DVec3) -> PointIrradiance {
+        let h = self.hierarchy;
+        let mut out = PointIrradiance::default();
+        let mut stack: Vec<Piece> = h
+            .patches
+            .iter()
+            .rev()
+            .map(|p| Piece {
+                element: p.root,
+                shape: *h.element(p.root).shape(),
+                depth: 0,
+                partial: None,
+            })
+            .collect();
+        while let Some(piece) = stack.pop() {
+            let solid_angle = PI * point_to_polygon(x, normal, &piece.shape);
+            if solid_angle <= 0.0 {
+                continue;
+            }
+            let element = h.element(piece.element);
+            let divisible = !element.is_leaf() || piece.depth < self.settings.max_depth;
+            if divisible && solid_angle > self.settings.max_solid_angle {
+                self.push_children(&mut stack, &piece, piece.partial);
+                continue;
+            }
+            let sample = self.sample(x, normal, &piece);
+            out.rays += sample.rays;
+            let coarse = if element.is_leaf() {
+                0.0
+            } else {
+                self.spread[piece.element as usize]
+            };
+            let v_error = sample.mixed.or(piece.partial).unwrap_or(sample.visible);
+            let gather = solid_angle
+                * (VISIBILITY_DEVIATIONS
+                    * sample.brightest
+                    * (v_error * (1.0 - v_error) / sample.nodes).sqrt()
+                    + sample.visible * coarse);
+            if divisible && gather > self.error_per_solid_angle * solid_angle {
+                self.push_children(&mut stack, &piece, sample.mixed.or(piece.partial));
+                continue;
+            }
+            out.irradiance += sample.radiance * solid_angle;
+            out.solver_error += solid_angle * sample.visible * element.error;
+            out.gather_error += gather;
+            out.pieces += 1;
+        }
+        out
+    }
+
+    /// The irradiance at every `(point, normal)`, in parallel; each point is gathered on its own, so the
+    /// result does not depend on the thread count.
+    pub fn at_all(&self, points: &[(DVec3, DVec3)]) -> Vec<PointIrradiance> {
+        points.par_iter().map(|&(x, n)| self.at(x, n)).collect()
+    }
+
+    fn push_children(&self, stack: &mut Vec<Piece>, piece: &Piece, partial: Option<f64>) {
+        let element = self.hierarchy.element(piece.element);
+        if element.is_leaf() {
+            for shape in piece.shape.subdivide().into_iter().rev() {
+                stack.push(Piece {
+                    element: piece.element,
+                    shape,
+                    depth: piece.depth + 1,
+                    partial,
+                });
+            }
+        } else {
+            for &child in element.children.iter().rev() {
+                stack.push(Piece {
+                    element: child,
+                    shape: *self.hierarchy.element(child).shape(),
+                    depth: 0,
+                    partial,
+                });
+            }
+        }
+    }
+
+    /// Kernel-weighted averages of `V L` and `V` over the piece's cubature nodes, and whether the
+    /// piece is partly visible: its nodes disagree, or its corners (moved [`CORNER_INSET`] towards the
+    /// centroid, so that walls meeting at its edges do not block them) disagree with each other or the
+    /// nodes. A straight shadow edge that crosses a convex piece always separates its corners, so the
+    /// corners catch the edges that pass between the nodes.
+    fn sample(&self, x: DVec3, normal: DVec3, piece: &Piece) -> NodeSample {
+        let h = self.hierarchy;
+        let n_y = h.patch_of(piece.element).normal;
+        let nodes = nodes_on(
+            &piece.shape,
+            rule(piece.shape.domain(), self.settings.cubature_degree),
+        );
+        let (mut open, mut seen, mut lit) = (0.0, 0.0, Rgb::BLACK);
+        let mut brightest = h.element(piece.element).average_radiance().max_channel();
+        let (mut rays, mut visible_samples) = (0, 0.0);
+        for node in &nodes {
+            let k = node.weight * point_to_point(x, normal, node.point, n_y);
+            if k <= 0.0 {
+                continue;
+            }
+            open += k;
+            rays += 1;
+            let t = self.visibility.transmittance(x, node.point);
+            visible_samples += t;
+            if t > 0.0 {
+                let radiance = h.radiance_at(piece.element, node.point);
+                brightest = brightest.max(radiance.max_channel());
+                seen += k * t;
+                lit += radiance * (k * t);
+            }
+        }
+        if open <= 0.0 {
+            // Above the horizon only between the nodes: nothing sampled; half the element's average
+            // radiance, with an error of the other half.
+            return NodeSample {
+                radiance: h.element(piece.element).average_radiance() * 0.5,
+                visible: 0.5,
+                mixed: Some(0.5),
+                brightest,
+                nodes: 1.0,
+                rays,
+            };
+        }
+        let nodes_cast = rays;
+        let visible = (seen / open).clamp(0.0, 1.0);
+        let centroid = piece.shape.centroid();
+        for &corner in piece.shape.vertices() {
+            let corner = corner + (centroid - corner) * CORNER_INSET;
+            if point_to_point(x, normal, corner, n_y) > 0.0 {
+                rays += 1;
+                visible_samples += self.visibility.transmittance(x, corner);
+            }
+        }
+        let fraction = visible_samples / f64::from(rays);
+        let mixed = if visible > 0.0 && visible < 1.0 {
+            Some(visible)
+        } else {
+            (fraction > 0.0 && fraction < 1.0).then_some(fraction)
+        };
+        NodeSample {
+            radiance: lit / open,
+            visible,
+            mixed,
+            brightest,
+            nodes: f64::from(nodes_cast),
+            rays,
+        }
+    }
+}
+
+/// Fraction of the way from a piece's corner to its centroid where the corner's visibility is sampled.
+const CORNER_INSET: f64 = 0.01;
+
+/// What the nodes of one piece saw.
+struct NodeSample {
+    /// `Σ k V L / Σ k`: the piece's contribution per unit projected solid angle.
+    radiance: Rgb,
+    /// `Σ k V / Σ k`.
+    visible: f64,
+    /// The visible fraction to judge the error by when the piece is partly visible (of the nodes if
+    /// they disagree, else of nodes and corners together).
+    mixed: Option<f64>,
+    /// Largest channel of the brightest radiance seen (or the element's average).
+    brightest: f64,
+    /// Node rays cast (the `m` of the visibility error).
+    nodes: f64,
+    /// Rays cast, corners included.
+    rays: u32,
+}
+
+/// One of the coordinate axes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    fn index(self) -> usize {
+        match self {
+            Axis::X => 0,
+            Axis::Y => 1,
+            Axis::Z => 2,
+        }
+    }
+
+    /// The two axes spanning a plane normal to this one, in increasing order (z: x, y; y: x, z; x: y, z).
+    pub fn plane_axes(self) -> [Axis; 2] {
+        match self {
+            Axis::X => [Axis::Y, Axis::Z],
+            Axis::Y => [Axis::X, Axis::Z],
+            Axis::Z => [Axis::X, Axis::Y],
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Axis::X => "x",
+            Axis::Y => "y",
+            Axis::Z => "z",
+        }
+    }
+}
+
+/// A work plane `axis = height` whose points face along `+axis` (or `-axis` when `facing_negative`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WorkPlane {
+    pub axis: Axis,
+    pub height: f64,
+    pub facing_negative: bool,
+}
+
+impl WorkPlane {
+    /// Parses `z=0.85`, `y=1.2`, `x=0` (normal along `+axis`) or `-z=2.5` (normal along `-axis`).
+    pub fn parse(text: &str) -> Result<WorkPlane, String> {
+        let text = text.trim();
+        let (axis, value) = text
+            .split_once('=')
+            .ok_or_else(|| format!("'{text}': expected AXIS=HEIGHT such as z=0.85 (or -z=2.5)"))?;
+        let (facing_negative, axis) = match axis.trim().strip_prefix('-') {
+            Some(a) => (true, a),
+            None => (false, axis.trim().strip_prefix('+').unwrap_or(axis.trim())),
+        };
+        let axis = match axis.to_ascii_lowercase().as_str() {
+            "x" => Axis::X,
+            "y" => Axis::Y,
+            "z" => Axis::Z,
+            other => return Err(format!("'{other}' is not an axis (x, y or z)")),
+        };
+        let height: f64 = value
+            .trim()
+            .parse()
+            .ok()
+            .filter(|h: &f64| h.is_finite())
+            .ok_or_else(|| format!("'{}' is not a finite number", value.trim()))?;
+        Ok(WorkPlane {
+            axis,
+            height,
+            facing_negative,
+        })
+    }
+
+    /// The unit normal the points face.
+    pub fn normal(&self) -> DVec3 {
+        let mut n = DVec3::ZERO;
+        n[self.axis.index()] = if self.facing_negative { -1.0 } else { 1.0 };
+        n
+    }
+
+    /// The world point with plane coordinates `uv` (along [`Axis::plane_axes`]).
+    pub fn point(&self, uv: DVec2) -> DVec3 {
+        let [a, b] = self.axis.plane_axes();
+        let mut p = DVec3::ZERO;
+        p[self.axis.index()] = self.height;
+        p[a.index()] = uv.x;
+        p[b.index()] = uv.y;
+        p
+    }
+
+    /// Plane coordinates of a world point.
+    pub fn coordinates(&self, p: DVec3) -> DVec2 {
+        let [a, b] = self.axis.plane_axes();
+        DVec2::new(p[a.index()], p[b.index()])
+    }
+
+    /// The default region: the scene's bounds in the plane's two axes, moved inward by
+    /// [`REGION_INSET`] of their extent on every side (so that no point lies in a wall). Fails when
+    /// the height is outside the bounds along the axis.
+    pub fn default_region(&self, bounds: &Aabb) -> Result<Region, String> {
+        let i = self.axis.index();
+        if bounds.is_empty() || !(bounds.min[i] < self.height && self.height < bounds.max[i]) {
+            return Err(format!(
+                "the plane {}={} lies outside the scene, which spans {} to {} along {}",
+                self.axis.name(),
+                self.height,
+                bounds.min[i],
+                bounds.max[i],
+                self.axis.name()
+            ));
+        }
+        let (lo, hi) = (self.coordinates(bounds.min), self.coordinates(bounds.max));
+        let inset = (hi - lo) * REGION_INSET;
+        Region::new(lo + inset, hi - inset)
+    }
+}
+
+/// Fraction of the scene's extent by which the default region keeps off the bounds on every side.
+pub const REGION_INSET: f64 = 0.01;
+
+/// A rectangle in the plane's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Region {
+    pub min: DVec2,
+    pub max: DVec2,
+}
+
+impl Region {
+    /// A region with `min < max` in both coordinates (finite).
+    pub fn new(min: DVec2, max: DVec2) -> Result<Region, String> {
+        if !(min.is_finite() && max.is_finite() && min.x < max.x && min.y < max.y) {
+            return Err(format!(
+                "the region {},{},{},{} is empty: give x0,y0,x1,y1 with x0 < x1 and y0 < y1",
+                min.x, min.y, max.x, max.y
+            ));
+        }
+        Ok(Region { min, max })
+    }
+
+    /// Parses `x0,y0,x1,y1` (commas or spaces).
+    pub fn parse(text: &str) -> Result<Region, String> {
+        let values: Vec<f64> = text
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .map(|s| {
+                s.parse::<f64>()
+                    .map_err(|_| format!("'{s}' is not a number"))
+            })
+            .collect::<Result<_, _>>()?;
+        let [x0, y0, x1, y1] = values[..] else {
+            return Err(format!(
+                "expected four numbers x0,y0,x1,y1, got {}",
+                values.len()
+            ));
+        };
+        Region::new(DVec2::new(x0, y0), DVec2::new(x1, y1))
+    }
+}
+
+/// Most points of one grid.
+pub const MAX_GRID_POINTS: usize = 1_000_000;
+
+/// A regular grid of points on a work plane: `columns × rows` points `spacing` apart, centred in the
+/// region, row-major from the region's minimum corner.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Grid {
+    pub plane: WorkPlane,
+    pub region: Region,
+    pub spacing: f64,
+    pub columns: usize,
+    pub rows: usize,
+}
+
+impl Grid {
+    pub fn new(plane: WorkPlane, region: Region, spacing: f64) -> Result<Grid, String> {
+        if !(spacing.is_finite() && spacing > 0.0) {
+            return Err("the spacing must be a positive number".to_string());
+        }
+        let size = region.max - region.min;
+        let count = |extent: f64| (extent / spacing).floor() + 1.0;
+        let (columns, rows) = (count(size.x), count(size.y));
+        if columns * rows > MAX_GRID_POINTS as f64 {
+            return Err(format!(
+                "a spacing of {spacing} gives {columns} × {rows} points, more than the \
+                 {MAX_GRID_POINTS} allowed: use a larger spacing or a smaller region"
+            ));
+        }
+        Ok(Grid {
+            plane,
+            region,
+            spacing,
+            columns: columns as usize,
+            rows: rows as usize,
+        })
+    }
+
+    /// Plane coordinates of point (column, row).
+    pub fn coordinates(&self, column: usize, row: usize) -> DVec2 {
+        let size = self.region.max - self.region.min;
+        let used = DVec2::new(
+            (self.columns - 1) as f64 * self.spacing,
+            (self.rows - 1) as f64 * self.spacing,
+        );
+        let origin = self.region.min + (size - used) * 0.5;
+        origin + DVec2::new(column as f64, row as f64) * self.spacing
+    }
+
+    /// World points with the plane's normal, row-major.
+    pub fn points(&self) -> Vec<(DVec3, DVec3)> {
+        let normal = self.plane.normal();
+        (0..self.rows)
+            .flat_map(|row| (0..self.columns).map(move |column| (column, row)))
+            .map(|(column, row)| (self.plane.point(self.coordinates(column, row)), normal))
+            .collect()
+    }
+}
+
+/// Summary statistics of a set of illuminances: min, mean, max, uniformity `U0 = min / mean` (the
+/// EN 12464-1 definition) and the ratio max / min (`None` where min is zero).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Statistics {
+    pub count: usize,
+    pub min: f64,
+    pub mean: f64,
+    pub max: f64,
+    pub uniformity: f64,
+    pub max_over_min: Option<f64>,
+}
+
+impl Statistics {
+    /// Statistics of `values` (NaN for an empty set; uniformity 0 where the mean is 0).
+    pub fn of(values: &[f64]) -> Statistics {
+        let count = values.len();
+        let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+        let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if count == 0 {
+            return Statistics {
+                count,
+                min: f64::NAN,
+                mean: f64::NAN,
+                max: f64::NAN,
+                uniformity: f64::NAN,
+                max_over_min: None,
+            };
+        }
+        let mean = values.iter().sum::<f64>() / count as f64;
+        Statistics {
+            count,
+            min,
+            mean,
+            max,
+            uniformity: if mean > 0.0 { min / mean } else { 0.0 },
+            max_over_min: (min > 0.0).then(|| max / min),
+        }
+    }
+}
+
+/// Paths per point of the independent path-traced estimate (`--reference-paths`), and their seed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ReferencePaths {
+    pub paths: usize,
+    pub seed: u64,
+}
+
+/// The illuminance at one grid point.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct GridValue {
+    pub point: [f64; 3],
+    /// Illuminance from the radiosity solution, lux.
+    pub lux: f64,
+    /// Its estimated error (solver and gather, [`PointIrradiance::error_lux`]), lux.
+    pub error_lux: f64,
+    /// The path-traced estimate and its standard error (lux), when asked for.
+    pub reference: Option<PhotometricEstimate>,
+}
+
+/// Illuminance over a work-plane grid, with its statistics.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GridReport {
+    pub grid: Grid,
+    /// Row-major, as [`Grid::points`].
+    pub values: Vec<GridValue>,
+    pub statistics: Statistics,
+    /// Largest and mean estimated error, lux.
+    pub max_error_lux: f64,
+    pub mean_error_lux: f64,
+    /// Gather pieces and visibility rays over all points.
+    pub pieces: u64,
+    pub rays: u64,
+}
+
+/// Illuminance at every point of `grid` from the solved `hierarchy`, and optionally the path tracer's
+/// independent estimate there (seeded per point from `reference.seed` and the point's index, so the
+/// result does not depend on the thread count).
+pub fn illuminance_grid(
+    scene: &crate::scene::Scene,
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    grid: &Grid,
+    settings: GatherSettings,
+    reference: Option<ReferencePaths>,
+) -> GridReport {
+    let points = grid.points();
+    let gathered = IrradianceGather::new(hierarchy, visibility, settings).at_all(&points);
+    let tracer = crate::reference::PathTracer::new(
+        scene,
+        visibility,
+        crate::reference::ReferenceSettings::default().roulette_depth,
+    );
+    let references: Vec<Option<PhotometricEstimate>> = points
+        .par_iter()
+        .enumerate()
+        .map(|(index, &(x, n))| {
+            reference.map(|r| {
+                let seed = crate::reference::derive_seed(r.seed, index as u64);
+                tracer.irradiance_at(x, n, r.paths, seed).photometric()
+            })
+        })
+        .collect();
+    let values: Vec<GridValue> = points
+        .iter()
+        .zip(&gathered)
+        .zip(references)
+        .map(|((&(x, _), g), reference)| GridValue {
+            point: x.to_array(),
+            lux: g.lux(),
+            error_lux: g.error_lux(),
+            reference,
+        })
+        .collect();
+    let lux: Vec<f64> = values.iter().map(|v| v.lux).collect();
+    let errors = values.iter().map(|v| v.error_lux);
+    GridReport {
+        grid: grid.clone(),
+        statistics: Statistics::of(&lux),
+        max_error_lux: errors.clone().fold(0.0, f64::max),
+        mean_error_lux: errors.sum::<f64>() / values.len().max(1) as f64,
+        pieces: gathered.iter().map(|g| u64::from(g.pieces)).sum(),
+        rays: gathered.iter().map(|g| u64::from(g.rays)).sum(),
+        values,
+    }
+}
+
+/// Photometric values at a surface probe (`radiosity probe --units photometric`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ProbePhotometry {
+    /// Luminance of the radiosity solution leaving the point, cd/m².
+    pub luminance: f64,
+    /// Illuminance arriving at the point, gathered from the solution, lux, and its estimated error.
+    pub illuminance: f64,
+    pub illuminance_error: f64,
+    /// The path-traced luminance and its standard error, when the probe has a reference.
+    pub reference_luminance: Option<PhotometricEstimate>,
+}
+
+/// Luminance and illuminance at probed surface points, the illuminance gathered in parallel.
+pub fn probe_photometry(
+    results: &[crate::reference::probe::ProbeResult],
+    gather: &IrradianceGather,
+) -> Vec<ProbePhotometry> {
+    let points: Vec<(DVec3, DVec3)> = results
+        .iter()
+        .map(|r| (DVec3::from_array(r.point), DVec3::from_array(r.normal)))
+        .collect();
+    results
+        .iter()
+        .zip(gather.at_all(&points))
+        .map(|(r, e)| ProbePhotometry {
+            luminance: crate::color::photometric(r.radiosity),
+            illuminance: e.lux(),
+            illuminance_error: e.error_lux(),
+            reference_luminance: r.reference.map(|e| e.photometric()),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planes_and_regions_parse_and_refuse_nonsense() {
+        let p = WorkPlane::parse("z=0.85").unwrap();
+        assert_eq!((p.axis, p.height, p.normal()), (Axis::Z, 0.85, DVec3::Z));
+        let p = WorkPlane::parse("-y = 2").unwrap();
+        assert_eq!((p.axis, p.normal()), (Axis::Y, -DVec3::Y));
+        assert_eq!(p.point(DVec2::new(1.0, 3.0)), DVec3::new(1.0, 2.0, 3.0));
+        assert!(WorkPlane::parse("w=1").is_err());
+        assert!(WorkPlane::parse("z=nan").is_err());
+        assert!(WorkPlane::parse("z").is_err());
+        let r = Region::parse("0,0,2,1").unwrap();
+        assert_eq!(r.max, DVec2::new(2.0, 1.0));
+        assert!(Region::parse("0,0,0,1").is_err());
+        assert!(Region::parse("0,0,1").is_err());
+    }
+
+    #[test]
+    fn grids_are_centred_in_their_region_and_bounded() {
+        let plane = WorkPlane::parse("z=1").unwrap();
+        let region = Region::parse("0,0,1,0.6").unwrap();
+        let grid = Grid::new(plane, region, 0.25).unwrap();
+        assert_eq!((grid.columns, grid.rows), (5, 3));
+        // 3 rows use 0.5 of 0.6: 0.05 margin on each side.
+        assert!((grid.coordinates(0, 0) - DVec2::new(0.0, 0.05)).length() < 1e-12);
+        assert!((grid.coordinates(4, 2) - DVec2::new(1.0, 0.55)).length() < 1e-12);
+        let points = grid.points();
+        assert_eq!(points.len(), 15);
+        assert_eq!(points[1].0, DVec3::new(0.25, 0.05, 1.0));
+        assert!(Grid::new(plane, region, 1e-4).is_err());
+        assert!(Grid::new(plane, region, 0.0).is_err());
+    }
+
+    #[test]
+    fn statistics_of_a_handmade_grid() {
+        let s = Statistics::of(&[100.0, 200.0, 300.0, 400.0]);
+        assert_eq!((s.min, s.mean, s.max), (100.0, 250.0, 400.0));
+        assert_eq!(s.uniformity, 0.4);
+        assert_eq!(s.max_over_min, Some(4.0));
+        let dark = Statistics::of(&[0.0, 10.0]);
+        assert_eq!((dark.uniformity, dark.max_over_min), (0.0, None));
+    }
+}

@@ -1,0 +1,346 @@
+//! Illuminance at points off the surfaces (`measures::illuminance`) against analytic ground truth: a small
+//! emitter (Howell's differential-element-to-rectangle factor and the inverse-square cosine law), the
+//! white furnace (uniform radiance L gives π L from every direction), and a penumbra cast by an
+//! occluder, where the exact answer is the emitter's factor minus that of its occluded part.
+
+use radiosity::color::Rgb;
+use radiosity::geometry::form_factor::point_to_polygon;
+use radiosity::geometry::{DVec3, Shape};
+use radiosity::measures::illuminance::{GatherSettings, IrradianceGather};
+use radiosity::pipeline::{simulate, SimulationSettings, Solution};
+use radiosity::progress::Progress;
+use radiosity::reference::PathTracer;
+use radiosity::scene::{generators, Material, Object, Polygon, Scene};
+use std::f64::consts::PI;
+
+/// A scene of axis-aligned squares `[x0, x1] × [y0, y1]` at height `z`, facing down (emitting or
+/// reflecting towards -z) when `down`, each with its material.
+fn squares(faces: &[([f64; 4], f64, bool, Material)]) -> Scene {
+    let mut scene = Scene::default();
+    for (k, &([x0, y0, x1, y1], z, down, ref material)) in faces.iter().enumerate() {
+        let p = |x: f64, y: f64| DVec3::new(x, y, z);
+        let up = [p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)];
+        let shape = if down {
+            Shape::Quad([up[0], up[3], up[2], up[1]])
+        } else {
+            Shape::Quad(up)
+        };
+        scene.materials.push(material.clone());
+        scene.objects.push(Object {
+            name: format!("square{k}"),
+        });
+        scene.polygons.push(Polygon {
+            shape,
+            material: k,
+            object: k,
+            two_sided: false,
+        });
+    }
+    scene
+}
+
+fn solve(scene: &Scene) -> Solution {
+    simulate(scene, &SimulationSettings::default(), &Progress::new(true)).expect("solve")
+}
+
+/// Howell's catalogue B-3: a differential element at height `c` below the corner of a parallel `a × b`
+/// rectangle, facing it; odd in `a` and `b` so that offsets superpose with signs.
+fn corner_factor(a: f64, b: f64, c: f64) -> f64 {
+    let (x, y) = (a.abs() / c, b.abs() / c);
+    let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+    let f = (x / sx * (y / sx).atan() + y / sy * (x / sy).atan()) / (2.0 * PI);
+    a.signum() * b.signum() * f
+}
+
+/// Factor from `(px, py, 0)` facing +z to the rectangle `[x0, x1] × [y0, y1]` at height `c`.
+fn rectangle_factor(px: f64, py: f64, [x0, y0, x1, y1]: [f64; 4], c: f64) -> f64 {
+    let g = |x: f64, y: f64| corner_factor(x - px, y - py, c);
+    g(x1, y1) - g(x0, y1) - g(x1, y0) + g(x0, y0)
+}
+
+#[test]
+fn a_small_emitter_gives_the_analytic_illuminance() {
+    let le = 3.0;
+    let side = 0.02;
+    let rect = [-side / 2.0, -side / 2.0, side / 2.0, side / 2.0];
+    let scene = squares(&[(
+        rect,
+        1.0,
+        true,
+        Material::emitter("lamp", Rgb::BLACK, Rgb::splat(le)),
+    )]);
+    let solution = solve(&scene);
+    let gather = IrradianceGather::new(
+        &solution.hierarchy,
+        solution.visibility.as_ref(),
+        GatherSettings::default(),
+    );
+    // Facing up, under and beside the lamp: Howell's closed form, exact up to rounding.
+    for (px, py) in [(0.0, 0.0), (0.5, 0.0), (0.3, -0.7), (2.0, 1.0)] {
+        let e = gather.at(DVec3::new(px, py, 0.0), DVec3::Z);
+        let exact = PI * le * rectangle_factor(px, py, rect, 1.0);
+        assert!(
+            (e.irradiance.g - exact).abs() <= 1e-9 * exact,
+            "({px}, {py}): {} vs {exact}",
+            e.irradiance.g
+        );
+        assert!(e.error() <= 1e-9 * exact, "no shadow, no solver error");
+    }
+    // Tilted normals at known distance and angle: the inverse-square cosine law L A cos θx cos θy / d²,
+    // whose relative error for a source of size s at distance d is O((s/d)²) ≈ 4e-4 here: within 1%.
+    for (x, normal) in [
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::new(1.0, 0.0, 1.0)),
+        (DVec3::new(0.4, 0.2, 0.1), DVec3::new(-1.0, 0.5, 0.3)),
+        (DVec3::new(-0.6, 0.0, 0.5), DVec3::new(1.0, 0.0, 0.0)),
+    ] {
+        let n = normal.normalize();
+        let to_lamp = DVec3::new(0.0, 0.0, 1.0) - x;
+        let d = to_lamp.length();
+        let (cos_x, cos_y) = (n.dot(to_lamp) / d, to_lamp.z / d);
+        let law = le * side * side * cos_x * cos_y / (d * d);
+        let e = gather.at(x, n).irradiance.g;
+        assert!((e - law).abs() <= 0.01 * law, "{x}: {e} vs {law}");
+    }
+}
+
+#[test]
+fn the_white_furnace_gives_pi_l_in_every_direction() {
+    let (rho, le) = (0.5, 1.0);
+    let scene = generators::furnace(DVec3::new(1.0, 2.0, 1.5), rho, le);
+    // Refined to the minimum element size, as in tests/physics.rs, where every leaf is within 0.5% of
+    // the exact L = E / (1 - ρ).
+    let settings = SimulationSettings {
+        eps: 1e-7,
+        min_area: 1e-2,
+        ..Default::default()
+    };
+    let mut solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+    let exact = le / (1.0 - rho);
+    let points = [
+        DVec3::new(0.5, 1.0, 0.75),
+        DVec3::new(0.1, 0.2, 0.3),
+        DVec3::new(0.95, 1.9, 0.05),
+    ];
+    let directions = [
+        DVec3::X,
+        -DVec3::Y,
+        DVec3::Z,
+        DVec3::new(1.0, 1.0, 1.0),
+        DVec3::new(-0.3, 0.8, -0.2),
+    ];
+    let check = |solution: &Solution, tolerance: f64| {
+        let gather = IrradianceGather::new(
+            &solution.hierarchy,
+            solution.visibility.as_ref(),
+            GatherSettings::default(),
+        );
+        for x in points {
+            for d in directions {
+                let e = gather.at(x, d.normalize());
+                let allowed = tolerance * PI * exact + e.gather_error + 1e-9;
+                assert!(
+                    (e.irradiance.g - PI * exact).abs() <= allowed,
+                    "{x} facing {d}: {} vs π L = {}, allowed {allowed}",
+                    e.irradiance.g,
+                    PI * exact
+                );
+            }
+        }
+    };
+    // The solved radiance: within the leaves' 0.5% of π L, up to the gather's own error.
+    check(&solution, 0.005);
+    // The exact uniform radiance: the pieces' exact factors close the sphere, so π L up to rounding and
+    // the gather's own error (pieces cut by the horizon between their nodes).
+    for e in &mut solution.hierarchy.elements {
+        e.radiance.iter_mut().for_each(|c| *c = Rgb::BLACK);
+        e.radiance[0] = Rgb::splat(exact);
+    }
+    check(&solution, 0.0);
+}
+
+/// An emitter square [0, 1]² at z = 1 facing down, a black occluder square at z = 0.5 below part of it:
+/// the points on z = 0 see the emitter minus the occluder's shadow-projection onto the emitter plane.
+const EMITTER: [f64; 4] = [0.0, 0.0, 1.0, 1.0];
+const OCCLUDER: [f64; 4] = [0.3, 0.2, 0.8, 0.6];
+
+fn shadow_scene() -> Scene {
+    squares(&[
+        (
+            EMITTER,
+            1.0,
+            true,
+            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
+        ),
+        (OCCLUDER, 0.5, false, Material::diffuse("black", Rgb::BLACK)),
+        (OCCLUDER, 0.5, true, Material::diffuse("black", Rgb::BLACK)),
+    ])
+}
+
+/// The exact irradiance at `(px, py, 0)` facing up: π L (F(emitter) − F(occluded part)), where the
+/// occluded part is the occluder projected from the point onto the emitter plane (a rectangle, scaled
+/// by 2 about the point), clipped to the emitter; both by Lambert's exact formula.
+fn shadow_truth(px: f64, py: f64) -> f64 {
+    let x = DVec3::new(px, py, 0.0);
+    let quad = |[x0, y0, x1, y1]: [f64; 4]| {
+        let p = |x: f64, y: f64| DVec3::new(x, y, 1.0);
+        Shape::Quad([p(x0, y0), p(x0, y1), p(x1, y1), p(x1, y0)])
+    };
+    let scale = 2.0;
+    let [ox0, oy0, ox1, oy1] = OCCLUDER;
+    let shadow = [
+        (px + scale * (ox0 - px)).max(EMITTER[0]),
+        (py + scale * (oy0 - py)).max(EMITTER[1]),
+        (px + scale * (ox1 - px)).min(EMITTER[2]),
+        (py + scale * (oy1 - py)).min(EMITTER[3]),
+    ];
+    let blocked = if shadow[0] < shadow[2] && shadow[1] < shadow[3] {
+        point_to_polygon(x, DVec3::Z, &quad(shadow))
+    } else {
+        0.0
+    };
+    PI * (point_to_polygon(x, DVec3::Z, &quad(EMITTER)) - blocked)
+}
+
+/// Points across the shadow and penumbra, on z = 0.
+fn shadow_points() -> Vec<(f64, f64)> {
+    (0..9)
+        .flat_map(|i| (0..9).map(move |j| (0.05 + 0.11 * i as f64, 0.05 + 0.11 * j as f64)))
+        .collect()
+}
+
+#[test]
+fn in_a_penumbra_the_gather_converges_and_its_error_estimate_covers_the_error() {
+    let scene = shadow_scene();
+    let solution = solve(&scene);
+    let visibility = solution.visibility.as_ref();
+    let fine = IrradianceGather::new(&solution.hierarchy, visibility, GatherSettings::default());
+    let coarse = IrradianceGather::new(
+        &solution.hierarchy,
+        visibility,
+        GatherSettings {
+            max_solid_angle: 0.3,
+            tolerance: 0.05,
+            max_depth: 1,
+            cubature_degree: 1,
+        },
+    );
+    let (mut fine_error, mut coarse_error) = (0.0, 0.0);
+    let (mut fine_covered, mut coarse_covered) = (0, 0);
+    let points = shadow_points();
+    for &(px, py) in &points {
+        let truth = shadow_truth(px, py);
+        let x = DVec3::new(px, py, 0.0);
+        let f = fine.at(x, DVec3::Z);
+        let c = coarse.at(x, DVec3::Z);
+        fine_error += (f.irradiance.g - truth).abs();
+        coarse_error += (c.irradiance.g - truth).abs();
+        fine_covered += usize::from((f.irradiance.g - truth).abs() <= f.error());
+        coarse_covered += usize::from((c.irradiance.g - truth).abs() <= c.error());
+    }
+    assert!(
+        fine_error < 0.25 * coarse_error,
+        "refinement helps: {fine_error} vs {coarse_error}"
+    );
+    // The visibility term is two binomial standard deviations of the sampled visible fraction, a 95%
+    // bound where sampling the fraction is the only error (the solution itself is exact here: nothing
+    // reflects).
+    for (name, covered) in [("fine", fine_covered), ("coarse", coarse_covered)] {
+        assert!(
+            covered as f64 >= 0.95 * points.len() as f64,
+            "{name}: {covered} of {} points covered by the estimate",
+            points.len()
+        );
+    }
+}
+
+#[test]
+fn the_path_traced_irradiance_at_a_floating_point_is_unbiased() {
+    let scene = shadow_scene();
+    let solution = solve(&scene);
+    let tracer = PathTracer::new(&scene, solution.visibility.as_ref(), 3);
+    // Four standard errors: a 6e-5 chance per point for a normal batch mean.
+    for (k, (px, py)) in [(0.5, 0.5), (0.15, 0.4), (0.9, 0.1)]
+        .into_iter()
+        .enumerate()
+    {
+        let e = tracer.irradiance_at(DVec3::new(px, py, 0.0), DVec3::Z, 4096, k as u64);
+        let truth = shadow_truth(px, py);
+        assert!(
+            (e.mean.g - truth).abs() <= 4.0 * e.stderr.g + 1e-12,
+            "({px}, {py}): {} ± {} vs {truth}",
+            e.mean.g,
+            e.stderr.g
+        );
+    }
+}
+
+fn radiosity(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_radiosity"))
+        .args(args)
+        .output()
+        .expect("run radiosity")
+}
+
+#[test]
+fn grid_writes_csv_json_and_isolux_svg_and_never_overwrites_the_scene() {
+    let dir = std::env::temp_dir().join(format!("radiosity-grid-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("cornell.mgf");
+    let s = scene.to_str().unwrap();
+    assert!(radiosity(&["scene", "cornell", "-o", s]).status.success());
+    let before = std::fs::read(&scene).unwrap();
+    let base = dir.join("floor");
+    let fast = ["--eps", "0.05", "--plane", "y=100", "--spacing", "100"];
+    let mut args = vec!["grid", s, "-o", base.to_str().unwrap()];
+    args.extend(fast);
+    let out = radiosity(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(dir.join("floor.csv")).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("floor.json")).unwrap()).unwrap();
+    let svg = std::fs::read_to_string(dir.join("floor.svg")).unwrap();
+    let points = json["points"].as_array().unwrap();
+    assert_eq!(csv.lines().count(), points.len() + 1);
+    assert!(csv.starts_with("x,y,z,lux,error_lux\n"));
+    assert_eq!(
+        json["summary"]["points"].as_u64(),
+        Some(points.len() as u64)
+    );
+    let (min, mean) = (
+        json["summary"]["min_lux"].as_f64().unwrap(),
+        json["summary"]["mean_lux"].as_f64().unwrap(),
+    );
+    // Points inside the blocks see only their black insides: zero.
+    assert!(min >= 0.0 && mean > min);
+    let uniformity = json["summary"]["uniformity_min_over_mean"]
+        .as_f64()
+        .unwrap();
+    assert!((uniformity - min / mean).abs() < 1e-12);
+    assert!(svg.contains("<svg") && svg.contains("illuminance (lux)"));
+    // An output that is the scene (through a link) is refused before any work; so is a bad plane.
+    std::os::unix::fs::symlink(&scene, dir.join("link.csv")).unwrap();
+    let link = dir.join("link");
+    let mut args = vec!["grid", s, "-o", link.to_str().unwrap()];
+    args.extend(fast);
+    let out = radiosity(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("input scene"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(&scene).unwrap(),
+        before,
+        "the scene is untouched"
+    );
+    let out = radiosity(&["grid", s, "--plane", "y=5000", "-o", base.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("outside the scene"),
+        "{stderr}"
+    );
+}
