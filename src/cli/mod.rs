@@ -29,6 +29,7 @@ mod probe;
 mod reference;
 mod render;
 mod scene;
+mod view;
 
 pub use args::parse_vec3;
 
@@ -77,6 +78,8 @@ pub enum Command {
     Scene(scene::SceneCommand),
     /// Chart one field of run statistics against another (error vs time or elements) as SVG.
     Plot(plot::PlotCommand),
+    /// Solve a scene, write the interactive viewer page (HTML, WebGL) and open it in the browser.
+    View(view::ViewCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -129,5 +132,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Measure(c) => c.run(seed, &progress),
         Command::Scene(c) => c.run(),
         Command::Plot(c) => c.run(),
+        Command::View(c) => c.run(seed, &progress),
     })
 }
