@@ -295,6 +295,33 @@ impl CameraArgs {
     }
 }
 
+/// From linear radiance to display: exposure and tone curve (PNG images and the viewer page).
+#[derive(Args, Debug, Clone)]
+pub struct ToneArgs {
+    /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
+    #[arg(long)]
+    pub exposure: Option<f64>,
+    /// Tone curve for the PNG.
+    #[arg(long, value_enum, default_value_t = crate::output::tonemap::Curve::Filmic)]
+    pub tone: crate::output::tonemap::Curve,
+}
+
+impl ToneArgs {
+    pub fn tone_map(&self) -> Result<crate::output::tonemap::ToneMap> {
+        use crate::output::tonemap::{Exposure, ToneMap};
+        if let Some(e) = self.exposure {
+            anyhow::ensure!(
+                e.is_finite() && e > 0.0,
+                "--exposure must be a positive number"
+            );
+        }
+        Ok(ToneMap {
+            exposure: self.exposure.map_or(Exposure::Auto, Exposure::Multiplier),
+            curve: self.tone,
+        })
+    }
+}
+
 /// Widest or tallest image, in pixels.
 pub const MAX_IMAGE_SIDE: u64 = 32_768;
 pub use crate::output::image::MAX_PIXELS;

@@ -57,19 +57,15 @@ impl GridCommand {
             self.max_solid_angle.is_finite() && self.max_solid_angle >= 1e-4,
             "--max-solid-angle must be at least 1e-4 sr"
         );
-        let input = self
-            .scene
-            .scene
-            .as_deref()
-            .and_then(|p| p.canonicalize().ok());
-        for (option, path) in ["-o (csv)", "-o (json)", "-o (svg)"]
-            .iter()
-            .zip(output_paths(&self.output))
-        {
-            super::args::check_output(option, &path, input.as_deref())?;
-        }
+        let paths = output_paths(&self.output);
+        let outputs: Vec<(&str, &std::path::Path)> = ["-o (csv)", "-o (json)", "-o (svg)"]
+            .into_iter()
+            .zip(paths.iter().map(|p| p.as_path()))
+            .collect();
+        super::args::check_outputs(&outputs, self.scene.scene.as_slice())?;
         let start = Instant::now();
         let (scene, name) = self.scene.load_for_solving(progress)?;
+        super::args::check_outputs(&outputs, &scene.sources)?;
         let region = match self.region {
             Some(region) => region,
             None => self

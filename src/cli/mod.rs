@@ -30,6 +30,7 @@ mod probe;
 mod reference;
 mod render;
 mod scene;
+mod view;
 
 pub use args::parse_vec3;
 
@@ -80,6 +81,8 @@ pub enum Command {
     Plot(plot::PlotCommand),
     /// Illuminance (lux) on a work-plane grid with an error per point: CSV, JSON and an isolux plot.
     Grid(grid::GridCommand),
+    /// Solve a scene, write the interactive viewer page (HTML, WebGL) and open it in the browser.
+    View(view::ViewCommand),
 }
 
 /// Runs the command line and returns the process exit code.
@@ -133,5 +136,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Scene(c) => c.run(),
         Command::Plot(c) => c.run(),
         Command::Grid(c) => c.run(seed, &progress),
+        Command::View(c) => c.run(seed, &progress),
     })
 }

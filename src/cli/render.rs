@@ -1,13 +1,14 @@
 //! `radiosity render`: load, solve, render to PNG (and EXR, PLY/GLB, stats JSON).
 
-use super::args::{CameraArgs, SceneArgs, SolveArgs};
+use super::args::{CameraArgs, SceneArgs, SolveArgs, ToneArgs};
 use crate::color::Units;
 use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
 use crate::output::false_colour;
 use crate::output::mesh_values::VertexRadiosity;
 use crate::output::render::{emitter_mask, render_with, Quantity, RenderOptions, Shading};
-use crate::output::tonemap::{write_png, Curve, Exposure, ToneMap};
+use crate::output::tonemap::write_png;
+use crate::output::viewer::{write_page, Page, ViewerMesh, DEFAULT_MAX_TRIANGLES};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use anyhow::{Context, Result};
@@ -41,18 +42,18 @@ pub struct RenderCommand {
     /// `reference`); 1 = pixel centres (comparable with `reference --filter centre`).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=65_536))]
     pub spp: u32,
-    /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
-    #[arg(long)]
-    pub exposure: Option<f64>,
-    /// Tone curve for the PNG.
-    #[arg(long, value_enum, default_value_t = Curve::Filmic)]
-    pub tone: Curve,
+    #[command(flatten)]
+    pub tone: ToneArgs,
     /// Also write linear radiance as OpenEXR.
     #[arg(long, value_name = "FILE.exr")]
     pub hdr: Option<PathBuf>,
-    /// Write the illuminated mesh (.ply or .glb; repeatable).
+    /// Write the illuminated mesh (.ply or .glb; repeatable), or the interactive viewer (.html: one
+    /// self-contained page, the same view and tone mapping as the PNG).
     #[arg(long, value_name = "FILE")]
     pub export: Vec<PathBuf>,
+    /// Most triangles in an --export .html page.
+    #[arg(long, default_value_t = DEFAULT_MAX_TRIANGLES, value_name = "N", value_parser = super::args::count(1, 1 << 28))]
+    pub max_triangles: usize,
     /// Write a PNG mask of the pixels that see a light source (white), for `compare --mask`.
     #[arg(long, value_name = "FILE.png")]
     pub emitter_mask: Option<PathBuf>,
@@ -71,17 +72,12 @@ impl RenderCommand {
         for path in &self.export {
             let ext = extension(path);
             anyhow::ensure!(
-                ext == "ply" || ext == "glb",
-                "--export {}: expected a .ply or .glb file",
+                ext == "ply" || ext == "glb" || ext == "html",
+                "--export {}: expected a .ply, .glb or .html file",
                 path.display()
             );
         }
-        if let Some(e) = self.exposure {
-            anyhow::ensure!(
-                e.is_finite() && e > 0.0,
-                "--exposure must be a positive number"
-            );
-        }
+        let tone = self.tone.tone_map()?;
         self.check_outputs(self.scene.scene.as_slice())?;
         let start = Instant::now();
         let (scene, name) = self.scene.load_for_solving(progress)?;
@@ -117,10 +113,6 @@ impl RenderCommand {
             .iter_mut()
             .for_each(|c| *c *= self.units.scale());
 
-        let tone = ToneMap {
-            exposure: self.exposure.map_or(Exposure::Auto, Exposure::Multiplier),
-            curve: self.tone,
-        };
         match self.show {
             Quantity::Radiance => write_png(&self.output, &image, &tone)?,
             Quantity::ErrorEstimate => {
@@ -144,7 +136,28 @@ impl RenderCommand {
             let vertices = vertices.as_ref().context("vertex radiosity")?;
             match extension(path).as_str() {
                 "ply" => write_ply(path, &solution.hierarchy, vertices, &tone)?,
-                _ => write_glb(path, &solution.hierarchy, vertices, &tone)?,
+                "glb" => write_glb(path, &solution.hierarchy, vertices, &tone)?,
+                _ => {
+                    let mesh = ViewerMesh::new(
+                        &solution.hierarchy,
+                        self.shading,
+                        Some(vertices),
+                        self.max_triangles,
+                    )?;
+                    // The PNG's own exposure; an error-estimate PNG has none, so the model's.
+                    let exposure = match self.show {
+                        Quantity::Radiance => tone.exposure_scale(image.pixels.iter().copied()),
+                        Quantity::ErrorEstimate => tone.exposure_scale(mesh.vertex_radiance()),
+                    };
+                    let page = Page {
+                        title: &name,
+                        camera: &camera,
+                        curve: tone.curve,
+                        exposure,
+                        shading: self.shading,
+                    };
+                    write_page(path, &mesh, &page)?;
+                }
             }
         }
         let mut stats = RunStats::new(&name, scene.polygons.len(), &solution, &settings);

@@ -12,7 +12,7 @@
 
 use crate::bases::{Basis, BasisKind};
 use crate::color::Rgb;
-use crate::geometry::{Aabb, DVec3, Shape};
+use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
 use std::sync::Arc;
@@ -341,10 +341,16 @@ impl Hierarchy {
     /// Exitant radiance of surface element `id` at the point `p` on it: its basis expansion evaluated
     /// at the point's parameters (clamped into the element).
     pub fn radiance_at(&self, id: ElementId, p: DVec3) -> Rgb {
+        let shape = self.element(id).shape();
+        self.radiance_at_parameters(id, shape.parameters_of(p))
+    }
+
+    /// Exitant radiance of surface element `id` at parameters `uv` of its shape (clamped into the
+    /// domain): the basis expansion, without inverting the parametrisation.
+    pub fn radiance_at_parameters(&self, id: ElementId, uv: DVec2) -> Rgb {
         let e = self.element(id);
-        let shape = e.shape();
-        let domain = shape.domain();
-        let uv = domain.clamp(shape.parameters_of(p));
+        let domain = e.shape().domain();
+        let uv = domain.clamp(uv);
         let mut phi = [0.0; crate::bases::MAX_BASIS_SIZE];
         let phi = &mut phi[..e.radiance.len()];
         self.basis.eval(domain, uv, phi);

@@ -12,6 +12,8 @@ pub struct Camera {
     forward: DVec3,
     right: DVec3,
     up: DVec3,
+    /// The world's up as given (unit length): what an interactive view keeps vertical.
+    sky: DVec3,
     /// tan(fov_y / 2)
     half_height: f64,
     pub width: usize,
@@ -34,6 +36,7 @@ impl Camera {
             forward,
             right,
             up,
+            sky: spec.up.normalize_or(up),
             half_height: (spec.fov_degrees.to_radians() * 0.5).tan(),
             width: width.max(1),
             height: height.max(1),
@@ -120,6 +123,21 @@ impl Camera {
     /// Direction the camera looks in.
     pub fn forward(&self) -> DVec3 {
         self.forward
+    }
+
+    /// The image's up direction (orthogonal to [`Camera::forward`]).
+    pub fn up(&self) -> DVec3 {
+        self.up
+    }
+
+    /// The world's up direction given to [`Camera::new`] (not orthogonalised).
+    pub fn sky(&self) -> DVec3 {
+        self.sky
+    }
+
+    /// Vertical field of view in degrees.
+    pub fn vertical_fov_degrees(&self) -> f64 {
+        2.0 * self.half_height.atan().to_degrees()
     }
 }
 

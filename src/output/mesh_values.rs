@@ -217,6 +217,17 @@ impl VertexRadiosity {
         self.positions[id]
     }
 
+    /// The outline of leaf `leaf` as welded vertex ids (corners and T-vertices, counter-clockwise) when
+    /// corners of its neighbours lie inside its edges; `None` when its own corners are its whole outline.
+    /// Triangulating such a leaf from its corners alone leaves cracks where the neighbours' edges meet it.
+    pub fn outline(&self, leaf: ElementId) -> Option<&[u32]> {
+        let slot = *self.leaf_slot.get(leaf as usize)?;
+        if slot == NOT_A_LEAF {
+            return None;
+        }
+        self.leaves[slot as usize].boundary.as_deref()
+    }
+
     /// Number of leaves whose edges carry T-vertices (interpolated by a fan from their centre).
     pub fn fanned_leaf_count(&self) -> usize {
         self.leaves.iter().filter(|l| l.boundary.is_some()).count()

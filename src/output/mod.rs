@@ -1,5 +1,5 @@
 //! Output: pinhole camera, ray-cast rendering of the solution (flat, smooth, mesh overlay), PNG and
-//! OpenEXR images, illuminated models (PLY, glTF).
+//! OpenEXR images, illuminated models (PLY, glTF), the interactive viewer page (HTML).
 
 pub mod camera;
 pub mod export;
@@ -9,6 +9,7 @@ pub mod mesh_values;
 pub mod plot;
 pub mod render;
 pub mod tonemap;
+pub mod viewer;
 pub mod work_plane;
 
 use anyhow::{Context, Result};
