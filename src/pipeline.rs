@@ -4,6 +4,7 @@
 //! tests share this one path.
 
 use crate::bases::BasisKind;
+use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
 use crate::hierarchy::Hierarchy;
 use crate::oracles::link_error::LinkErrorOracle;
 use crate::oracles::mutual_information::MutualInformationOracle;
@@ -17,6 +18,7 @@ use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell}
 use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
+use crate::visibility::extinction::Extinction;
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
@@ -97,12 +99,16 @@ pub fn mean_radiance_estimate(hierarchy: &Hierarchy) -> f64 {
     (channel(emitted.r, rho.r) + channel(emitted.g, rho.g) + channel(emitted.b, rho.b)) / 3.0
 }
 
-/// Ray casting back end (`--visibility`).
+/// Visibility back end (`--visibility`): exact ray casting, or extinction through clusters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum VisibilityKind {
-    /// Our SAH bounding volume hierarchy.
+    /// Exact ray casting with our SAH bounding volume hierarchy.
+    #[value(alias = "exact")]
     Bvh,
+    /// Transmittance by extinction through the clusters a segment crosses (Sillion–Drettakis §3.1;
+    /// clusters built by `--hierarchy`); rays for rendering stay exact.
+    Extinction,
     /// Embree 3 (build with `--features embree`).
     #[cfg(feature = "embree")]
     Embree,
@@ -117,6 +123,10 @@ pub struct SimulationSettings {
     pub oracle: OracleKind,
     pub solver: SolverKind,
     pub visibility: VisibilityKind,
+    /// Cluster transfer model; `None` links every pair of patches at the start.
+    pub clustering: ClusteringKind,
+    /// How the cluster tree is built (clustering and extinction visibility).
+    pub cluster_tree: ClusterTreeKind,
     /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
     pub eps: f64,
     /// Smallest splittable element area relative to the total patch area.
@@ -187,6 +197,8 @@ impl Default for SimulationSettings {
             oracle: OracleKind::Power,
             solver: SolverKind::GaussSeidel,
             visibility: VisibilityKind::Bvh,
+            clustering: ClusteringKind::None,
+            cluster_tree: ClusterTreeKind::Grid,
             eps: 1e-3,
             min_area: 1e-5,
             basis: BasisKind::Constant,
@@ -216,14 +228,24 @@ pub struct Solution {
     pub visibility_seconds: f64,
 }
 
-/// Builds the ray-casting structure over the scene's polygons.
+/// Builds the ray-casting structure over the scene's polygons (extinction on grid clusters).
 pub fn build_visibility(
     scene: &Scene,
     kind: VisibilityKind,
 ) -> anyhow::Result<Box<dyn Visibility>> {
+    build_visibility_with(scene, kind, ClusterTreeKind::Grid)
+}
+
+/// [`build_visibility`] with the cluster tree extinction visibility uses.
+pub fn build_visibility_with(
+    scene: &Scene,
+    kind: VisibilityKind,
+    tree: ClusterTreeKind,
+) -> anyhow::Result<Box<dyn Visibility>> {
     let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
     Ok(match kind {
         VisibilityKind::Bvh => Box::new(Bvh::new(&shapes)),
+        VisibilityKind::Extinction => Box::new(Extinction::new(&shapes, tree)),
         #[cfg(feature = "embree")]
         VisibilityKind::Embree => Box::new(crate::visibility::embree::EmbreeScene::new(&shapes)?),
         VisibilityKind::BruteForce => Box::new(BruteForce::new(shapes)),
@@ -243,6 +265,7 @@ pub fn make_oracle(
         OracleKind::Error => Box::new(LinkErrorOracle {
             coupling: CouplingSettings {
                 cubature_degree: settings.cubature_degree(),
+                seed: settings.seed,
             },
         }),
     }
@@ -271,8 +294,14 @@ pub fn deterministic_settings(
             threshold: settings.eps * hierarchy.total_emission(),
             min_area: settings.min_area * hierarchy.total_area(),
             max_elements: settings.max_elements.min(memory_elements),
+            // Half the memory budget for links (the element budget above already reserves links per
+            // element; clustering can put many more links on few elements).
+            max_links: settings.max_memory
+                / 2
+                / link_bytes(settings.basis, settings.cubature_degree()).max(1),
             coupling: CouplingSettings {
                 cubature_degree: settings.cubature_degree(),
+                seed: settings.seed,
             },
             seed: settings.seed,
         },
@@ -307,9 +336,15 @@ pub fn simulate(
     progress: &Progress,
 ) -> anyhow::Result<Solution> {
     let start = Instant::now();
-    let visibility = build_visibility(scene, settings.visibility)?;
+    let visibility = build_visibility_with(scene, settings.visibility, settings.cluster_tree)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, settings.basis);
+    anyhow::ensure!(
+        settings.clustering == ClusteringKind::None || settings.method == MethodKind::Deterministic,
+        "clustering works with the deterministic method (use --clustering none with \
+         --method stochastic-jacobi)"
+    );
+    hierarchy.add_clusters(settings.cluster_tree, settings.clustering);
     let threshold = settings.eps * hierarchy.total_emission();
     let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);
@@ -358,9 +393,12 @@ pub fn simulate(
     );
     if report.refused_by_budget > 0 && !progress.quiet {
         crate::progress::stderr_line(format_args!(
-            "warning: the element budget ({} elements, from --max-elements and --max-memory) stopped \
-             refinement: {} splits refused, the solution is coarser than the settings ask",
-            solve_settings.refine.max_elements, report.refused_by_budget
+            "warning: the element and link budget ({} elements, {} links, from --max-elements and \
+             --max-memory) stopped refinement: {} splits refused, the solution is coarser than the \
+             settings ask",
+            solve_settings.refine.max_elements,
+            solve_settings.refine.max_links,
+            report.refused_by_budget
         ));
     }
     Ok(Solution {

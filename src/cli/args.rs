@@ -2,6 +2,7 @@
 
 use crate::bases::BasisKind;
 use crate::geometry::DVec3;
+use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
 use crate::pipeline::{
     default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
     VisibilityKind, DEFAULT_RELATIVE_ACCURACY,
@@ -141,9 +142,16 @@ pub struct SolveArgs {
     /// Iterative solver for the linear system.
     #[arg(long, value_enum, default_value_t = SolverKind::GaussSeidel)]
     pub solver: SolverKind,
-    /// Ray casting back end.
+    /// Visibility: exact ray casting (bvh, alias exact) or extinction through clusters.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
     pub visibility: VisibilityKind,
+    /// Clustering (Sillion–Drettakis §4): start from one self-link on the root cluster; clusters
+    /// exchange light as isotropic volumes or by the projected area of their patches.
+    #[arg(long, value_enum, default_value_t = ClusteringKind::None)]
+    pub clustering: ClusteringKind,
+    /// How clusters are built: the paper's multi-level grid, a median-split k-d tree or an octree.
+    #[arg(long = "hierarchy", value_enum, default_value_t = ClusterTreeKind::Grid)]
+    pub cluster_tree: ClusterTreeKind,
     /// Refinement threshold ε of the power, smoothness and mi oracles, relative to the scene's total
     /// emission (Σ A·max(E)); smaller is finer.
     #[arg(long, default_value_t = 3e-5)]
@@ -203,6 +211,8 @@ impl SolveArgs {
             }),
             solver: self.solver,
             visibility: self.visibility,
+            clustering: self.clustering,
+            cluster_tree: self.cluster_tree,
             eps: self.eps,
             min_area: self.min_area,
             basis: self.basis,

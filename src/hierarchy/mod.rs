@@ -10,6 +10,8 @@
 //! (Sillion–Drettakis §4): a box of other elements, with no patch, that links and push-pull treat as one
 //! element whose radiance is the area-weighted average of its contents.
 
+pub mod clusters;
+
 use crate::bases::{Basis, BasisKind};
 use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec2, DVec3, Shape};
@@ -108,6 +110,12 @@ pub struct Surface {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cluster {
     pub bounds: Aabb,
+    /// Largest reflectance of its contents, per channel (the refinement bound's ρ_max).
+    pub reflectance: Rgb,
+    /// Largest emission of its contents, per channel.
+    pub emission: Rgb,
+    /// Its patch roots: `Hierarchy::cluster_surfaces[contents]`.
+    pub contents: std::ops::Range<u32>,
 }
 
 /// The two kinds of element.
@@ -187,6 +195,13 @@ pub struct Hierarchy {
     /// Irradiance coefficients (divided by π, like gathered ones) from the luminaires, `basis size` per
     /// element, on leaves only; empty without luminaires ([`crate::solvers::direct`]).
     pub direct: Vec<Rgb>,
+    /// The root of the cluster tree over the patch roots, when clustering is on
+    /// ([`Hierarchy::add_clusters`]).
+    pub root_cluster: Option<ElementId>,
+    /// Patch roots in cluster-tree order: each cluster's contents are one contiguous range.
+    pub cluster_surfaces: Vec<ElementId>,
+    /// How clusters exchange light (`ClusteringKind::None` without clusters).
+    pub clustering: clusters::ClusteringKind,
 }
 
 impl Hierarchy {
@@ -200,6 +215,9 @@ impl Hierarchy {
             basis: Arc::new(Basis::new(basis)),
             luminaires: scene.luminaires.clone(),
             direct: Vec::new(),
+            root_cluster: None,
+            cluster_surfaces: Vec::new(),
+            clustering: clusters::ClusteringKind::None,
         };
         for (index, polygon) in scene.polygons.iter().enumerate() {
             let material = scene.material_of(polygon);
@@ -258,6 +276,175 @@ impl Hierarchy {
         &self.patches[self.elements[id as usize].patch() as usize]
     }
 
+    /// Groups the patch roots into a tree of cluster elements (Sillion–Drettakis §4) built by `kind`,
+    /// exchanging light by `transfer`; cluster radiance starts at the area-weighted average emission
+    /// of the contents. Call before any element is split; does nothing for `ClusteringKind::None`,
+    /// without patches, or if clusters exist already.
+    pub fn add_clusters(
+        &mut self,
+        kind: clusters::ClusterTreeKind,
+        transfer: clusters::ClusteringKind,
+    ) {
+        if transfer == clusters::ClusteringKind::None
+            || self.patches.is_empty()
+            || self.root_cluster.is_some()
+        {
+            return;
+        }
+        self.clustering = transfer;
+        let items: Vec<clusters::Item> = self
+            .patches
+            .iter()
+            .map(|p| clusters::Item {
+                bounds: p.shape.bounds(),
+                area: self.element(p.root).area,
+            })
+            .collect();
+        let tree = clusters::ClusterTree::build(&items, kind);
+        let first = self.elements.len() as ElementId;
+        let size = self.basis_size();
+        for node in &tree.nodes {
+            let id = self.elements.len() as ElementId;
+            let children: Vec<ElementId> = node
+                .children
+                .iter()
+                .map(|&c| match c {
+                    clusters::Child::Item(i) => self.patches[i as usize].root,
+                    clusters::Child::Node(n) => first + n,
+                })
+                .collect();
+            let (mut reflectance, mut emission) = (Rgb::BLACK, Rgb::BLACK);
+            for &c in &children {
+                self.elements[c as usize].parent = Some(id);
+                let (r, e) = self.optics_of(c);
+                reflectance = max_rgb(reflectance, r);
+                emission = max_rgb(emission, e);
+            }
+            self.elements.push(Element {
+                kind: ElementKind::Cluster(Cluster {
+                    bounds: node.bounds,
+                    reflectance,
+                    emission,
+                    contents: 0..0,
+                }),
+                parent: None,
+                children,
+                level: 0,
+                area: node.area,
+                radiance: vec![Rgb::BLACK; size],
+                links: Vec::new(),
+                error: 0.0,
+                threshold: f64::INFINITY,
+            });
+        }
+        let root = self.elements.len() as ElementId - 1;
+        self.root_cluster = Some(root);
+        self.order_contents(root);
+        self.pull_clusters();
+    }
+
+    /// Lists the patch roots below `id` into `cluster_surfaces` and records each cluster's range.
+    fn order_contents(&mut self, id: ElementId) {
+        if !self.is_cluster(id) {
+            self.cluster_surfaces.push(id);
+            return;
+        }
+        let start = self.cluster_surfaces.len() as u32;
+        for c in self.elements[id as usize].children.clone() {
+            self.order_contents(c);
+        }
+        let end = self.cluster_surfaces.len() as u32;
+        if let ElementKind::Cluster(cluster) = &mut self.elements[id as usize].kind {
+            cluster.contents = start..end;
+        }
+    }
+
+    /// Cluster radiance as the area-weighted average of the children's average radiance (the pull of
+    /// push-pull through clusters), bottom-up. Only the constant coefficient of a cluster is used.
+    pub fn pull_clusters(&mut self) {
+        let Some(root) = self.root_cluster else {
+            return;
+        };
+        let first = self.patches.len().min(root as usize);
+        // Clusters are stored after every surface element they contain and after their child clusters.
+        for id in first..=root as usize {
+            if !self.is_cluster(id as ElementId) {
+                continue;
+            }
+            let e = &self.elements[id];
+            let sum: Rgb = e
+                .children
+                .iter()
+                .map(|&c| self.elements[c as usize].radiance[0] * self.elements[c as usize].area)
+                .sum();
+            let average = if e.area > 0.0 {
+                sum / e.area
+            } else {
+                Rgb::BLACK
+            };
+            self.elements[id].radiance[0] = average;
+        }
+    }
+
+    pub fn is_cluster(&self, id: ElementId) -> bool {
+        matches!(self.elements[id as usize].kind, ElementKind::Cluster(_))
+    }
+
+    /// The cluster of element `id`; `None` for a surface.
+    pub fn cluster(&self, id: ElementId) -> Option<&Cluster> {
+        match &self.elements[id as usize].kind {
+            ElementKind::Cluster(c) => Some(c),
+            ElementKind::Surface(_) => None,
+        }
+    }
+
+    /// The patch roots inside cluster `id`.
+    pub fn contents(&self, cluster: &Cluster) -> &[ElementId] {
+        &self.cluster_surfaces[cluster.contents.start as usize..cluster.contents.end as usize]
+    }
+
+    /// Reflectance and emission of a surface element's patch, or a cluster's per-channel maxima.
+    pub fn optics_of(&self, id: ElementId) -> (Rgb, Rgb) {
+        match &self.elements[id as usize].kind {
+            ElementKind::Surface(s) => {
+                let p = &self.patches[s.patch as usize];
+                (p.reflectance, p.emission)
+            }
+            ElementKind::Cluster(c) => (c.reflectance, c.emission),
+        }
+    }
+
+    /// The reflectance refinement scales by: the patch's, or a cluster's largest per channel.
+    pub fn reflectance_of(&self, id: ElementId) -> Rgb {
+        self.optics_of(id).0
+    }
+
+    /// Bounds of a surface element's shape or of a cluster.
+    pub fn bounds_of(&self, id: ElementId) -> Aabb {
+        match &self.elements[id as usize].kind {
+            ElementKind::Surface(s) => s.shape.bounds(),
+            ElementKind::Cluster(c) => c.bounds,
+        }
+    }
+
+    /// Centroid of a surface element, centre of a cluster's bounds.
+    pub fn center_of(&self, id: ElementId) -> DVec3 {
+        match &self.elements[id as usize].kind {
+            ElementKind::Surface(s) => s.shape.centroid(),
+            ElementKind::Cluster(c) => c.bounds.center(),
+        }
+    }
+
+    /// The children refinement links to when it splits `id`: a cluster's contents, or a surface's four
+    /// regular children (created on first use).
+    pub fn split(&mut self, id: ElementId) -> Vec<ElementId> {
+        if self.is_cluster(id) {
+            self.elements[id as usize].children.clone()
+        } else {
+            self.subdivide(id).to_vec()
+        }
+    }
+
     /// Splits a surface leaf into its four regular children (returning the existing children if it is
     /// already split). Children inherit the parent's radiance, pushed through the basis's two-scale
     /// relation so that the piecewise function is unchanged.
@@ -292,6 +479,14 @@ impl Hierarchy {
         let children = [first, first + 1, first + 2, first + 3];
         self.elements[id as usize].children = children.to_vec();
         children
+    }
+
+    /// The tops of the element trees: the root cluster, or every patch root without clusters.
+    pub fn roots(&self) -> Vec<ElementId> {
+        match self.root_cluster {
+            Some(root) => vec![root],
+            None => self.patches.iter().map(|p| p.root).collect(),
+        }
     }
 
     /// Ids of all leaf elements, patch by patch in tree order.
@@ -412,7 +607,12 @@ impl Hierarchy {
             .sum()
     }
 
+    /// Leaf surface elements (clusters always have children).
     pub fn leaf_count(&self) -> usize {
         self.elements.iter().filter(|e| e.is_leaf()).count()
     }
+}
+
+fn max_rgb(a: Rgb, b: Rgb) -> Rgb {
+    Rgb::new(a.r.max(b.r), a.g.max(b.g), a.b.max(b.b))
 }

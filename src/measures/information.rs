@@ -204,7 +204,7 @@ impl HierarchyLeaves {
                 let source = group(&range, &count, link.source as usize)?;
                 // The solver never links into a patch that reflects nothing (its gather is useless), but
                 // light still arrives there: its row comes from reciprocity, A_S F_SR = A_R F_RS.
-                if hierarchy.patch_of(link.source).reflectance.is_black() {
+                if hierarchy.reflectance_of(link.source).is_black() {
                     blocks.push(Block {
                         receiver: source.clone(),
                         source: receiver.clone(),

@@ -118,7 +118,7 @@ pub fn reflected_source_radiance(
     receiver: ElementId,
     source: ElementId,
 ) -> f64 {
-    let rho = hierarchy.patch_of(receiver).reflectance;
+    let rho = hierarchy.reflectance_of(receiver);
     let b = hierarchy.element(source).average_radiance();
     (rho * b).max_channel()
 }

@@ -17,6 +17,7 @@
 //! the bilinear map's varying Jacobian makes `O` only approximately diagonal; we neglect that, as the
 //! error is second order in the quad's departure from a parallelogram).
 
+use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
@@ -28,11 +29,16 @@ pub struct CouplingSettings {
     /// Polynomial degree integrated exactly by the receiver's cubature rule (eq. (12)); the source's is
     /// [`crate::bases::source_cubature_degree`] of it.
     pub cubature_degree: usize,
+    /// Seed of the visibility samples of cluster links.
+    pub seed: u64,
 }
 
 impl Default for CouplingSettings {
     fn default() -> Self {
-        CouplingSettings { cubature_degree: 4 }
+        CouplingSettings {
+            cubature_degree: 4,
+            seed: 1,
+        }
     }
 }
 
@@ -47,7 +53,8 @@ pub struct Coupling {
     pub rays: u64,
 }
 
-/// Algorithm 4.1 for the link `source` → `receiver` (both surface elements).
+/// Algorithm 4.1 for the link `source` → `receiver`; links with a cluster at either end are coupled by
+/// [`couple_cluster`].
 pub fn couple(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
@@ -55,6 +62,9 @@ pub fn couple(
     source: ElementId,
     settings: &CouplingSettings,
 ) -> Coupling {
+    if hierarchy.is_cluster(receiver) || hierarchy.is_cluster(source) {
+        return couple_cluster(hierarchy, visibility, receiver, source, settings);
+    }
     let basis = &hierarchy.basis;
     let size = basis.size();
     let (r, s) = (hierarchy.element(receiver), hierarchy.element(source));
@@ -128,11 +138,7 @@ pub fn couple(
     }
     let node_factors = (0..n).map(|k| inner[k * size] as f32).collect();
     let visible: f64 = (0..n).map(|k| x_nodes[k].weight * inner[k * size]).sum();
-    let visibility = if unoccluded > 0.0 {
-        (visible / unoccluded).clamp(0.0, 1.0)
-    } else {
-        1.0
-    };
+    let visibility = visible_fraction(visible, unoccluded);
     Coupling {
         coupling: LinkCoupling {
             block: block.into(),
@@ -144,6 +150,15 @@ pub fn couple(
         unoccluded: unoccluded / r.area,
         source_nodes: y_nodes.len(),
         rays,
+    }
+}
+
+/// `v`: the visible part of a link's transfer over its unoccluded part (1 when nothing can arrive).
+pub fn visible_fraction(visible: f64, unoccluded: f64) -> f64 {
+    if unoccluded > 0.0 {
+        (visible / unoccluded).clamp(0.0, 1.0)
+    } else {
+        1.0
     }
 }
 

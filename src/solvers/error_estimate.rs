@@ -66,7 +66,7 @@ fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
                 return 0.0;
             };
             let nodes = first.coupling.node_factors.len();
-            let rho = h.patch_of(id as ElementId).reflectance;
+            let rho = h.reflectance_of(id as ElementId);
             // Visibility errors (see `LinkCoupling::visibility_error`) are sampling errors of independent
             // links: they add in quadrature.
             let visibility: f64 = e
@@ -105,8 +105,8 @@ fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
 /// Adds each element's estimate to its descendants, then sets every inner element to the largest
 /// estimate of its leaves (algorithm 6.1, steps 2b and 2e of the extended push-pull).
 fn extended_push_pull(h: &Hierarchy, errors: &mut [f64]) {
-    for patch in &h.patches {
-        down_then_up(h, patch.root, 0.0, errors);
+    for root in h.roots() {
+        down_then_up(h, root, 0.0, errors);
     }
 }
 

@@ -4,6 +4,7 @@
 //! patches before it; sequential but converging about twice as fast) and Southwell (the patch with the
 //! largest unshot change first).
 
+use super::clustering::irradiance_from_clusters;
 use super::push_pull::{push_pull, PatchUpdate};
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -39,6 +40,20 @@ pub fn gather(hierarchy: &Hierarchy, id: ElementId, out: &mut [Rgb]) {
     }
 }
 
+/// [`gather`] plus, at a patch root, the irradiance pushed down from the clusters above it
+/// (`from_clusters`, see [`irradiance_from_clusters`]).
+fn gather_with_clusters(
+    hierarchy: &Hierarchy,
+    from_clusters: &[Rgb],
+    id: ElementId,
+    out: &mut [Rgb],
+) {
+    gather(hierarchy, id, out);
+    if let Some(&h) = from_clusters.get(id as usize) {
+        out[0] += h;
+    }
+}
+
 fn apply(hierarchy: &mut Hierarchy, update: &PatchUpdate, totals: &mut Sweep) {
     update.apply(hierarchy);
     totals.exitant += update.exitant;
@@ -57,11 +72,12 @@ impl GatheringSolver for Jacobi {
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
         let h = &*hierarchy;
         let size = h.basis_size();
+        let from_clusters = irradiance_from_clusters(h);
         let mut gathered = vec![Rgb::BLACK; h.elements.len() * size];
         gathered
             .par_chunks_mut(size)
             .enumerate()
-            .for_each(|(id, out)| gather(h, id as ElementId, out));
+            .for_each(|(id, out)| gather_with_clusters(h, &from_clusters, id as ElementId, out));
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
             .map(|p| {
@@ -75,6 +91,7 @@ impl GatheringSolver for Jacobi {
         for update in &updates {
             apply(hierarchy, update, &mut totals);
         }
+        hierarchy.pull_clusters();
         totals
     }
 }
@@ -89,14 +106,19 @@ impl GatheringSolver for GaussSeidel {
     }
 
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
+        // Links at clusters gather once per sweep (Jacobi-like); patches see each other's updates.
+        let from_clusters = irradiance_from_clusters(hierarchy);
         let mut totals = Sweep::default();
         for p in 0..hierarchy.patches.len() as u32 {
             let update = {
                 let h = &*hierarchy;
-                push_pull(h, p, &|id, out| gather(h, id, out))
+                push_pull(h, p, &|id, out| {
+                    gather_with_clusters(h, &from_clusters, id, out)
+                })
             };
             apply(hierarchy, &update, &mut totals);
         }
+        hierarchy.pull_clusters();
         totals
     }
 }
@@ -124,11 +146,14 @@ impl GatheringSolver for Southwell {
         residuals.resize(patches, f64::INFINITY);
         let mut order: Vec<usize> = (0..patches).collect();
         order.sort_by(|&a, &b| residuals[b].total_cmp(&residuals[a]).then(a.cmp(&b)));
+        let from_clusters = irradiance_from_clusters(hierarchy);
         let mut totals = Sweep::default();
         for p in order {
             let update = {
                 let h = &*hierarchy;
-                push_pull(h, p as u32, &|id, out| gather(h, id, out))
+                push_pull(h, p as u32, &|id, out| {
+                    gather_with_clusters(h, &from_clusters, id, out)
+                })
             };
             let root = hierarchy.patches[p].root;
             let before = hierarchy.element(root).radiance[0];
@@ -141,6 +166,7 @@ impl GatheringSolver for Southwell {
             );
             residuals[p] = change.max_channel() * PI * hierarchy.element(root).area;
         }
+        hierarchy.pull_clusters();
         totals
     }
 }

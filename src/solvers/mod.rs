@@ -3,6 +3,7 @@
 //! is stable and the total power has converged. Link form factors come from [`coupling`]. Hierarchical
 //! Monte Carlo radiosity ([`stochastic`]) replaces links by power-carrying random lines.
 
+pub mod clustering;
 pub mod coupling;
 pub mod direct;
 pub mod error_estimate;
@@ -221,10 +222,7 @@ pub fn solve(
 /// constant per patch) and ρ_p the patch's largest channel.
 fn initialise_thresholds(hierarchy: &mut Hierarchy, accuracy: f64) {
     for id in 0..hierarchy.elements.len() {
-        let rho = hierarchy
-            .patch_of(id as ElementId)
-            .reflectance
-            .max_channel();
+        let rho = hierarchy.reflectance_of(id as ElementId).max_channel();
         hierarchy.elements[id].threshold = (1.0 - rho).max(0.0) * accuracy;
     }
 }
@@ -251,8 +249,7 @@ fn lower_thresholds(hierarchy: &mut Hierarchy, control: &ErrorControl, min_area:
         e.threshold = e.threshold.min(lowest);
         e.threshold
     }
-    for p in 0..hierarchy.patches.len() {
-        let root = hierarchy.patches[p].root;
+    for root in hierarchy.roots() {
         visit(hierarchy, root, control, min_area);
     }
 }

@@ -5,6 +5,7 @@
 //! (Bekaert–Willems §5), which judges a link from its coupling and so computes it first. The element and
 //! link sets therefore do not depend on the number of threads.
 
+use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{couple, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
@@ -49,6 +50,8 @@ pub struct RefineSettings {
     pub min_area: f64,
     /// Elements are not split beyond this count (the element budget); links stay where they are.
     pub max_elements: usize,
+    /// Links are not refined beyond this count (the link budget, from `--max-memory`).
+    pub max_links: usize,
     pub coupling: CouplingSettings,
     pub seed: u64,
 }
@@ -78,10 +81,14 @@ pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
     in_front(receiver, source) && in_front(source, receiver)
 }
 
-/// Root-to-root candidates for every ordered pair of patches that can interact (Hanrahan's initial
-/// linking; quadratic in the number of patches, which clustering removes). Receivers that reflect
-/// nothing and sources that can never radiate are skipped.
+/// The first candidates: with clusters, one self-link on the root cluster (Sillion–Drettakis §4, Smits
+/// et al. 1994), refined from there; without, root-to-root candidates for every ordered pair of patches
+/// that can interact (Hanrahan's initial linking, quadratic in the number of patches). Receivers that
+/// reflect nothing and sources that can never radiate are skipped.
 pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
+    if let Some(root) = hierarchy.root_cluster {
+        return vec![Candidate::new(root, root, None)];
+    }
     let patches = &hierarchy.patches;
     (0..patches.len())
         .into_par_iter()
@@ -120,6 +127,10 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
 
 const ORACLE_STREAM: u64 = 1;
 
+/// Most candidates one refinement creates (a cluster self-link: every ordered pair of its children).
+const MAX_NEW_CANDIDATES: usize =
+    crate::hierarchy::clusters::MAX_CHILDREN * crate::hierarchy::clusters::MAX_CHILDREN;
+
 /// Refines `candidates` until every one is admissible, then stores them as links at their receivers.
 pub fn refine(
     hierarchy: &mut Hierarchy,
@@ -150,8 +161,15 @@ pub fn refine(
             outcome.oracle_rays += verdict.rays;
             outcome.form_factor_rays += verdict.coupling_rays;
             let mut decision = verdict.decision;
+            let splits_surface = match decision {
+                Decision::Admissible => false,
+                Decision::SubdivideReceiver => !hierarchy.is_cluster(c.receiver),
+                Decision::SubdivideSource => !hierarchy.is_cluster(c.source),
+            };
+            let links = admissible.len() + next.len() + MAX_NEW_CANDIDATES;
             if decision != Decision::Admissible
-                && hierarchy.elements.len() + 4 > settings.max_elements
+                && ((splits_surface && hierarchy.elements.len() + 4 > settings.max_elements)
+                    || links > settings.max_links)
             {
                 outcome.refused_by_budget += 1;
                 decision = Decision::Admissible;
@@ -169,12 +187,24 @@ pub fn refine(
                     coupling: verdict.coupling.or(c.coupling),
                     ..c
                 }),
+                Decision::SubdivideReceiver if c.receiver == c.source => {
+                    // A cluster's self-link: links among its contents, and their own self-links.
+                    outcome.refined_links += 1;
+                    let children = hierarchy.split(c.receiver);
+                    for &a in &children {
+                        for &b in &children {
+                            if a != b || hierarchy.is_cluster(a) {
+                                push_if_interacting(hierarchy, &mut next, a, b, None);
+                            }
+                        }
+                    }
+                }
                 Decision::SubdivideReceiver => {
                     outcome.refined_links += 1;
                     if hierarchy.element(c.receiver).is_leaf() {
                         outcome.subdivisions += 1;
                     }
-                    for child in hierarchy.subdivide(c.receiver) {
+                    for child in hierarchy.split(c.receiver) {
                         push_if_interacting(hierarchy, &mut next, child, c.source, partial);
                     }
                 }
@@ -183,7 +213,7 @@ pub fn refine(
                     if hierarchy.element(c.source).is_leaf() {
                         outcome.subdivisions += 1;
                     }
-                    for child in hierarchy.subdivide(c.source) {
+                    for child in hierarchy.split(c.source) {
                         push_if_interacting(hierarchy, &mut next, c.receiver, child, partial);
                     }
                 }
@@ -233,7 +263,19 @@ fn push_if_interacting(
     source: ElementId,
     inherited_visibility: Option<f32>,
 ) {
-    if can_interact(h.element(receiver).shape(), h.element(source).shape()) {
+    let (reflectance, _) = h.optics_of(receiver);
+    let (source_reflectance, source_emission) = h.optics_of(source);
+    if reflectance.is_black() || (source_reflectance.is_black() && source_emission.is_black()) {
+        return;
+    }
+    let interacting = if receiver == source {
+        h.is_cluster(receiver)
+    } else if h.is_cluster(receiver) || h.is_cluster(source) {
+        cluster_can_interact(h, receiver, source)
+    } else {
+        can_interact(h.element(receiver).shape(), h.element(source).shape())
+    };
+    if interacting {
         out.push(Candidate::new(receiver, source, inherited_visibility));
     }
 }
@@ -276,7 +318,16 @@ fn decide(
     c: &Candidate,
 ) -> Verdict {
     let h = context.hierarchy;
-    let splittable = |id: ElementId| h.element(id).area > settings.min_area;
+    if c.receiver == c.source {
+        return Verdict {
+            decision: Decision::SubdivideReceiver,
+            ..Verdict::admissible(None)
+        };
+    }
+    let splittable = |id: ElementId| h.is_cluster(id) || h.element(id).area > settings.min_area;
+    if h.is_cluster(c.receiver) || h.is_cluster(c.source) {
+        return decide_cluster_link(context, oracle, settings, c, &splittable);
+    }
     if !splittable(c.receiver) && !splittable(c.source) {
         return Verdict::admissible(c.oracle_factor);
     }
@@ -340,6 +391,51 @@ fn decide(
             Decision::SubdivideSource if !splittable(c.source) => Decision::SubdivideReceiver,
             other => other,
         },
+    };
+    verdict
+}
+
+/// A link with a cluster at one end, judged by the power-type bound of [`transport_bound`]:
+/// `ρ_max B_j · min(A_i, A_j, A_i A_j / (π d²))` (ρ_max the largest reflectance in a receiver cluster,
+/// B_j the source's average radiance; visibility bounded by 1, as Sillion–Drettakis §6.1 notes of
+/// cluster bounds). The link error oracle compares the same bound per unit receiver area, plus the
+/// error the source's own estimate propagates through it (eq. (13) with the whole transfer as its
+/// error), with the receiver's threshold. Above the threshold the larger end (by bounding box) is
+/// split; a surface too small to split passes the split to the other end, a cluster always splits.
+fn decide_cluster_link(
+    context: &OracleContext,
+    oracle: &dyn RefinementOracle,
+    settings: &RefineSettings,
+    c: &Candidate,
+    splittable: &dyn Fn(ElementId) -> bool,
+) -> Verdict {
+    let h = context.hierarchy;
+    let bound = transport_bound(h, c.receiver, c.source);
+    let weight = reflected_source_radiance(h, c.receiver, c.source);
+    let (error, threshold) = if oracle.judges_couplings() {
+        let rho = h.reflectance_of(c.receiver).max_channel();
+        let area = h.element(c.receiver).area.max(1e-300);
+        (
+            (weight + rho * h.element(c.source).error) * bound / area,
+            h.element(c.receiver).threshold,
+        )
+    } else {
+        (weight * bound, settings.threshold)
+    };
+    let mut verdict = Verdict::admissible(None);
+    if error <= threshold {
+        return verdict;
+    }
+    let size = |id| h.bounds_of(id).diagonal();
+    let larger = if size(c.receiver) >= size(c.source) {
+        Decision::SubdivideReceiver
+    } else {
+        Decision::SubdivideSource
+    };
+    verdict.decision = match larger {
+        Decision::SubdivideReceiver if !splittable(c.receiver) => Decision::SubdivideSource,
+        Decision::SubdivideSource if !splittable(c.source) => Decision::SubdivideReceiver,
+        other => other,
     };
     verdict
 }

@@ -8,6 +8,7 @@ pub mod brute_force;
 pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod extinction;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 

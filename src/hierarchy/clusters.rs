@@ -1,0 +1,595 @@
+//! Cluster hierarchies over a set of objects (Sillion–Drettakis §4): the paper's multi-level uniform grid
+//! construction, and, to compare with it (§4.2), a k-d tree split at the median and an octree
+//! (`--hierarchy grid|kdtree|octree`). The same trees serve the clustering solver (patches grouped into
+//! cluster elements, [`crate::hierarchy::Hierarchy::add_clusters`]) and extinction visibility (polygons
+//! grouped into absorbing volumes, [`crate::visibility::extinction`]).
+//!
+//! Every construction is deterministic: ties are broken by object index, never by hashing or threads.
+
+use crate::geometry::{Aabb, DVec3};
+
+/// How the cluster tree is built (`--hierarchy`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ClusterTreeKind {
+    /// Sillion–Drettakis §4.1: objects inserted into the level of a hierarchy of uniform grids whose
+    /// voxel fits their size, grouped per voxel to minimise empty space, leftovers moved up.
+    #[default]
+    Grid,
+    /// Median split of the object centres along the longest axis (the hierarchy of Sillion 1995).
+    Kdtree,
+    /// Regular octree: each cell split at its centre into eight, objects by their centre.
+    Octree,
+}
+
+/// How clusters exchange light (`--clustering`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ClusteringKind {
+    /// No clusters: every pair of patches that can interact starts linked (quadratic).
+    #[default]
+    None,
+    /// Clusters as isotropic volumes (Sillion 1995): mean cosine 1/4.
+    Isotropic,
+    /// Clusters by the projected area of their patches toward the other end (Smits et al. 1994).
+    Oriented,
+}
+
+/// An object to cluster: its bounds and the area it contributes to a cluster's total.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Item {
+    pub bounds: Aabb,
+    pub area: f64,
+}
+
+/// A member of a cluster: an object or a cluster below it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Child {
+    Item(u32),
+    Node(u32),
+}
+
+/// A cluster: the bounds and total area of its contents.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Node {
+    pub bounds: Aabb,
+    /// Total area of all objects below.
+    pub area: f64,
+    pub children: Vec<Child>,
+}
+
+/// A tree of clusters over items; `nodes` is in post-order (every node after its children), so the
+/// root is the last node and bottom-up passes walk the nodes in order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ClusterTree {
+    pub nodes: Vec<Node>,
+}
+
+/// Most members of one cluster.
+pub const MAX_CHILDREN: usize = 8;
+
+impl ClusterTree {
+    /// The cluster tree of `items` by `kind`; empty for no items, and a root holding the lone item for
+    /// one.
+    pub fn build(items: &[Item], kind: ClusterTreeKind) -> Self {
+        let mut tree = ClusterTree::default();
+        if items.is_empty() {
+            return tree;
+        }
+        let all: Vec<Child> = (0..items.len() as u32).map(Child::Item).collect();
+        let top = match kind {
+            ClusterTreeKind::Grid => grid::build(&mut tree, items, all),
+            ClusterTreeKind::Kdtree => tree.kdtree(items, all),
+            ClusterTreeKind::Octree => {
+                let cell = cube_around(&union(items, &tree, &all));
+                tree.octree(items, all, cell, 0)
+            }
+        };
+        if let Child::Item(_) = top {
+            tree.push(items, vec![top]);
+        }
+        tree
+    }
+
+    pub fn root(&self) -> Option<u32> {
+        self.nodes.len().checked_sub(1).map(|r| r as u32)
+    }
+
+    fn bounds_of(&self, items: &[Item], child: Child) -> Aabb {
+        match child {
+            Child::Item(i) => items[i as usize].bounds,
+            Child::Node(n) => self.nodes[n as usize].bounds,
+        }
+    }
+
+    fn area_of(&self, items: &[Item], child: Child) -> f64 {
+        match child {
+            Child::Item(i) => items[i as usize].area,
+            Child::Node(n) => self.nodes[n as usize].area,
+        }
+    }
+
+    /// Appends a cluster of `children` and returns it.
+    fn push(&mut self, items: &[Item], children: Vec<Child>) -> Child {
+        let bounds = union(items, self, &children);
+        let area = children.iter().map(|&c| self.area_of(items, c)).sum();
+        self.nodes.push(Node {
+            bounds,
+            area,
+            children,
+        });
+        Child::Node(self.nodes.len() as u32 - 1)
+    }
+
+    /// Median split of the centres along the longest axis of their bounds, down to leaves of at most
+    /// [`MAX_CHILDREN`] objects.
+    fn kdtree(&mut self, items: &[Item], mut members: Vec<Child>) -> Child {
+        if members.len() == 1 {
+            return members[0];
+        }
+        if members.len() <= MAX_CHILDREN {
+            return self.push(items, members);
+        }
+        let upper = self.median_split(items, &mut members);
+        let children = vec![self.kdtree(items, members), self.kdtree(items, upper)];
+        self.push(items, children)
+    }
+
+    /// Sorts `members` by centre along the longest axis of their centres' bounds and splits off the
+    /// upper half (ties by identity, so the split is deterministic).
+    fn median_split(&self, items: &[Item], members: &mut Vec<Child>) -> Vec<Child> {
+        let centres: Aabb = members.iter().fold(Aabb::EMPTY, |mut b, &c| {
+            b.grow(self.bounds_of(items, c).center());
+            b
+        });
+        let axis = longest_axis(centres.extent());
+        members.sort_by(|&a, &b| {
+            let (ca, cb) = (
+                self.bounds_of(items, a).center()[axis],
+                self.bounds_of(items, b).center()[axis],
+            );
+            ca.total_cmp(&cb).then(a.cmp(&b))
+        });
+        members.split_off(members.len() / 2)
+    }
+
+    /// The cube `cell` split at its centre; each object goes to the octant of its centre. Cells with at
+    /// most [`MAX_CHILDREN`] objects (or too deep to separate coincident centres) become leaf clusters.
+    fn octree(&mut self, items: &[Item], members: Vec<Child>, cell: Aabb, depth: usize) -> Child {
+        const MAX_DEPTH: usize = 24;
+        if members.len() == 1 {
+            return members[0];
+        }
+        if members.len() <= MAX_CHILDREN || depth >= MAX_DEPTH {
+            return self.push_in_chunks(items, members);
+        }
+        let mid = cell.center();
+        let mut octants: [Vec<Child>; 8] = Default::default();
+        for &m in &members {
+            let c = self.bounds_of(items, m).center();
+            let k = usize::from(c.x >= mid.x)
+                | usize::from(c.y >= mid.y) << 1
+                | usize::from(c.z >= mid.z) << 2;
+            octants[k].push(m);
+        }
+        let mut children = Vec::new();
+        for (k, octant) in octants.into_iter().enumerate() {
+            if octant.is_empty() {
+                continue;
+            }
+            let pick = |bit: usize, lo: f64, m: f64, hi: f64| {
+                if k & bit != 0 {
+                    (m, hi)
+                } else {
+                    (lo, m)
+                }
+            };
+            let (x0, x1) = pick(1, cell.min.x, mid.x, cell.max.x);
+            let (y0, y1) = pick(2, cell.min.y, mid.y, cell.max.y);
+            let (z0, z1) = pick(4, cell.min.z, mid.z, cell.max.z);
+            let sub = Aabb {
+                min: DVec3::new(x0, y0, z0),
+                max: DVec3::new(x1, y1, z1),
+            };
+            children.push(self.octree(items, octant, sub, depth + 1));
+        }
+        if children.len() == 1 {
+            return children[0];
+        }
+        self.push(items, children)
+    }
+
+    /// Clusters of at most [`MAX_CHILDREN`] members over `members` (in their order), then clusters of
+    /// those, up to one.
+    fn push_in_chunks(&mut self, items: &[Item], mut members: Vec<Child>) -> Child {
+        while members.len() > MAX_CHILDREN {
+            members = members
+                .chunks(MAX_CHILDREN)
+                .map(|chunk| {
+                    if chunk.len() == 1 {
+                        chunk[0]
+                    } else {
+                        self.push(items, chunk.to_vec())
+                    }
+                })
+                .collect();
+        }
+        if members.len() == 1 {
+            members[0]
+        } else {
+            self.push(items, members)
+        }
+    }
+}
+
+fn union(items: &[Item], tree: &ClusterTree, members: &[Child]) -> Aabb {
+    members
+        .iter()
+        .fold(Aabb::EMPTY, |b, &c| b.union(&tree.bounds_of(items, c)))
+}
+
+fn longest_axis(e: DVec3) -> usize {
+    if e.x >= e.y && e.x >= e.z {
+        0
+    } else if e.y >= e.z {
+        1
+    } else {
+        2
+    }
+}
+
+fn largest_extent(b: &Aabb) -> f64 {
+    b.extent().max_element()
+}
+
+/// The cube with the same centre whose side is the largest extent of `b` (at least a tiny positive
+/// size, so that degenerate scenes still have cells).
+fn cube_around(b: &Aabb) -> Aabb {
+    let half = DVec3::splat(0.5 * largest_extent(b).max(1e-12));
+    Aabb {
+        min: b.center() - half,
+        max: b.center() + half,
+    }
+}
+
+/// The multi-level grid construction of Sillion–Drettakis §4.1.
+mod grid {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    /// Deepest grid level (2^16 voxels per axis); smaller objects all start there.
+    const MAX_LEVEL: usize = 16;
+    /// A group takes a further member only while at most this fraction of its bounds is empty (the
+    /// proximity criterion), unless the member is very small for the voxel.
+    const MAX_EMPTY_FRACTION: f64 = 0.85;
+    /// Members smaller than this fraction of the voxel are grouped regardless of the empty space they
+    /// add ("objects very small compared to the grid size are grouped into an appropriate cluster,
+    /// even if the resulting cluster is largely empty").
+    const SMALL_FRACTION: f64 = 0.25;
+    /// Voxels holding more members than this are first split at the median (kd) into runs of this size
+    /// so that the quadratic greedy grouping stays bounded.
+    const MAX_RUN: usize = 256;
+
+    struct Grid {
+        origin: DVec3,
+        size: f64,
+    }
+
+    impl Grid {
+        fn voxel(&self, level: usize) -> f64 {
+            self.size / (1u64 << level) as f64
+        }
+
+        /// The level whose voxel fits an object of this largest extent.
+        fn level_of(&self, extent: f64) -> usize {
+            if extent <= 0.0 {
+                return MAX_LEVEL;
+            }
+            ((self.size / extent).log2().floor().max(0.0) as usize).min(MAX_LEVEL)
+        }
+
+        fn cell(&self, p: DVec3, level: usize) -> [i64; 3] {
+            let q = (p - self.origin) / self.voxel(level);
+            [q.x.floor() as i64, q.y.floor() as i64, q.z.floor() as i64]
+        }
+    }
+
+    /// Padded volume: flat objects (polygons) have empty boxes, so every extent is padded by a small
+    /// fraction of the voxel for the empty-space measure.
+    fn volume(b: &Aabb, pad: f64) -> f64 {
+        let e = b.extent() + DVec3::splat(pad);
+        e.x * e.y * e.z
+    }
+
+    pub(super) fn build(tree: &mut ClusterTree, items: &[Item], all: Vec<Child>) -> Child {
+        let scene = union(items, tree, &all);
+        let grid = Grid {
+            origin: scene.min,
+            size: largest_extent(&scene).max(1e-12),
+        };
+        let mut pending: Vec<Vec<Child>> = vec![Vec::new(); MAX_LEVEL + 1];
+        for c in all {
+            let level = grid.level_of(largest_extent(&tree.bounds_of(items, c)));
+            pending[level].push(c);
+        }
+        for level in (1..=MAX_LEVEL).rev() {
+            let members = std::mem::take(&mut pending[level]);
+            if members.is_empty() {
+                continue;
+            }
+            let moved_up = group_level(tree, items, &grid, level, members);
+            pending[level - 1].extend(moved_up);
+        }
+        // Level 0 is one voxel, the scene: group until one cluster remains.
+        let mut members = std::mem::take(&mut pending[0]);
+        let pad = 0.01 * grid.size;
+        loop {
+            if members.len() == 1 {
+                return members[0];
+            }
+            let before = members.len();
+            members = group_voxel(tree, items, members, grid.size, pad);
+            if members.len() == before {
+                // Nothing merged (every candidate too empty): force one level of chunks.
+                return tree.push_in_chunks(items, members);
+            }
+        }
+    }
+
+    /// One level: groups the members contained in one voxel, adds the leftovers (members straddling
+    /// voxels) to the groups they overlap where that grows them least, and returns everything that
+    /// moves up to the next coarser level.
+    fn group_level(
+        tree: &mut ClusterTree,
+        items: &[Item],
+        grid: &Grid,
+        level: usize,
+        members: Vec<Child>,
+    ) -> Vec<Child> {
+        let voxel = grid.voxel(level);
+        let pad = 0.01 * voxel;
+        let mut contained: BTreeMap<[i64; 3], Vec<Child>> = BTreeMap::new();
+        let mut leftovers = Vec::new();
+        for c in members {
+            let b = tree.bounds_of(items, c);
+            let (lo, hi) = (grid.cell(b.min, level), grid.cell(b.max, level));
+            if lo == hi {
+                contained.entry(lo).or_default().push(c);
+            } else {
+                leftovers.push(c);
+            }
+        }
+        let mut up = Vec::new();
+        // The clusters made at this level, by voxel, that leftovers may join (all made after every
+        // leftover, so that the nodes stay in post-order).
+        let mut made: BTreeMap<[i64; 3], Vec<u32>> = BTreeMap::new();
+        let first_new = tree.nodes.len() as u32;
+        for (cell, voxel_members) in contained {
+            for g in group_voxel(tree, items, voxel_members, voxel, pad) {
+                if let Child::Node(n) = g {
+                    if n >= first_new {
+                        made.entry(cell).or_default().push(n);
+                    }
+                }
+                up.push(g);
+            }
+        }
+        for c in leftovers {
+            let b = tree.bounds_of(items, c);
+            let (lo, hi) = (grid.cell(b.min, level), grid.cell(b.max, level));
+            let mut best: Option<(f64, u32)> = None;
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        for &n in made.get(&[x, y, z]).into_iter().flatten() {
+                            let node = &tree.nodes[n as usize];
+                            if node.children.len() >= MAX_CHILDREN {
+                                continue;
+                            }
+                            let merged = node.bounds.union(&b);
+                            let filled = volume(&node.bounds, pad) + volume(&b, pad);
+                            let empty = 1.0 - (filled / volume(&merged, pad)).min(1.0);
+                            if empty <= MAX_EMPTY_FRACTION && best.is_none_or(|(e, _)| empty < e) {
+                                best = Some((empty, n));
+                            }
+                        }
+                    }
+                }
+            }
+            match best {
+                Some((_, n)) => {
+                    let area = tree.area_of(items, c);
+                    let node = &mut tree.nodes[n as usize];
+                    node.bounds = node.bounds.union(&b);
+                    node.area += area;
+                    node.children.push(c);
+                }
+                None => up.push(c),
+            }
+        }
+        up
+    }
+
+    /// Greedy grouping of the members of one voxel into clusters of at most [`MAX_CHILDREN`]: each group
+    /// is seeded with the largest remaining member and grows by the member that leaves the least empty
+    /// space, while the empty fraction stays acceptable. Returns the new clusters and the members left
+    /// alone.
+    fn group_voxel(
+        tree: &mut ClusterTree,
+        items: &[Item],
+        mut members: Vec<Child>,
+        voxel: f64,
+        pad: f64,
+    ) -> Vec<Child> {
+        if members.len() > MAX_RUN {
+            // Bounded work: median runs first (a kd split), then each run on its own.
+            let mut out = Vec::new();
+            let upper = tree.median_split(items, &mut members);
+            out.extend(group_voxel(tree, items, members, voxel, pad));
+            out.extend(group_voxel(tree, items, upper, voxel, pad));
+            return out;
+        }
+        let bounds: Vec<Aabb> = members.iter().map(|&c| tree.bounds_of(items, c)).collect();
+        let mut order: Vec<usize> = (0..members.len()).collect();
+        order.sort_by(|&a, &b| {
+            largest_extent(&bounds[b])
+                .total_cmp(&largest_extent(&bounds[a]))
+                .then(members[a].cmp(&members[b]))
+        });
+        let mut taken = vec![false; members.len()];
+        let mut out = Vec::new();
+        for &seed in &order {
+            if taken[seed] {
+                continue;
+            }
+            taken[seed] = true;
+            let mut group = vec![members[seed]];
+            let mut b = bounds[seed];
+            let mut filled = volume(&b, pad);
+            while group.len() < MAX_CHILDREN {
+                let mut best: Option<(f64, usize)> = None;
+                for (k, other) in bounds.iter().enumerate() {
+                    if taken[k] {
+                        continue;
+                    }
+                    let merged = volume(&b.union(other), pad);
+                    let empty = 1.0 - ((filled + volume(other, pad)) / merged).min(1.0);
+                    if best.is_none_or(|(e, _)| empty < e) {
+                        best = Some((empty, k));
+                    }
+                }
+                let Some((empty, k)) = best else { break };
+                let small = largest_extent(&bounds[k]) < SMALL_FRACTION * voxel;
+                if empty > MAX_EMPTY_FRACTION && !small {
+                    break;
+                }
+                taken[k] = true;
+                group.push(members[k]);
+                filled += volume(&bounds[k], pad);
+                b = b.union(&bounds[k]);
+            }
+            out.push(if group.len() == 1 {
+                group[0]
+            } else {
+                tree.push(items, group)
+            });
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn boxes(n: usize) -> Vec<Item> {
+        // A deterministic scatter of small boxes of a few sizes.
+        (0..n)
+            .map(|i| {
+                let f = |k: usize| ((i * 7919 + k * 104_729) % 1000) as f64 / 1000.0;
+                let size = [0.01, 0.03, 0.1][i % 3];
+                let min = DVec3::new(f(1), f(2), f(3)) * 4.0;
+                Item {
+                    bounds: Aabb {
+                        min,
+                        max: min + DVec3::new(size, size, 0.0),
+                    },
+                    area: size * size,
+                }
+            })
+            .collect()
+    }
+
+    /// Every item appears exactly once, post-order holds, bounds contain the contents, areas add up,
+    /// and no cluster exceeds the fan-out.
+    #[test]
+    fn every_kind_builds_a_proper_tree() {
+        let items = boxes(500);
+        let total: f64 = items.iter().map(|i| i.area).sum();
+        for kind in [
+            ClusterTreeKind::Grid,
+            ClusterTreeKind::Kdtree,
+            ClusterTreeKind::Octree,
+        ] {
+            let tree = ClusterTree::build(&items, kind);
+            let root = tree.root().expect("root") as usize;
+            assert!(
+                (tree.nodes[root].area - total).abs() < 1e-9 * total,
+                "{kind:?}"
+            );
+            let mut seen = vec![0; items.len()];
+            for (n, node) in tree.nodes.iter().enumerate() {
+                assert!(!node.children.is_empty() && node.children.len() <= MAX_CHILDREN);
+                for &c in &node.children {
+                    let b = tree.bounds_of(&items, c);
+                    assert!(
+                        b.min.cmpge(node.bounds.min).all() && b.max.cmple(node.bounds.max).all()
+                    );
+                    match c {
+                        Child::Item(i) => seen[i as usize] += 1,
+                        Child::Node(m) => assert!((m as usize) < n, "{kind:?}: not post-order"),
+                    }
+                }
+            }
+            assert!(
+                seen.iter().all(|&s| s == 1),
+                "{kind:?}: items not once each"
+            );
+            assert_eq!(
+                tree,
+                ClusterTree::build(&items, kind),
+                "{kind:?}: deterministic"
+            );
+        }
+    }
+
+    /// Share of the objects in clusters of two or more objects that belong to their cluster's most
+    /// common size class.
+    fn homogeneity(items: &[Item], tree: &ClusterTree) -> f64 {
+        let (mut same, mut total) = (0, 0);
+        for node in &tree.nodes {
+            let sizes: Vec<u64> = node
+                .children
+                .iter()
+                .filter_map(|&c| match c {
+                    Child::Item(i) => Some(largest_extent(&items[i as usize].bounds).to_bits()),
+                    Child::Node(_) => None,
+                })
+                .collect();
+            if sizes.len() >= 2 {
+                total += sizes.len();
+                same += sizes
+                    .iter()
+                    .map(|s| sizes.iter().filter(|&t| t == s).count())
+                    .max()
+                    .unwrap_or(0);
+            }
+        }
+        same as f64 / total.max(1) as f64
+    }
+
+    /// The grid construction groups objects of similar size (§4.1's homogeneity), which the k-d tree,
+    /// blind to size, does not (§4.2).
+    #[test]
+    fn grid_clusters_are_more_homogeneous_in_size_than_kdtree_clusters() {
+        let items = boxes(3000);
+        let grid = homogeneity(&items, &ClusterTree::build(&items, ClusterTreeKind::Grid));
+        let kd = homogeneity(&items, &ClusterTree::build(&items, ClusterTreeKind::Kdtree));
+        assert!(grid > kd + 0.1, "grid {grid}, kd-tree {kd}");
+    }
+
+    #[test]
+    fn one_item_gets_a_root_and_none_gets_none() {
+        let items = boxes(1);
+        for kind in [
+            ClusterTreeKind::Grid,
+            ClusterTreeKind::Kdtree,
+            ClusterTreeKind::Octree,
+        ] {
+            let tree = ClusterTree::build(&items, kind);
+            assert_eq!(tree.nodes.len(), 1);
+            assert_eq!(tree.nodes[0].children, vec![Child::Item(0)]);
+            assert!(ClusterTree::build(&[], kind).root().is_none());
+        }
+    }
+}

@@ -1,0 +1,329 @@
+//! Clustering hierarchical radiosity (Smits, Arvo, Greenberg 1994; Sillion 1995; Sillion–Drettakis §4
+//! and §6): light exchanged between clusters of surfaces as between single elements. Refinement starts
+//! from one self-link on the root cluster ([`crate::solvers::refine::initial_candidates`]); a cluster is
+//! split into its contents; links involving a cluster are judged by [`transport_bound`] and coupled here.
+//!
+//! Transfer between two ends at distance `r` (centres), each a surface (its own cosine) or a cluster:
+//!
+//! `F_ij = A_j c_i c_j v / (π r²)`,
+//!
+//! the point-to-point kernel with each cosine replaced by the end's *mean cosine* toward the other:
+//! * isotropic (Sillion 1995, the volume model Sillion–Drettakis §3.1 builds on): a cluster radiates and
+//!   receives like an isotropic volume whose projected area in any direction is a quarter of the area of
+//!   its contents (Cauchy's formula: randomly oriented one-sided surfaces project `A/4` on average), so
+//!   `c = 1/4`; a cluster of area `A` and radiance `L` then has intensity `L A / 4` in every direction
+//!   and radiates `π L A`, its power;
+//! * oriented (Smits et al. 1994): `c = Σ_k A_k max(0, n_k · d_k) / A`, the projected area of its
+//!   patches toward the other end over their area.
+//!
+//! `v` is the transmittance averaged over sample segments between the two ends (rays from points on the
+//! receiver to area-sampled points on the source's contents; with `--visibility extinction` these are
+//! extinction estimates, Sillion–Drettakis §3.1). The coupling is constant in the source (clusters carry
+//! one average radiance); on a surface receiver it is evaluated at the receiver's cubature nodes and
+//! projected onto its basis like any coupling (Bekaert–Willems Algorithm 4.1), so every basis works.
+//!
+//! Push-pull through clusters ([`irradiance_from_clusters`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
+//! radiance is pulled up area-weighted; irradiance gathered at a cluster is pushed to the patches it
+//! contains, evenly (isotropic) or with each patch's own cosine toward the link's source, normalised so
+//! that the power the link delivered is what the patches receive (oriented).
+//!
+//! Visibility error of a cluster link (Sillion–Drettakis Appendix A): spreading the average visibility
+//! `v` over the receiver deviates from the binary visibility by `2v(1−v)` in L¹ and `sqrt(v(1−v))` in L²
+//! (eqs. (5), (10)); the L² form times the unoccluded factor is the link's `visibility_error`, which the
+//! a-posteriori estimate and the link error oracle read as for any link.
+
+use super::coupling::{basis_values, visible_fraction, Coupling, CouplingSettings};
+use super::link_rng;
+use crate::color::Rgb;
+use crate::geometry::cubature::{nodes_on, rule};
+use crate::geometry::{DVec2, DVec3};
+use crate::hierarchy::clusters::ClusteringKind;
+use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
+use crate::visibility::Visibility;
+use rand::Rng;
+use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// Visibility samples per receiver node of a cluster link (per link for a cluster receiver: twice this).
+pub const CLUSTER_VISIBILITY_SAMPLES: usize = 4;
+
+const CLUSTER_STREAM: u64 = 3;
+
+/// The mean cosine `c` of element `id` toward the point `toward` (see the module documentation).
+pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: ClusteringKind) -> f64 {
+    let e = h.element(id);
+    match &e.kind {
+        ElementKind::Surface(s) => {
+            let d = (toward - s.shape.centroid()).normalize_or_zero();
+            h.patches[s.patch as usize].normal.dot(d).max(0.0)
+        }
+        ElementKind::Cluster(_) if kind == ClusteringKind::Isotropic => 0.25,
+        ElementKind::Cluster(c) => {
+            if e.area <= 0.0 {
+                return 0.0;
+            }
+            let projected: f64 = h
+                .contents(c)
+                .iter()
+                .map(|&s| {
+                    let surface = h.element(s);
+                    let d = (toward - surface.shape().centroid()).normalize_or_zero();
+                    surface.area * h.patch_of(s).normal.dot(d).max(0.0)
+                })
+                .sum();
+            projected / e.area
+        }
+    }
+}
+
+/// The transport `A_i F_ij` a link can carry (per unit source radiance, in the power oracle's units of
+/// area): `min(A_i, A_j, A_i A_j / (π r²))` between well-separated ends (centre distance `r` at least
+/// the sum of the bounding-sphere radii), every cosine and the visibility bounded by 1 (`F_ij ≤ 1` and
+/// reciprocity give the first two); `min(A_i, A_j)` when the bounding spheres overlap, so that close
+/// ends are always split. Like eq. (1)'s centre estimate it is not a strict bound across the ends.
+pub fn transport_bound(h: &Hierarchy, receiver: ElementId, source: ElementId) -> f64 {
+    let (a_i, a_j) = (h.element(receiver).area, h.element(source).area);
+    let radius = |id| 0.5 * h.bounds_of(id).diagonal();
+    let r = (h.center_of(receiver) - h.center_of(source)).length();
+    let near = a_i.min(a_j);
+    if r <= radius(receiver) + radius(source) {
+        return near;
+    }
+    near.min(a_i * a_j / (PI * r * r))
+}
+
+/// Whether the pair can exchange light, when one end is a cluster: a surface must have part of the
+/// cluster's box strictly in front of it.
+pub fn cluster_can_interact(h: &Hierarchy, receiver: ElementId, source: ElementId) -> bool {
+    let faces_box = |surface: ElementId, cluster: ElementId| {
+        let shape = h.element(surface).shape();
+        let (n, p) = (shape.normal(), shape.vertices()[0]);
+        let b = h.bounds_of(cluster);
+        let tolerance = 1e-9 * shape.diameter().max(b.diagonal());
+        (0..8).any(|k| {
+            let corner = DVec3::new(
+                if k & 1 == 0 { b.min.x } else { b.max.x },
+                if k & 2 == 0 { b.min.y } else { b.max.y },
+                if k & 4 == 0 { b.min.z } else { b.max.z },
+            );
+            n.dot(corner - p) > tolerance
+        })
+    };
+    match (h.is_cluster(receiver), h.is_cluster(source)) {
+        (true, true) => receiver != source,
+        (true, false) => faces_box(source, receiver),
+        (false, true) => faces_box(receiver, source),
+        (false, false) => unreachable!("surface pairs are tested by refine::can_interact"),
+    }
+}
+
+/// Where visibility samples of a link end are drawn: uniformly on a surface, or on a cluster's patches
+/// with probability proportional to their projected area toward the other end (`A_k max(0, cos_k)`), so
+/// that the back faces the mean cosine already discounts are not counted a second time as occluded.
+enum SampleEnd<'a> {
+    Surface(&'a crate::geometry::Shape),
+    Cluster {
+        surfaces: &'a [ElementId],
+        cumulative: Vec<f64>,
+    },
+}
+
+impl<'a> SampleEnd<'a> {
+    fn new(h: &'a Hierarchy, id: ElementId, toward: DVec3) -> Self {
+        match &h.element(id).kind {
+            ElementKind::Surface(s) => SampleEnd::Surface(&s.shape),
+            ElementKind::Cluster(c) => {
+                let surfaces = h.contents(c);
+                let cumulative = surfaces
+                    .iter()
+                    .scan(0.0, |sum, &s| {
+                        let cos = mean_cosine(h, s, toward, ClusteringKind::Oriented);
+                        *sum += h.element(s).area * cos;
+                        Some(*sum)
+                    })
+                    .collect();
+                SampleEnd::Cluster {
+                    surfaces,
+                    cumulative,
+                }
+            }
+        }
+    }
+
+    /// A sample point, or `None` when nothing at this end faces the other.
+    fn sample(&self, h: &Hierarchy, rng: &mut Pcg64Mcg) -> Option<DVec3> {
+        let uv = DVec2::new(rng.random(), rng.random());
+        match self {
+            SampleEnd::Surface(shape) => Some(shape.sample_uniform(uv)),
+            SampleEnd::Cluster {
+                surfaces,
+                cumulative,
+            } => {
+                let total = *cumulative.last()?;
+                if total <= 0.0 {
+                    return None;
+                }
+                let target = rng.random::<f64>() * total;
+                let k = cumulative
+                    .partition_point(|&p| p <= target)
+                    .min(surfaces.len() - 1);
+                Some(h.element(surfaces[k]).shape().sample_uniform(uv))
+            }
+        }
+    }
+}
+
+/// The coupling of a link with a cluster at one or both ends (see the module documentation).
+pub fn couple_cluster(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    settings: &CouplingSettings,
+) -> Coupling {
+    let size = h.basis_size();
+    let kind = h.clustering;
+    let (r, s) = (h.element(receiver), h.element(source));
+    let (r_centre, s_centre) = (h.center_of(receiver), h.center_of(source));
+    let mut rng = link_rng(settings.seed, receiver, source, CLUSTER_STREAM);
+    let mut rays = 0u64;
+    let (receiver_end, source_end) = (
+        SampleEnd::new(h, receiver, s_centre),
+        SampleEnd::new(h, source, r_centre),
+    );
+    let mut sample_visibility = |x: Option<DVec3>, samples: usize, rng: &mut Pcg64Mcg| {
+        let mut total = 0.0;
+        for _ in 0..samples {
+            let from = x.or_else(|| receiver_end.sample(h, rng));
+            if let (Some(from), Some(to)) = (from, source_end.sample(h, rng)) {
+                total += visibility.transmittance(from, to);
+                rays += 1;
+            }
+        }
+        total / samples as f64
+    };
+    let c_source = mean_cosine(h, source, r_centre, kind);
+    let mut block = vec![0.0; size * size];
+    // Per receiver node: δ_{j,β}(x_k) (only β = 1 is non-zero) and the point factor K_{j,1}(x_k).
+    let (errors, node_factors, unoccluded) = match &r.kind {
+        ElementKind::Cluster(_) => {
+            let c_receiver = mean_cosine(h, receiver, s_centre, kind);
+            let r2 = (s_centre - r_centre).length_squared().max(1e-300);
+            let open = (s.area * c_receiver * c_source / (PI * r2)).min(1.0);
+            let v = if open > 0.0 {
+                sample_visibility(None, 2 * CLUSTER_VISIBILITY_SAMPLES, &mut rng)
+            } else {
+                1.0
+            };
+            block[0] = open * v;
+            (vec![0.0f32; size], vec![block[0] as f32], open)
+        }
+        ElementKind::Surface(surface) => {
+            let shape = &surface.shape;
+            let normal = h.patches[surface.patch as usize].normal;
+            let nodes = nodes_on(shape, rule(shape.domain(), settings.cubature_degree));
+            let phi = basis_values(&h.basis, shape, &nodes);
+            let mut inner = vec![0.0; nodes.len()];
+            let mut unoccluded = 0.0;
+            for (k, x) in nodes.iter().enumerate() {
+                let d = s_centre - x.point;
+                let r2 = d.length_squared().max(1e-300);
+                let cos = normal.dot(d) / r2.sqrt();
+                let open = (s.area * c_source * cos.max(0.0) / (PI * r2)).min(1.0);
+                if open <= 0.0 {
+                    continue;
+                }
+                unoccluded += x.weight * open / r.area;
+                inner[k] =
+                    open * sample_visibility(Some(x.point), CLUSTER_VISIBILITY_SAMPLES, &mut rng);
+                let w = x.weight / r.area;
+                for alpha in 0..size {
+                    block[alpha * size] += w * phi[k * size + alpha] * inner[k];
+                }
+            }
+            let mut errors = vec![0.0f32; nodes.len() * size];
+            for (k, value) in inner.iter().enumerate() {
+                // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
+                let projected: f64 = (0..size)
+                    .map(|alpha| block[alpha * size] * phi[k * size + alpha])
+                    .sum();
+                errors[k * size] = (projected - value) as f32;
+            }
+            (
+                errors,
+                inner.iter().map(|&f| f as f32).collect(),
+                unoccluded,
+            )
+        }
+    };
+    let v = visible_fraction(block[0], unoccluded);
+    Coupling {
+        coupling: LinkCoupling {
+            block: block.into(),
+            errors: errors.into(),
+            node_factors: node_factors.into(),
+            visibility: v as f32,
+            visibility_error: (unoccluded * (v * (1.0 - v)).sqrt()) as f32,
+        },
+        unoccluded,
+        source_nodes: CLUSTER_VISIBILITY_SAMPLES,
+        rays,
+    }
+}
+
+/// Irradiance (constant coefficient) pushed from the clusters to each patch root, indexed by the root's
+/// element id (patch roots are the first elements): the sum over its ancestor clusters of what their
+/// links gathered, spread evenly (isotropic) or by each patch's cosine toward the link's source
+/// (oriented). Empty without clusters.
+pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
+    let kind = h.clustering;
+    if h.root_cluster.is_none() {
+        return Vec::new();
+    }
+    let with_links: Vec<ElementId> = (0..h.elements.len() as ElementId)
+        .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
+        .collect();
+    let shares: Vec<(ElementId, Vec<Rgb>)> = with_links
+        .par_iter()
+        .map(|&id| {
+            let cluster = h.cluster(id).expect("cluster");
+            let contents = h.contents(cluster);
+            let e = h.element(id);
+            let mut share = vec![Rgb::BLACK; contents.len()];
+            for link in &e.links {
+                let gathered = h.element(link.source).radiance[0] * link.coupling.block[0];
+                if kind == ClusteringKind::Isotropic {
+                    share.iter_mut().for_each(|s| *s += gathered);
+                    continue;
+                }
+                let target = h.center_of(link.source);
+                let cosines: Vec<f64> = contents
+                    .iter()
+                    .map(|&s| mean_cosine(h, s, target, kind))
+                    .collect();
+                let projected: f64 = contents
+                    .iter()
+                    .zip(&cosines)
+                    .map(|(&s, c)| h.element(s).area * c)
+                    .sum();
+                if projected > 0.0 {
+                    // H_s = H A_cluster cos_s / Σ_k A_k cos_k: the patches receive the power the link
+                    // delivered, each by its own cosine.
+                    for (s, c) in share.iter_mut().zip(&cosines) {
+                        *s += gathered * (e.area * c / projected);
+                    }
+                }
+            }
+            (id, share)
+        })
+        .collect();
+    let mut out = vec![Rgb::BLACK; h.patches.len()];
+    for (id, share) in shares {
+        let cluster = h.cluster(id).expect("cluster");
+        for (&p, s) in h.contents(cluster).iter().zip(share) {
+            out[p as usize] += s;
+        }
+    }
+    out
+}
