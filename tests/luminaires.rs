@@ -396,7 +396,7 @@ fn illuminance_follows_the_inverse_square_cosine_law() {
     };
     let t = |deg: f64| height * f64::to_radians(deg).tan();
     // (x, y, expected intensity in cd): table values, or the linear interpolation between them.
-    let cases: [(&Arc<Photometry>, Vec<(f64, f64, f64)>); 2] = [
+    let cases = [
         (
             &isotropic,
             vec![(0.0, 0.0, 1000.0), (1.0, 0.5, 1000.0), (-3.0, 2.0, 1000.0)],

@@ -303,7 +303,7 @@ fn malformed_mgf_is_reported() {
         ),
         ("v c =\n p 0 0 0\nring c 0 1\n", "has no normal", 3, true),
         ("p 1 2 3\n", "outside a vertex context", 1, true),
-        ("ies lamp.ies\n", "not supported", 1, false),
+        ("ies lamp.ies\n", "cannot read file", 1, true),
         (
             "m x =\n rs 0.5 0.1\n ts 0.2 0.1\n",
             "rs (specular",

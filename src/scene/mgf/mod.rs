@@ -766,7 +766,7 @@ impl<'a> Reader<'a> {
                 n,
                 format!(
                     "luminaire fixture geometry '{fixture}' not loaded: the intensity table carries \
-                     the light (render the fixture file on its own to see the fixture)"
+                     the light, and the luminaire itself is not drawn"
                 ),
             );
         }
