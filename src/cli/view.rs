@@ -46,6 +46,12 @@ impl ViewCommand {
             .and_then(|p| p.canonicalize().ok());
         if let Some(out) = &self.out {
             super::args::check_output("--out", out, input.as_deref())?;
+            let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("");
+            anyhow::ensure!(
+                ext.eq_ignore_ascii_case("html") || ext.eq_ignore_ascii_case("htm"),
+                "--out {}: expected an .html file",
+                out.display()
+            );
         }
         let (scene, name) = self.scene.load_for_solving(progress)?;
         let settings = self.solve.settings(seed)?;
