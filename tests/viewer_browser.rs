@@ -452,6 +452,7 @@ fn render_export_and_view_write_the_page() {
     // Refusals: a scene file as output, an unknown export type, a page over its triangle budget.
     for (args, expected) in [
         (&["view", "--no-open", "--out", "x.mgf"][..], "scene file"),
+        (&["view", "--no-open", "--out", "x.png"][..], ".html"),
         (&["render", "-o", "d.png", "--export", "d.txt"][..], ".html"),
         (
             &[

@@ -308,10 +308,11 @@ impl CameraArgs {
 /// From linear radiance to display: exposure and tone curve (PNG images and the viewer page).
 #[derive(Args, Debug, Clone)]
 pub struct ToneArgs {
-    /// Exposure multiplier for the PNG; automatic (log-average luminance to middle grey) when omitted.
+    /// Exposure multiplier for the PNG and the viewer page; automatic (log-average luminance to middle
+    /// grey) when omitted.
     #[arg(long)]
     pub exposure: Option<f64>,
-    /// Tone curve for the PNG.
+    /// Tone curve for the PNG and the viewer page.
     #[arg(long, value_enum, default_value_t = crate::output::tonemap::Curve::Filmic)]
     pub tone: crate::output::tonemap::Curve,
 }

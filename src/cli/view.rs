@@ -41,6 +41,12 @@ impl ViewCommand {
         let tone = self.tone.tone_map()?;
         if let Some(out) = &self.out {
             super::args::check_output("--out", out, self.scene.scene.as_slice())?;
+            let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("");
+            anyhow::ensure!(
+                ext.eq_ignore_ascii_case("html") || ext.eq_ignore_ascii_case("htm"),
+                "--out {}: expected an .html file",
+                out.display()
+            );
         }
         let (scene, name) = self.scene.load_for_solving(progress)?;
         if let Some(out) = &self.out {
