@@ -54,6 +54,7 @@ fn solve_receiver(scene: &Scene, kind: BasisKind, level: u16, vis: &dyn Visibili
     let emitter = h.patches[1].root;
     let settings = CouplingSettings {
         cubature_degree: kind.default_cubature_degree(),
+        ..Default::default()
     };
     let mut leaves = Vec::new();
     h.collect_leaves(h.patches[0].root, &mut leaves);
