@@ -336,7 +336,17 @@ mod grid {
         }
     }
 
-    /// One level: groups the members contained in one voxel, adds the leftovers (members straddling
+    /// Size class of an object in a voxel: how many halvings of the voxel it fits (0 for objects of the
+    /// voxel's size, up to 3 for objects at most an eighth of it, which count as one class of "very
+    /// small" objects).
+    fn size_class(extent: f64, voxel: f64) -> usize {
+        if extent <= 0.0 {
+            return 3;
+        }
+        ((voxel / extent).log2().floor().max(0.0) as usize).min(3)
+    }
+
+    /// One level: groups the members contained in one voxel (by size class), adds the leftovers (members straddling
     /// voxels) to the groups they overlap where that grows them least, and returns everything that
     /// moves up to the next coarser level.
     fn group_level(
@@ -365,7 +375,20 @@ mod grid {
         let mut made: BTreeMap<[i64; 3], Vec<u32>> = BTreeMap::new();
         let first_new = tree.nodes.len() as u32;
         for (cell, voxel_members) in contained {
-            for g in group_voxel(tree, items, voxel_members, voxel, pad) {
+            // Homogeneity: objects are grouped with objects of their own size class only.
+            let mut classes: BTreeMap<usize, Vec<Child>> = BTreeMap::new();
+            for c in voxel_members {
+                let extent = largest_extent(&tree.bounds_of(items, c));
+                classes
+                    .entry(size_class(extent, voxel))
+                    .or_default()
+                    .push(c);
+            }
+            let groups: Vec<Child> = classes
+                .into_values()
+                .flat_map(|class| group_voxel(tree, items, class, voxel, pad))
+                .collect();
+            for g in groups {
                 if let Child::Node(n) = g {
                     if n >= first_new {
                         made.entry(cell).or_default().push(n);
