@@ -85,7 +85,11 @@ fn report(name: &str, shapes: &[Shape], rays: usize) {
     );
     let segments = random_segments(shapes, rays, 1);
     let (bvh, seconds) = timed(|| Bvh::new(shapes));
-    println!("bvh build {seconds:.3} s ({} wide nodes)", bvh.node_count());
+    println!(
+        "bvh build {seconds:.3} s ({} wide nodes, {:.1} MB)",
+        bvh.node_count(),
+        bvh.memory_bytes().unwrap_or(0) as f64 / 1e6
+    );
     let mut backends: Vec<Box<dyn Visibility>> = vec![Box::new(bvh)];
     backends.extend(embree(shapes));
     // Back ends back to back for each measurement, so that load from other processes hits both alike.

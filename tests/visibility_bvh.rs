@@ -355,3 +355,79 @@ fn embree_agrees_with_brute_force() {
         .count();
     assert!(differ <= 20, "{differ} segment mismatches");
 }
+
+/// A bumpy `n`×`n` height field around `corner`: triangles and (non-planar) quads sharing every vertex and
+/// edge with their neighbours, with the vertex grid returned too.
+fn height_field(n: usize, corner: DVec3, seed: u64) -> (Vec<Shape>, Vec<DVec3>) {
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let grid: Vec<DVec3> = (0..(n + 1) * (n + 1))
+        .map(|k| {
+            let (i, j) = ((k % (n + 1)) as f64, (k / (n + 1)) as f64);
+            corner + DVec3::new(i, j, rng.random_range(-0.3..0.3)) / n as f64
+        })
+        .collect();
+    let at = |i: usize, j: usize| grid[j * (n + 1) + i];
+    let mut shapes = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let q = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+            if (i + j) % 3 == 0 {
+                shapes.push(Shape::Quad(q));
+            } else {
+                shapes.push(Shape::Triangle([q[0], q[1], q[2]]));
+                shapes.push(Shape::Triangle([q[0], q[2], q[3]]));
+            }
+        }
+    }
+    (shapes, grid)
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+
+    /// Rays through shared vertices, along and across shared edges, and grazing the surface agree with the
+    /// exhaustive reference, near the origin and far from it (where `f32` rounding is coarsest).
+    #[test]
+    fn rays_grazing_shared_edges_and_vertices_agree_with_brute_force(
+        seed in 0u64..1_000_000,
+        far in proptest::bool::ANY,
+    ) {
+        let corner = if far { DVec3::new(3e4, -2e4, 1e4) } else { DVec3::ZERO };
+        let (shapes, grid) = height_field(8, corner, seed);
+        let bvh = Bvh::new(&shapes);
+        let reference = BruteForce::new(shapes);
+        let mut rng = Pcg64Mcg::seed_from_u64(seed ^ 0x5eed);
+        for i in 0..300 {
+            let k = rng.random_range(0..grid.len());
+            let a = grid[k];
+            // Targets: a shared vertex, a point on a grid edge (to the next vertex in the row or column),
+            // or on the segment between two random vertices.
+            let target = match i % 3 {
+                0 => a,
+                1 => {
+                    let next = grid[(k + if i % 2 == 0 { 1 } else { 9 }) % grid.len()];
+                    a + (next - a) * rng.random::<f64>()
+                }
+                _ => a + (grid[rng.random_range(0..grid.len())] - a) * rng.random::<f64>(),
+            };
+            // From above, from below, or almost in the surface's mean plane (grazing).
+            let lift = [1.0, -1.0, 1e-3][(i / 3) % 3] * rng.random_range(0.05..1.0);
+            let origin = target
+                + DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), lift);
+            let ray = Ray::new(origin, target - origin);
+            let context = format!("seed {seed} far {far} ray {i}");
+            for t_max in [1.0, 2.0, f64::INFINITY] {
+                assert_same_hit(
+                    bvh.intersect(&ray, 0.0, t_max),
+                    reference.intersect(&ray, 0.0, t_max),
+                    &context,
+                );
+                proptest::prop_assert_eq!(
+                    bvh.occluded(&ray, 0.0, t_max),
+                    reference.occluded(&ray, 0.0, t_max),
+                    "{}: occlusion to {}", context, t_max
+                );
+            }
+        }
+    }
+}

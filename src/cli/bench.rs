@@ -38,6 +38,10 @@ pub struct RaysBench {
     /// Back ends to measure (repeatable).
     #[arg(long = "backend", value_enum, default_values_t = [VisibilityKind::Bvh])]
     pub backends: Vec<VisibilityKind>,
+    /// Measurement rounds; each round runs every back end back to back, so that load from other
+    /// processes hits them alike and the ratio to the first back end is taken within the round.
+    #[arg(long, default_value_t = 1, value_parser = super::args::count(1, 100))]
+    pub repeat: usize,
 }
 
 #[derive(Args, Debug)]
@@ -68,24 +72,34 @@ impl RaysBench {
         let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
         let triangles: usize = shapes.iter().map(|s| s.vertex_count() - 2).sum();
         let segments = random_segments(&shapes, self.rays, seed);
-        outln!(
-            "| scene | polygons (triangles) | back end | build (s) | threads | rays/s | blocked |"
-        )?;
-        outln!("|---|---|---|---|---|---|---|")?;
+        let mut backends = Vec::with_capacity(self.backends.len());
         for &kind in &self.backends {
             let (visibility, build_seconds) = timed(|| build_visibility(&scene, kind));
-            let visibility = visibility?;
-            for threads in [1, rayon::current_num_threads()] {
-                let r = occlusion_rate(visibility.as_ref(), &segments, threads)?;
-                outln!(
-                    "| {name} | {} ({triangles}) | {} | {build_seconds:.3} | {threads} | {:.3} M | {} |",
-                    shapes.len(),
-                    visibility.name(),
-                    r.rays_per_second / 1e6,
-                    r.blocked
-                )?;
-                if threads == rayon::current_num_threads() {
-                    break;
+            backends.push((visibility?, build_seconds));
+        }
+        outln!(
+            "| scene | polygons (triangles) | back end | build (s) | memory (MB) | threads | round | rays/s | vs first | blocked |"
+        )?;
+        outln!("|---|---|---|---|---|---|---|---|---|---|")?;
+        let all = rayon::current_num_threads();
+        let thread_counts = if all > 1 { vec![1, all] } else { vec![1] };
+        for round in 1..=self.repeat {
+            for &threads in &thread_counts {
+                let mut first_rate = None;
+                for (visibility, build_seconds) in &backends {
+                    let r = occlusion_rate(visibility.as_ref(), &segments, threads)?;
+                    let first = *first_rate.get_or_insert(r.rays_per_second);
+                    let memory = visibility
+                        .memory_bytes()
+                        .map_or("–".to_string(), |b| format!("{:.1}", b as f64 / 1e6));
+                    outln!(
+                        "| {name} | {} ({triangles}) | {} | {build_seconds:.3} | {memory} | {threads} | {round} | {:.3} M | {:.0}% | {} |",
+                        shapes.len(),
+                        visibility.name(),
+                        r.rays_per_second / 1e6,
+                        100.0 * r.rays_per_second / first,
+                        r.blocked
+                    )?;
                 }
             }
         }

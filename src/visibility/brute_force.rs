@@ -41,23 +41,31 @@ pub fn intersect_shape(
     t_min: f64,
     t_max: f64,
 ) -> Option<Hit> {
-    let v = shape.vertices();
-    let s = ray.origin - v[0];
-    let e2 = v[2] - v[0];
-    let found = ray_triangle(ray, s, v[1] - v[0], e2, t_min, t_max).or_else(|| {
-        if v.len() == 4 {
-            ray_triangle(ray, s, e2, v[3] - v[0], t_min, t_max)
-        } else {
-            None
-        }
-    });
-    let (t, _, _) = found?;
+    let (t, _, _) = ray_polygon(ray, shape.vertices(), t_min, t_max)?;
     Some(Hit {
         t,
         polygon: index,
         uv: shape.parameters_of(ray.at(t)),
         front: ray.direction.dot(shape.vector_area()) < 0.0,
     })
+}
+
+/// The nearest hit on a triangle (3 vertices) or quad (4, tested as `v0 v1 v2` and `v0 v2 v3`) with `t` in
+/// `(t_min, t_max)`: `t` and the barycentrics of the triangle hit. A non-planar quad can be crossed twice,
+/// so the second triangle is tested up to the first's hit: the answer does not depend on `t_max` as long
+/// as the nearest hit lies below it.
+#[inline(always)]
+pub fn ray_polygon(ray: &Ray, v: &[DVec3], t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
+    let s = ray.origin - v[0];
+    let e2 = v[2] - v[0];
+    let first = ray_triangle(ray, s, v[1] - v[0], e2, t_min, t_max);
+    if v.len() == 4 {
+        let limit = first.map_or(t_max, |(t, _, _)| t);
+        if let Some(second) = ray_triangle(ray, s, e2, v[3] - v[0], t_min, limit) {
+            return Some(second);
+        }
+    }
+    first
 }
 
 /// Relative distance (to the coordinates' magnitude) below which a ray origin counts as lying in a

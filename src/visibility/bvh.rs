@@ -87,19 +87,23 @@ struct Prim {
 
 impl Prim {
     /// Ray parameter in `(t_min, t_max)`, with the triangle's barycentric (u, v). The same test, on the
-    /// same numbers, as `brute_force::intersect_shape`.
+    /// same numbers, as `brute_force::ray_polygon`.
     #[inline(always)]
     fn hit(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
         let s = ray.origin - self.a;
-        if may_hit(ray.direction, s, self.e1, self.e2) {
-            if let Some(hit) = triangle(ray, s, self.e1, self.e2, t_min, t_max) {
-                return Some(hit);
+        let first = if may_hit(ray.direction, s, self.e1, self.e2) {
+            triangle(ray, s, self.e1, self.e2, t_min, t_max)
+        } else {
+            None
+        };
+        // A non-planar quad can be crossed twice: the nearer hit (see `brute_force::ray_polygon`).
+        if self.vertex & QUAD_FLAG != 0 && may_hit(ray.direction, s, self.e2, self.e3) {
+            let limit = first.map_or(t_max, |(t, _, _)| t);
+            if let Some(second) = triangle(ray, s, self.e2, self.e3, t_min, limit) {
+                return Some(second);
             }
         }
-        if self.vertex & QUAD_FLAG != 0 && may_hit(ray.direction, s, self.e2, self.e3) {
-            return triangle(ray, s, self.e2, self.e3, t_min, t_max);
-        }
-        None
+        first
     }
 }
 
@@ -841,6 +845,16 @@ impl Visibility for Bvh {
 
     fn name(&self) -> &'static str {
         "bvh"
+    }
+
+    /// Nodes, primitive records and vertices.
+    fn memory_bytes(&self) -> Option<usize> {
+        use std::mem::size_of_val;
+        Some(
+            size_of_val(self.nodes.as_slice())
+                + size_of_val(self.prims.as_slice())
+                + size_of_val(self.vertices.as_slice()),
+        )
     }
 }
 

@@ -55,6 +55,11 @@ pub trait Visibility: Sync + Send {
 
     /// Short name for reports ("bvh", "embree", "brute-force").
     fn name(&self) -> &'static str;
+
+    /// Bytes of the acceleration structure, where the back end knows them (for benchmarks).
+    fn memory_bytes(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// Relative trim of a segment's ends in [`Visibility::segment_occluded`].
