@@ -344,3 +344,63 @@ fn grid_writes_csv_json_and_isolux_svg_and_never_overwrites_the_scene() {
         "{stderr}"
     );
 }
+
+#[test]
+fn photometric_units_scale_exr_and_probe_values_by_179_lm_per_w() {
+    use radiosity::output::image::Image;
+    let dir = std::env::temp_dir().join(format!("radiosity-units-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let fast = ["-q", "--eps", "0.05", "--width", "12", "--height", "10"];
+    for (units, exr) in [("radiometric", "w.exr"), ("photometric", "cd.exr")] {
+        let mut args = vec!["render", "--units", units, "--hdr"];
+        let (exr, png) = (file(exr), file(&format!("{units}.png")));
+        args.extend([exr.as_str(), "-o", png.as_str()]);
+        args.extend(fast);
+        let out = radiosity(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let w = Image::read_exr(std::path::Path::new(&file("w.exr"))).unwrap();
+    let cd = Image::read_exr(std::path::Path::new(&file("cd.exr"))).unwrap();
+    for (a, b) in w.pixels.iter().zip(&cd.pixels) {
+        for (x, y) in a.to_array().into_iter().zip(b.to_array()) {
+            // EXR stores 32-bit floats: relative rounding 2^-24 on each value.
+            assert!(
+                (179.0 * x - y).abs() <= 1e-6 * y.abs().max(1e-30),
+                "{x} {y}"
+            );
+        }
+    }
+    let out = radiosity(&[
+        "probe",
+        "-q",
+        "--eps",
+        "0.05",
+        "--random",
+        "4",
+        "--units",
+        "photometric",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for row in rows.as_array().unwrap() {
+        let c = &row["probe"]["radiosity"];
+        let radiance = Rgb::new(
+            c["r"].as_f64().unwrap(),
+            c["g"].as_f64().unwrap(),
+            c["b"].as_f64().unwrap(),
+        );
+        let luminance = row["photometric"]["luminance"].as_f64().unwrap();
+        assert!((luminance - 179.0 * radiance.luminance()).abs() <= 1e-9 * luminance);
+        assert!(row["photometric"]["illuminance"].as_f64().unwrap() > 0.0);
+    }
+}

@@ -38,8 +38,8 @@ pub struct GridCommand {
     /// error (rounded up to a multiple of 16).
     #[arg(long, value_name = "N", value_parser = super::args::count(2, 1 << 24))]
     pub reference_paths: Option<usize>,
-    /// Largest gather error per unit projected solid angle, relative to the scene's mean radiance
-    /// (see `measures::illuminance`).
+    /// Largest gather error of one piece of surface, relative to the scene's mean radiance times
+    /// --max-solid-angle (see `measures::illuminance`).
     #[arg(long, default_value_t = GatherSettings::default().tolerance, value_name = "T")]
     pub gather_tolerance: f64,
     /// Largest projected solid angle (sr) of a piece of surface gathered as a whole.
