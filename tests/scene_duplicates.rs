@@ -86,8 +86,9 @@ fn exact_duplicates_are_kept_once_with_both_places() {
     // Φ = π L_e A per side, L_e = ed / (179 π): two unit squares, each two-sided (MGF's default).
     let power = scene.emitted_power().luminance();
     let expected = 2.0 * 2.0 * 100.0 / 179.0;
+    // The sRGB matrix has 7 significant digits: neutral white maps to RGB (1, 1, 1) within ~1e-7.
     assert!(
-        (power - expected).abs() < 1e-9 * expected,
+        (power - expected).abs() < 1e-6 * expected,
         "{power} vs {expected}"
     );
 
@@ -136,12 +137,12 @@ fn duplicates_in_obj_are_found_too() {
     assert!(warned[0].contains("dup.obj:5: 1 polygon(s)") && warned[0].contains("dup.obj:4:"));
 }
 
-/// Duplicate polygons in RenderPark's own scenes: (file, duplicates removed). Measured once with
-/// `--keep-duplicates` against the default; the test checks the detector still finds exactly these.
+/// RenderPark's own scenes as shipped here hold no exact duplicates (`info --keep-duplicates` gives the
+/// same polygon counts): the detector must not invent any, and every removal must be reported.
 #[test]
 fn renderpark_scenes_duplicates() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark");
-    for (file, _) in RENDERPARK_DUPLICATES {
+    for (file, expected) in RENDERPARK_DUPLICATES {
         let path = dir.join(file);
         let kept = scene::load(
             &path,
@@ -168,11 +169,11 @@ fn renderpark_scenes_duplicates() {
             })
             .sum();
         assert_eq!(removed, warned, "{file}: every removed polygon is reported");
+        assert_eq!(removed, expected, "{file}: {:?}", deduplicated.warnings);
         // Removing a duplicate never removes area that is not there twice.
         let area_kept = kept.total_area();
         let area_dedup = deduplicated.total_area();
         assert!(area_dedup <= area_kept && area_dedup > 0.0, "{file}");
-        println!("{file}: {removed} duplicate polygons removed");
     }
 }
 
@@ -187,7 +188,7 @@ const RENDERPARK_DUPLICATES: [(&str, usize); 7] = [
 ];
 
 #[test]
-fn negative_emission_and_reflectance_above_one_warn_in_obj_and_gltf() {
+fn negative_emission_and_reflectance_above_one_warn_in_obj() {
     let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl x\nf 1 2 3\n";
     let mtl = "newmtl x\nKd 1.5 0.2 0.2\nKe -1 0 2\n";
     let scene = load(&[("neg.obj", obj), ("m.mtl", mtl)]);
@@ -205,48 +206,6 @@ fn negative_emission_and_reflectance_above_one_warn_in_obj_and_gltf() {
     );
     let m = &scene.materials[0];
     assert!(m.reflectance.r < 1.0 && m.emission == Rgb::new(0.0, 0.0, 2.0));
-
-    let gltf = gltf_triangle(
-        "[0,0,0, 1,0,0, 0,1,0]",
-        "[-1.0, 0.5, 0.0]",
-        "[2.0, 0.5, 0.5, 1.0]",
-    );
-    let scene = load(&[("neg.gltf", &gltf)]);
-    assert_eq!(
-        warnings_with(&scene, "negative emission").len(),
-        1,
-        "{:?}",
-        scene.warnings
-    );
-    assert_eq!(
-        warnings_with(&scene, "reflectance").len(),
-        1,
-        "{:?}",
-        scene.warnings
-    );
-}
-
-#[test]
-fn degenerate_and_non_finite_gltf_triangles_are_dropped_with_a_warning() {
-    // A collinear triangle; positions are f32 in a base64 buffer, built below.
-    let gltf = gltf_triangle("[0,0,0, 1,0,0, 2,0,0]", "[0,0,0]", "[0.5,0.5,0.5,1]");
-    let scene = load(&[("flat.gltf", &gltf)]);
-    assert!(scene.polygons.is_empty());
-    assert_eq!(
-        warnings_with(&scene, "degenerate").len(),
-        1,
-        "{:?}",
-        scene.warnings
-    );
-    let gltf = gltf_triangle("[0,0,0, 1,0,0, \"nan\",1,0]", "[0,0,0]", "[0.5,0.5,0.5,1]");
-    let scene = load(&[("nan.gltf", &gltf)]);
-    assert!(scene.polygons.is_empty());
-    assert_eq!(
-        warnings_with(&scene, "degenerate").len(),
-        1,
-        "{:?}",
-        scene.warnings
-    );
 }
 
 #[test]
@@ -284,44 +243,4 @@ fn non_planar_concave_and_overflowing_mgf_polygons() {
         "{:?}",
         scene.warnings
     );
-}
-
-/// A glTF file with one triangle (positions as a JSON array of f32, "nan" allowed), one material.
-fn gltf_triangle(positions: &str, emissive: &str, base: &str) -> String {
-    let values: Vec<f32> = positions
-        .trim_matches(|c| c == '[' || c == ']')
-        .split(',')
-        .map(|v| v.trim().trim_matches('"').parse::<f32>().unwrap())
-        .collect();
-    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let base64 = encode_base64(&bytes);
-    format!(
-        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
-"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"material":0}}]}}],
-"materials":[{{"pbrMetallicRoughness":{{"baseColorFactor":{base}}},"emissiveFactor":{emissive}}}],
-"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[2,1,0]}}],
-"bufferViews":[{{"buffer":0,"byteLength":36}}],
-"buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{base64}"}}]}}"#
-    )
-}
-
-fn encode_base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(ALPHABET[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }

@@ -250,7 +250,12 @@ fn strips_fans_degenerates_and_points() {
         {"attributes": {"POSITION": 0}, "indices": 4},
         {"attributes": {"POSITION": 0}, "mode": 0}
     ]}]);
-    let scene = load(&doc);
+    // The primitives cover the same square: duplicates are kept to count what each mode makes.
+    let keep = LoadOptions {
+        keep_duplicates: true,
+        ..LoadOptions::default()
+    };
+    let scene = scene::load(&write_gltf(&temp_dir(), &doc), &keep).unwrap();
     // Strip 2 + fan 2 + list 1 (one degenerate dropped).
     assert_eq!(scene.polygons.len(), 5, "{:?}", scene.warnings);
     assert!(close(scene.total_area(), 2.5));
@@ -638,4 +643,43 @@ fn hostile_numbers_and_corrupted_bytes_do_not_panic() {
         std::fs::write(&path, &bytes).unwrap();
         let _ = try_load(&path);
     }
+}
+
+#[test]
+fn negative_emission_reflectance_above_one_and_nan_positions_warn() {
+    let mut doc = embedded_quad();
+    doc["materials"] = json!([{
+        "pbrMetallicRoughness": {"baseColorFactor": [2.0, 0.5, 0.5, 1.0]},
+        "emissiveFactor": [-1.0, 0.5, 0.0]
+    }]);
+    doc["meshes"][0]["primitives"][0]["material"] = json!(0);
+    let scene = load(&doc);
+    let warned = |text: &str| {
+        scene
+            .warnings
+            .iter()
+            .filter(|w| w.message.contains(text))
+            .count()
+    };
+    assert_eq!(warned("negative emission"), 1, "{:?}", scene.warnings);
+    assert_eq!(warned("reflectance"), 1, "{:?}", scene.warnings);
+    let m = &scene.materials[0];
+    assert!(m.reflectance.r < 1.0 && m.emission.r == 0.0 && m.emission.g == 0.5);
+
+    // Vertex 0, shared by both triangles, is NaN: both are dropped with the one warning.
+    let mut bytes = quad_buffer();
+    bytes[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let doc = quad_document(
+        json!({"byteLength": bytes.len(), "uri": data_uri("application/octet-stream", &bytes)}),
+    );
+    let scene = load(&doc);
+    assert!(scene.polygons.is_empty());
+    assert!(
+        scene
+            .warnings
+            .iter()
+            .any(|w| w.message.contains("2 degenerate triangles dropped")),
+        "{:?}",
+        scene.warnings
+    );
 }

@@ -72,11 +72,10 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
 pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let error = |message: String| SceneError::new(path, 0, message);
     let (json_bytes, bin) = if bytes.starts_with(b"glTF") {
-        let (json_bytes, bin) =
-            split_glb(&bytes).map_err(|e| error(format!("invalid GLB: {e}")))?;
+        let (json_bytes, bin) = split_glb(bytes).map_err(|e| error(format!("invalid GLB: {e}")))?;
         (json_bytes, Some(bin))
     } else {
-        (&bytes[..], None)
+        (bytes, None)
     };
     let root: json::Root = json::deserialize::from_slice(json_bytes).map_err(|e| {
         // Lines only mean something in a text file; a GLB's JSON chunk has its own numbering.

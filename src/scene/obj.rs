@@ -249,7 +249,7 @@ fn check_mtl(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
 /// Checks vertex and face lines (and the UTF-8 `tobj` needs); returns the line number of every face
 /// (faces of three or more vertices, in file order, as `tobj` returns them).
 fn check(path: &Path, bytes: &[u8]) -> Result<Vec<usize>, SceneError> {
-    let mut vertices = 0usize;
+    let (mut vertices, mut texcoords, mut normals) = (0usize, 0usize, 0usize);
     let mut faces = Vec::new();
     for (k, raw) in bytes.split(|&b| b == b'\n').enumerate() {
         let number = k + 1;
@@ -259,6 +259,11 @@ fn check(path: &Path, bytes: &[u8]) -> Result<Vec<usize>, SceneError> {
         match words.next() {
             Some(keyword @ ("vt" | "vn")) => {
                 let count = if keyword == "vn" { 3 } else { 2 };
+                if keyword == "vn" {
+                    normals += 1;
+                } else {
+                    texcoords += 1;
+                }
                 let values: Vec<&str> = words.take(count).collect();
                 if values.len() < count {
                     return Err(error(format!("{keyword} needs {count} numbers")));
@@ -296,19 +301,33 @@ fn check(path: &Path, bytes: &[u8]) -> Result<Vec<usize>, SceneError> {
             Some("f") => {
                 let corners: Vec<&str> = words.collect();
                 for c in &corners {
-                    let first = c.split('/').next().unwrap_or("");
-                    let index: i64 = first
-                        .parse()
-                        .map_err(|_| error(format!("bad face vertex '{c}'")))?;
-                    let resolved = if index < 0 {
-                        vertices as i64 + index
-                    } else {
-                        index - 1
-                    };
-                    if index == 0 || resolved < 0 || resolved >= vertices as i64 {
-                        return Err(error(format!(
-                            "face vertex {index} does not exist ({vertices} vertices so far)"
-                        )));
+                    // v, v/vt, v//vn or v/vt/vn: every index given must exist (tobj overflows on
+                    // out-of-range texture and normal indices).
+                    let tables = [
+                        ("vertex", vertices),
+                        ("texture", texcoords),
+                        ("normal", normals),
+                    ];
+                    for (k, field) in c.split('/').enumerate() {
+                        let Some(&(what, count)) = tables.get(k) else {
+                            return Err(error(format!("bad face vertex '{c}'")));
+                        };
+                        if k > 0 && field.is_empty() {
+                            continue;
+                        }
+                        let index: i64 = field
+                            .parse()
+                            .map_err(|_| error(format!("bad face vertex '{c}'")))?;
+                        let resolved = if index < 0 {
+                            count as i64 + index
+                        } else {
+                            index - 1
+                        };
+                        if index == 0 || resolved < 0 || resolved >= count as i64 {
+                            return Err(error(format!(
+                                "face {what} index {index} does not exist ({count} so far)"
+                            )));
+                        }
                     }
                 }
                 if corners.len() >= 3 {

@@ -505,8 +505,8 @@ impl<'a> Reader<'a> {
             "fh" => self.face_with_holes(line),
             "sph" => {
                 self.arity(line, 2)?;
-                let c = self.vertex(n, &w[1])?;
-                let r = self.number(n, &w[2])?;
+                let c = self.vertex(n, w[1])?;
+                let r = self.number(n, w[2])?;
                 let loops =
                     solids::sphere(c.p, r, self.segments()).map_err(|e| self.error(n, e))?;
                 self.add_polygons(n, loops)
@@ -514,15 +514,15 @@ impl<'a> Reader<'a> {
             "cyl" | "cone" => {
                 let (v1, r1, v2, r2) = if keyword == "cyl" {
                     self.arity(line, 3)?;
-                    let r = self.number(n, &w[2])?;
-                    (self.vertex(n, &w[1])?, r, self.vertex(n, &w[3])?, r)
+                    let r = self.number(n, w[2])?;
+                    (self.vertex(n, w[1])?, r, self.vertex(n, w[3])?, r)
                 } else {
                     self.arity(line, 4)?;
                     (
-                        self.vertex(n, &w[1])?,
-                        self.number(n, &w[2])?,
-                        self.vertex(n, &w[3])?,
-                        self.number(n, &w[4])?,
+                        self.vertex(n, w[1])?,
+                        self.number(n, w[2])?,
+                        self.vertex(n, w[3])?,
+                        self.number(n, w[4])?,
                     )
                 };
                 let loops = solids::cone(v1.p, r1, v2.p, r2, self.segments())
@@ -531,8 +531,8 @@ impl<'a> Reader<'a> {
             }
             "ring" | "torus" => {
                 self.arity(line, 3)?;
-                let c = self.vertex(n, &w[1])?;
-                let (r0, r1) = (self.number(n, &w[2])?, self.number(n, &w[3])?);
+                let c = self.vertex(n, w[1])?;
+                let (r0, r1) = (self.number(n, w[2])?, self.number(n, w[3])?);
                 let loops = if keyword == "ring" {
                     solids::ring(c.p, c.n, r0, r1, self.segments())
                 } else {
@@ -545,7 +545,7 @@ impl<'a> Reader<'a> {
                 if w.len() < 5 {
                     return Err(self.error(n, "a prism needs at least three vertices and a length"));
                 }
-                let length = self.number(n, &w[w.len() - 1])?;
+                let length = self.number(n, w[w.len() - 1])?;
                 let base = w[1..w.len() - 1]
                     .iter()
                     .map(|name| self.vertex(n, name).map(|v| v.p))
@@ -574,7 +574,7 @@ impl<'a> Reader<'a> {
             self.warn(n, "malformed camera comment ignored");
             return Ok(());
         }
-        let number = |k: usize| self.number(n, &w[k]);
+        let number = |k: usize| self.number(n, w[k]);
         let vector = |k: usize| -> Result<DVec3> {
             Ok(DVec3::new(number(k)?, number(k + 1)?, number(k + 2)?))
         };
@@ -888,7 +888,7 @@ impl<'a> Reader<'a> {
         }
         let mut parts = Vec::new();
         for pair in w[1..].chunks(2) {
-            let weight = self.number(n, &pair[0])?;
+            let weight = self.number(n, pair[0])?;
             let c = self
                 .colours
                 .get(pair[1])
