@@ -5,7 +5,7 @@
 use radiosity::output::image::Image;
 use radiosity::output::plot::{group_series, run_points, svg, PlotSpec};
 use radiosity::reference::probe::parse_points;
-use radiosity::scene::{gltf, mgf, obj, LoadOptions};
+use radiosity::scene::{gltf, ies, mgf, obj, LoadOptions};
 use std::path::Path;
 
 /// Runs one input through the entry point of `target`, as `fuzz/fuzz_targets/TARGET.rs` does.
@@ -22,6 +22,11 @@ fn run(target: &str, data: &[u8]) {
         }
         "gltf" => drop(gltf::parse_bytes(data, nowhere)),
         "exr" => drop(Image::from_exr_bytes(data)),
+        "ies" => {
+            if let Ok(p) = ies::parse(nowhere, &String::from_utf8_lossy(data)) {
+                assert!(p.flux().is_finite() && p.intensity(45.0, 30.0).is_finite());
+            }
+        }
         "points" => {
             if let Ok(text) = std::str::from_utf8(data) {
                 drop(parse_points(text, nowhere));

@@ -329,7 +329,7 @@ fn grid_writes_csv_json_and_isolux_svg_and_never_overwrites_the_scene() {
     let out = radiosity(&args);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && stderr.contains("input scene"),
+        !out.status.success() && stderr.contains("is an input"),
         "{stderr}"
     );
     assert_eq!(

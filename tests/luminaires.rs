@@ -324,6 +324,18 @@ fn photometry(horizontal: &[f64], columns: &[[f64; 10]], size: f64) -> Arc<Photo
     Arc::new(parse(Path::new("table.ies"), &text).unwrap())
 }
 
+/// A point-like (size 0) table with a 0° and a 90° plane, tabulated every 10° down to 50°.
+fn directional_point_source() -> Arc<Photometry> {
+    photometry(
+        &[0.0, 90.0],
+        &[
+            [1000.0, 950.0, 800.0, 500.0, 200.0, 50.0, 0.0, 0.0, 0.0, 0.0],
+            [1000.0, 800.0, 400.0, 250.0, 100.0, 25.0, 0.0, 0.0, 0.0, 0.0],
+        ],
+        0.0,
+    )
+}
+
 fn quad(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> Shape {
     Shape::Quad([a, b, c, d])
 }
@@ -378,14 +390,7 @@ fn quiet() -> Progress {
 #[test]
 fn illuminance_follows_the_inverse_square_cosine_law() {
     let isotropic = photometry(&[0.0], &[[1000.0; 10]], 0.0);
-    let directional = photometry(
-        &[0.0, 90.0],
-        &[
-            [1000.0, 950.0, 800.0, 500.0, 200.0, 50.0, 0.0, 0.0, 0.0, 0.0],
-            [1000.0, 800.0, 400.0, 250.0, 100.0, 25.0, 0.0, 0.0, 0.0, 0.0],
-        ],
-        0.0,
-    );
+    let directional = directional_point_source();
     let height = 2.0;
     let rho = 0.5;
     let settings = SimulationSettings {
@@ -587,14 +592,7 @@ fn the_command_line_places_luminaires() {
 #[test]
 fn the_lux_grid_sees_the_luminaires() {
     use radiosity::measures::illuminance::{GatherSettings, IrradianceGather};
-    let directional = photometry(
-        &[0.0, 90.0],
-        &[
-            [1000.0, 950.0, 800.0, 500.0, 200.0, 50.0, 0.0, 0.0, 0.0, 0.0],
-            [1000.0, 800.0, 400.0, 250.0, 100.0, 25.0, 0.0, 0.0, 0.0, 0.0],
-        ],
-        0.0,
-    );
+    let directional = directional_point_source();
     let height = 2.0;
     let plane = 0.85;
     let luminaire = Luminaire::place(

@@ -744,7 +744,7 @@ impl<'a> Reader<'a> {
         };
         let spec = transform::parse(rest).map_err(|e| self.error(n, e))?;
         let target = match self.file.parent() {
-            Some(dir) => dir.join(&w[1]),
+            Some(dir) => dir.join(w[1]),
             None => PathBuf::from(&w[1]),
         };
         // Read, so protected from being overwritten by an output.
