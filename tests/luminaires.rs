@@ -16,7 +16,11 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
 
-const EXAMPLE: &str = "/work/shared/scenes/renderpark/examp1.ies";
+/// RenderPark's example luminaire, in the shared scenes beside the repository.
+const EXAMPLE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/scenes/renderpark/examp1.ies"
+);
 
 fn table(header: &str, numbers: &str) -> std::result::Result<Photometry, String> {
     parse(
