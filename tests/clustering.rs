@@ -223,10 +223,6 @@ fn clustered_and_unclustered_cornell_box_agree() {
             ClusterTreeKind::Kdtree,
             ClusterTreeKind::Octree,
         ] {
-            if (clustering, cluster_tree) == (ClusteringKind::Oriented, ClusterTreeKind::Octree) {
-                // Known gap: 11.6% on the red wall's red channel (BENCHMARKS.md), not understood yet.
-                continue;
-            }
             let settings = SimulationSettings {
                 clustering,
                 cluster_tree,
