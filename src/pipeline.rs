@@ -19,6 +19,7 @@ use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
+use crate::visibility::multires::Multires;
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
@@ -109,6 +110,9 @@ pub enum VisibilityKind {
     /// Transmittance by extinction through the clusters a segment crosses (Sillion–Drettakis §3.1;
     /// clusters built by `--hierarchy`); rays for rendering stay exact.
     Extinction,
+    /// Multi-resolution visibility (Sillion–Drettakis §3.2–3.3): exact where a cluster could cast a
+    /// shadow feature larger than --feature-size, extinction where not.
+    Multires,
     /// Embree 3 (build with `--features embree`).
     #[cfg(feature = "embree")]
     Embree,
@@ -127,6 +131,9 @@ pub struct SimulationSettings {
     pub clustering: ClusteringKind,
     /// How the cluster tree is built (clustering and extinction visibility).
     pub cluster_tree: ClusterTreeKind,
+    /// Multi-resolution visibility: the smallest shadow feature (world units on the receiver) computed
+    /// exactly; 0 is exact visibility, ∞ extinction.
+    pub feature_size: f64,
     /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
     pub eps: f64,
     /// Smallest splittable element area relative to the total patch area.
@@ -199,6 +206,7 @@ impl Default for SimulationSettings {
             visibility: VisibilityKind::Bvh,
             clustering: ClusteringKind::None,
             cluster_tree: ClusterTreeKind::Grid,
+            feature_size: 0.0,
             eps: 1e-3,
             min_area: 1e-5,
             basis: BasisKind::Constant,
@@ -246,10 +254,31 @@ pub fn build_visibility_with(
     Ok(match kind {
         VisibilityKind::Bvh => Box::new(Bvh::new(&shapes)),
         VisibilityKind::Extinction => Box::new(Extinction::new(&shapes, tree)),
+        VisibilityKind::Multires => {
+            anyhow::bail!(
+                "multi-resolution visibility needs a feature size: use build_visibility_for"
+            )
+        }
         #[cfg(feature = "embree")]
         VisibilityKind::Embree => Box::new(crate::visibility::embree::EmbreeScene::new(&shapes)?),
         VisibilityKind::BruteForce => Box::new(BruteForce::new(shapes)),
     })
+}
+
+/// The visibility structure `settings` names, with its cluster tree and (multires) feature size.
+pub fn build_visibility_for(
+    scene: &Scene,
+    settings: &SimulationSettings,
+) -> anyhow::Result<Box<dyn Visibility>> {
+    if settings.visibility == VisibilityKind::Multires {
+        let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+        return Ok(Box::new(Multires::new(
+            &shapes,
+            settings.cluster_tree,
+            settings.feature_size,
+        )));
+    }
+    build_visibility_with(scene, settings.visibility, settings.cluster_tree)
 }
 
 /// The oracle named in `settings` for refining `hierarchy` (eq. (2) takes its reference area from it).
@@ -336,7 +365,7 @@ pub fn simulate(
     progress: &Progress,
 ) -> anyhow::Result<Solution> {
     let start = Instant::now();
-    let visibility = build_visibility_with(scene, settings.visibility, settings.cluster_tree)?;
+    let visibility = build_visibility_for(scene, settings)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, settings.basis);
     anyhow::ensure!(

@@ -142,9 +142,13 @@ pub struct SolveArgs {
     /// Iterative solver for the linear system.
     #[arg(long, value_enum, default_value_t = SolverKind::GaussSeidel)]
     pub solver: SolverKind,
-    /// Visibility: exact ray casting (bvh, alias exact) or extinction through clusters.
+    /// Visibility: exact ray casting (bvh, alias exact), extinction through clusters, or multires.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
     pub visibility: VisibilityKind,
+    /// Multires visibility: smallest shadow feature (world units on the receiver) computed exactly;
+    /// 0 is exact visibility, inf extinction.
+    #[arg(long, value_name = "S")]
+    pub feature_size: Option<f64>,
     /// Clustering (Sillion–Drettakis §4): start from one self-link on the root cluster; clusters
     /// exchange light as isotropic volumes or by the projected area of their patches.
     #[arg(long, value_enum, default_value_t = ClusteringKind::None)]
@@ -202,6 +206,14 @@ impl SolveArgs {
             "--oracle-samples must be at least 2 (a kernel variation needs two samples)"
         );
         anyhow::ensure!(self.rays >= 1, "--rays must be at least 1");
+        let feature_size = match (self.visibility, self.feature_size) {
+            (VisibilityKind::Multires, Some(s)) if s >= 0.0 => s,
+            (VisibilityKind::Multires, _) => anyhow::bail!(
+                "--visibility multires needs --feature-size S with S >= 0 (world units, or inf)"
+            ),
+            (_, None) => 0.0,
+            (_, Some(_)) => anyhow::bail!("--feature-size applies to --visibility multires only"),
+        };
         Ok(SimulationSettings {
             method: self.method,
             oracle: self.oracle.unwrap_or(if self.accuracy.is_some() {
@@ -213,6 +225,7 @@ impl SolveArgs {
             visibility: self.visibility,
             clustering: self.clustering,
             cluster_tree: self.cluster_tree,
+            feature_size,
             eps: self.eps,
             min_area: self.min_area,
             basis: self.basis,

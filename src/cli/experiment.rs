@@ -10,7 +10,7 @@ use crate::experiments::oracles::{
 use crate::output::camera::Camera;
 use crate::output::image::Image;
 use crate::output::tonemap::{write_png, ToneMap};
-use crate::pipeline::{build_visibility, OracleKind};
+use crate::pipeline::{build_visibility_for, OracleKind};
 use crate::progress::Progress;
 use crate::reference::{render_reference, ReferenceSettings};
 use anyhow::{Context, Result};
@@ -212,7 +212,7 @@ impl OraclesExperiment {
             return Ok(image);
         }
         super::args::check_samples(camera.width, camera.height, self.reference_spp.max(2))?;
-        let visibility = build_visibility(scene, self.solve.visibility)?;
+        let visibility = build_visibility_for(scene, &self.solve.settings(seed)?)?;
         let settings = ReferenceSettings {
             spp: self.reference_spp.max(2),
             seed,

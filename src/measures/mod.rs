@@ -5,4 +5,5 @@ pub mod global_lines;
 pub mod illuminance;
 pub mod image_metrics;
 pub mod information;
+pub mod morphology;
 pub mod stats;

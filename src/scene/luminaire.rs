@@ -145,7 +145,8 @@ impl Luminaire {
     }
 
     /// Irradiance (W/m² per channel) at `x` with unit normal `normal` from this luminaire, the opening
-    /// points weighted equally: Σ_points I(ω) cos θ_x / d² × `transmittance(point, x)` / points.
+    /// points weighted equally: Σ_points I(ω) cos θ_x / d² × `transmittance(x, point)` / points (receiving
+    /// end first, as [`crate::visibility::Visibility::transmittance`] reads it).
     pub fn irradiance(
         &self,
         x: DVec3,
@@ -166,7 +167,7 @@ impl Luminaire {
             if intensity.is_black() {
                 continue;
             }
-            let t = transmittance(y, x);
+            let t = transmittance(x, y);
             if t > 0.0 {
                 sum += intensity * (share * t * cos_x / (r2 * r2.sqrt()));
             }

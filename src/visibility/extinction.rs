@@ -86,22 +86,22 @@ impl Extinction {
 
     /// `Σ κ_i l_i` along the segment from `from` to `to`.
     pub fn optical_depth(&self, from: DVec3, to: DVec3) -> f64 {
-        let Some(root) = self.tree.root() else {
-            return 0.0;
-        };
-        let d = to - from;
-        let length = d.length();
-        if length == 0.0 {
-            return 0.0;
+        match (self.tree.root(), Segment::new(from, to)) {
+            (Some(root), Some(segment)) => self.optical_depth_below(root, &segment),
+            _ => 0.0,
         }
-        let inverse = DVec3::ONE / d;
+    }
+
+    /// `Σ κ_i l_i` over cluster `node` and the clusters below it: the extinction multi-resolution
+    /// visibility uses for a cluster it does not descend into.
+    pub(super) fn optical_depth_below(&self, node: u32, segment: &Segment) -> f64 {
         let mut depth = 0.0;
-        let mut stack = vec![root];
+        let mut stack = vec![node];
         while let Some(n) = stack.pop() {
-            let Some((t0, t1)) = clip(&self.bounds[n as usize], from, inverse) else {
+            let Some((t0, t1)) = segment.clip(&self.bounds[n as usize]) else {
                 continue;
             };
-            depth += self.kappa[n as usize] * (t1 - t0) * length;
+            depth += self.kappa[n as usize] * (t1 - t0) * segment.length;
             for &c in &self.tree.nodes[n as usize].children {
                 if let Child::Node(m) = c {
                     stack.push(m);
@@ -109,6 +109,47 @@ impl Extinction {
             }
         }
         depth
+    }
+
+    /// The cluster tree over the polygons (indices of `Child::Item` are polygon indices).
+    pub(super) fn tree(&self) -> &ClusterTree {
+        &self.tree
+    }
+
+    /// The padded bounds of cluster `node`, which contain every polygon below it with a margin.
+    pub(super) fn padded_bounds(&self, node: u32) -> &Aabb {
+        &self.bounds[node as usize]
+    }
+
+    /// The exact ray caster over the same polygons.
+    pub(super) fn exact(&self) -> &Bvh {
+        &self.exact
+    }
+}
+
+/// A segment `from + t (to − from)`, `t ∈ [0, 1]`, ready for clipping against boxes.
+pub(super) struct Segment {
+    pub from: DVec3,
+    /// `1 / (to − from)` per axis.
+    pub inverse: DVec3,
+    pub length: f64,
+}
+
+impl Segment {
+    /// `None` for a segment of zero length.
+    pub fn new(from: DVec3, to: DVec3) -> Option<Self> {
+        let d = to - from;
+        let length = d.length();
+        (length > 0.0).then(|| Segment {
+            from,
+            inverse: DVec3::ONE / d,
+            length,
+        })
+    }
+
+    /// The parameter interval of the segment inside `b`.
+    pub fn clip(&self, b: &Aabb) -> Option<(f64, f64)> {
+        clip(b, self.from, self.inverse)
     }
 }
 

@@ -9,6 +9,7 @@ pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod extinction;
+pub mod multires;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 
@@ -44,7 +45,9 @@ pub trait Visibility: Sync + Send {
 
     /// Fraction of light that passes along the open segment between two surface points, in [0, 1]: the
     /// `vis(x, y)` of the radiosity kernel (Bekaert–Willems eq. (1)). Exact ray casting gives 0 or 1;
-    /// extinction through clusters (Sillion–Drettakis §3.1) gives values in between.
+    /// extinction through clusters (Sillion–Drettakis §3.1) gives values in between. `from` is the
+    /// receiving end and `to` the source end: multi-resolution visibility (§3.2) sizes the shadows that
+    /// light from `to` casts toward `from`.
     fn transmittance(&self, from: DVec3, to: DVec3) -> f64 {
         if self.segment_occluded(from, to) {
             0.0
