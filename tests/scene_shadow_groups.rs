@@ -10,74 +10,12 @@
 //! between the shadow sizes is small for the groups whose shadows are smaller than s and stays large
 //! for the others.
 
-use radiosity::geometry::{DVec3, Shape};
-use radiosity::hierarchy::Hierarchy;
+use radiosity::experiments::shadow_groups::Wall;
 use radiosity::measures::fbem::{self, Mask};
-use radiosity::output::camera::Camera;
 use radiosity::output::image::Image;
-use radiosity::output::render::{render, RenderOptions, Shading};
-use radiosity::pipeline::{deterministic_settings, make_oracle, make_solver, SimulationSettings};
 use radiosity::progress::Progress;
 use radiosity::scene::generators::ShadowGroups;
-use radiosity::scene::{CameraSpec, Scene};
-use radiosity::solvers::solve;
 use radiosity::visibility::bvh::Bvh;
-
-/// Image pixel size on the wall.
-const PIXEL: f64 = 0.009;
-const FOV_DEGREES: f64 = 30.0;
-
-/// Hierarchical radiosity on the receivers (wall tiles and source) with rays cast against `occluders`.
-/// With black cubes this is the solution of the whole scene: black cubes emit and reflect nothing, so
-/// they act on the wall only by blocking rays; leaving their ~2000 patches out of the hierarchy spares
-/// the four million initial patch pairs that would cost a minute.
-fn solve_wall(receivers: &Scene, occluders: &[Shape], tile_area: f64) -> Hierarchy {
-    let settings = SimulationSettings {
-        eps: 1e-7,
-        // A degree-1 cubature (one node on each element, one visibility ray per link): the elements are
-        // tiny next to their distance to the source, so the form factor needs no more.
-        cubature_degree: Some(1),
-        ..Default::default()
-    };
-    let mut h = Hierarchy::new(receivers, radiosity::bases::BasisKind::Constant);
-    // Wall elements stop at quadtree level 7 (side 1/128 of a tile, about 0.012, a third of the smallest
-    // shadow): level-6 elements are still splittable, level-7 ones not.
-    let mut solve_settings = deterministic_settings(&settings, &h);
-    solve_settings.refine.min_area = 0.5 * tile_area / 4f64.powi(6);
-    let oracle = make_oracle(&settings, &h);
-    let solver = make_solver(settings.solver);
-    solve(
-        &mut h,
-        &Bvh::new(occluders),
-        oracle.as_ref(),
-        solver.as_ref(),
-        &solve_settings,
-        &Progress::new(true),
-    );
-    h
-}
-
-/// Flat render of the wall tiles alone (the cubes and source are not in the view), head-on over the
-/// shadow region of group `k`.
-fn wall_image(solution: &Hierarchy, groups: &ShadowGroups, tiles: &Bvh, k: usize) -> Image {
-    let [x0, x1, y0, y1] = groups.shadow_region(k);
-    let side = (x1 - x0).max(y1 - y0);
-    let n = (side / PIXEL).round() as usize;
-    let centre = DVec3::new(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.0);
-    let half_height = 0.5 * n as f64 * PIXEL;
-    let distance = half_height / (0.5 * FOV_DEGREES).to_radians().tan();
-    let spec = CameraSpec {
-        eye: centre + DVec3::Z * distance,
-        look_at: centre,
-        up: DVec3::Y,
-        fov_degrees: FOV_DEGREES,
-    };
-    let options = RenderOptions {
-        shading: Shading::Flat,
-        ..Default::default()
-    };
-    render(solution, tiles, &Camera::new(&spec, n, n), &options)
-}
 
 /// The occlusion of the region averaged: unoccluded × mean(reference / unoccluded).
 fn averaged_occlusion(reference: &Image, unoccluded: &Image) -> Image {
@@ -97,27 +35,20 @@ fn averaged_occlusion(reference: &Image, unoccluded: &Image) -> Image {
 
 #[test]
 fn fbem_separates_the_groups_by_shadow_size() {
-    let groups = ShadowGroups {
-        // Black cubes: pure occluders, direct shadows as in Appendix A.
-        cube_reflectance: 0.0,
-        ..Default::default()
-    };
-    let scene = groups.scene();
-    let t = groups.wall_tiles();
-    let tile_area = scene.polygons[0].shape.area();
-    let shapes: Vec<Shape> = scene.polygons.iter().map(|p| p.shape).collect();
-    let mut bare = scene.clone();
-    bare.polygons.truncate(t + 1);
-    let reference = solve_wall(&bare, &shapes, tile_area);
-    let unoccluded = solve_wall(&bare, &shapes[..t + 1], tile_area);
+    // Black cubes (Wall makes them so): pure occluders, direct shadows as in Appendix A. Wall elements
+    // stop at quadtree level 7 (side 1/128 of a tile, about 0.012, a third of the smallest shadow).
+    let wall = Wall::new(&ShadowGroups::default());
+    let groups = &wall.groups;
+    let quiet = Progress::new(true);
+    let (reference, _) = wall.solve(&Bvh::new(&wall.shapes), 7, &quiet);
+    let (unoccluded, _) = wall.solve(&Bvh::new(wall.unoccluded()), 7, &quiet);
     eprintln!("reference: {} leaf elements", reference.leaf_count());
-    let tiles = Bvh::new(&shapes[..t]);
 
     let sizes = [2usize, 12];
     let mut table = Vec::new();
     for k in 0..groups.cube_sizes.len() {
-        let r = wall_image(&reference, &groups, &tiles, k);
-        let u = wall_image(&unoccluded, &groups, &tiles, k);
+        let r = wall.image(&reference, k);
+        let u = wall.image(&unoccluded, k);
         assert!(
             u.pixels.iter().all(|p| p.luminance() > 0.0),
             "wall fully lit"

@@ -27,6 +27,55 @@ pub struct ExperimentCommand {
 pub enum Experiment {
     /// Power, smoothness and MI oracles at equal element counts (Feixas et al. §4, figures 1-5).
     Oracles(OraclesExperiment),
+    /// Multi-resolution visibility on the shadow-groups scene: time and FBEM against feature size
+    /// (Sillion–Drettakis §5, Figure 9).
+    ShadowGroups(ShadowGroupsExperiment),
+}
+
+#[derive(Args, Debug)]
+pub struct ShadowGroupsExperiment {
+    /// Feature sizes s in world units on the wall (the scene's cubes are 0.03 to 0.24); 0 is multires
+    /// at its exact limit.
+    #[arg(long, value_delimiter = ',', default_values_t = [0.0, 0.02, 0.04, 0.08, 0.16, 0.32])]
+    pub feature_sizes: Vec<f64>,
+    /// Quadtree level of the compared walls' elements (side 1/2^level of a wall tile).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=9))]
+    pub level: u32,
+    /// Quadtree level of the exact reference's elements.
+    #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u32).range(1..=9))]
+    pub reference_level: u32,
+    /// Cluster tree of extinction and multires visibility.
+    #[arg(long = "hierarchy", value_enum, default_value_t = crate::hierarchy::clusters::ClusterTreeKind::Grid)]
+    pub cluster_tree: crate::hierarchy::clusters::ClusterTreeKind,
+    /// Folder for table.md and runs.json (`radiosity plot runs.json --x feature_size --y seconds
+    /// --label visibility`).
+    #[arg(short, long, default_value = "experiment-shadow-groups")]
+    pub out: PathBuf,
+}
+
+impl ShadowGroupsExperiment {
+    fn run(&self, progress: &Progress) -> Result<()> {
+        let experiment = crate::experiments::shadow_groups::MultiresExperiment {
+            groups: crate::scene::generators::ShadowGroups::default(),
+            feature_sizes: self.feature_sizes.clone(),
+            level: self.level,
+            reference_level: self.reference_level,
+            tree: self.cluster_tree,
+        };
+        std::fs::create_dir_all(&self.out)
+            .with_context(|| format!("creating {}", self.out.display()))?;
+        let runs = experiment.run(progress)?;
+        let table = crate::experiments::shadow_groups::markdown_table(&runs);
+        let json = serde_json::to_string_pretty(&runs)? + "\n";
+        for (name, text) in [("table.md", table.clone()), ("runs.json", json)] {
+            let path = self.out.join(name);
+            crate::output::write_atomically(&path, |to| {
+                std::fs::write(to, text).with_context(|| format!("writing {}", path.display()))
+            })?;
+        }
+        out!("{table}")?;
+        Ok(())
+    }
 }
 
 #[derive(Args, Debug)]
@@ -70,6 +119,7 @@ impl ExperimentCommand {
     pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
         match &self.which {
             Experiment::Oracles(e) => e.run(seed, progress),
+            Experiment::ShadowGroups(e) => e.run(progress),
         }
     }
 }

@@ -2,3 +2,4 @@
 //! tables (Markdown and JSON) and images.
 
 pub mod oracles;
+pub mod shadow_groups;
