@@ -26,7 +26,7 @@ pub struct ExperimentCommand {
 #[derive(Subcommand, Debug)]
 pub enum Experiment {
     /// Power, smoothness and MI oracles at equal element counts (Feixas et al. §4, figures 1-5).
-    Oracles(OraclesExperiment),
+    Oracles(Box<OraclesExperiment>),
     /// Multi-resolution visibility on the shadow-groups scene: time and FBEM against feature size
     /// (Sillion–Drettakis §5, Figure 9).
     ShadowGroups(ShadowGroupsExperiment),
@@ -67,12 +67,10 @@ impl ShadowGroupsExperiment {
         let runs = experiment.run(progress)?;
         let table = crate::experiments::shadow_groups::markdown_table(&runs);
         let json = serde_json::to_string_pretty(&runs)? + "\n";
-        for (name, text) in [("table.md", table.clone()), ("runs.json", json)] {
-            let path = self.out.join(name);
-            crate::output::write_atomically(&path, |to| {
-                std::fs::write(to, text).with_context(|| format!("writing {}", path.display()))
-            })?;
-        }
+        write_files(
+            &self.out,
+            [("table.md", table.clone()), ("runs.json", json)],
+        )?;
         out!("{table}")?;
         Ok(())
     }
@@ -113,6 +111,17 @@ pub struct OraclesExperiment {
     /// Folder for table.md, table.json and the images.
     #[arg(short, long, default_value = "experiment-oracles")]
     pub out: PathBuf,
+}
+
+/// Writes each (name, text) into the folder `out`, atomically.
+fn write_files(out: &std::path::Path, files: [(&str, String); 2]) -> Result<()> {
+    for (name, text) in files {
+        let path = out.join(name);
+        crate::output::write_atomically(&path, |to| {
+            std::fs::write(to, text).with_context(|| format!("writing {}", path.display()))
+        })?;
+    }
+    Ok(())
 }
 
 impl ExperimentCommand {
@@ -202,12 +211,10 @@ impl OraclesExperiment {
             self.oracles.iter().map(|&o| oracle_name(o)).collect::<Vec<_>>().join(", ")
         );
         let json = serde_json::to_string_pretty(&runs)? + "\n";
-        for (name, text) in [("table.md", header + &table), ("table.json", json)] {
-            let path = self.out.join(name);
-            crate::output::write_atomically(&path, |to| {
-                std::fs::write(to, text).with_context(|| format!("writing {}", path.display()))
-            })?;
-        }
+        write_files(
+            &self.out,
+            [("table.md", header + &table), ("table.json", json)],
+        )?;
         out!("{table}")?;
         Ok(())
     }
