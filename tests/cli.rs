@@ -397,3 +397,47 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("accuracy"));
 }
+
+#[test]
+fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
+    for (args, says) in [
+        (vec!["--visibility", "multires"], "--feature-size"),
+        (
+            vec!["--visibility", "multires", "--feature-size=-1"],
+            "--feature-size",
+        ),
+        (vec!["--feature-size", "0.1"], "--visibility multires"),
+    ] {
+        let mut args = [vec!["render", "-q"], args].concat();
+        args.extend(["-o", "/tmp/radiosity-never.png"]);
+        let out = radiosity(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            stderr.contains(says) && !stderr.contains("panicked"),
+            "{args:?}: {stderr}"
+        );
+    }
+    let dir = temp_dir("multires");
+    let png = dir.join("box.png");
+    let out = radiosity(&[
+        "render",
+        "-q",
+        "--visibility",
+        "multires",
+        "--feature-size",
+        "0.05",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists());
+}
