@@ -29,7 +29,9 @@
 //! of width `e` gives the receiver an umbra of width `b·D/d − e·(D − d)/d`; the query knows only one
 //! point of the emitter, so `e = 0`: the umbra `b·D/d`, the largest any emitter gives (conservative: a
 //! larger emitter only shrinks the umbra). If that is smaller than `s` the cluster's whole subtree is
-//! treated by extinction (the same `Σ κ_i l_i` as [`super::extinction::Extinction`]); otherwise the
+//! treated by extinction (the same leaf-level `Σ κ_i l_i` as [`super::extinction::Extinction`], not the
+//! paper's single `κ` of the stopped cluster: exact agreement at `s = ∞`, at the price of walking the
+//! subtree's boxes); otherwise the
 //! polygons it holds directly are intersected exactly (a hit makes the transmittance 0) and its
 //! sub-clusters are visited in turn.
 //!
