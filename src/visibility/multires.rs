@@ -31,9 +31,8 @@
 //! larger emitter only shrinks the umbra). If that is smaller than `s` the cluster's whole subtree is
 //! treated by extinction (the same leaf-level `Σ κ_i l_i` as [`super::extinction::Extinction`], not the
 //! paper's single `κ` of the stopped cluster: exact agreement at `s = ∞`, at the price of walking the
-//! subtree's boxes); otherwise the
-//! polygons it holds directly are intersected exactly (a hit makes the transmittance 0) and its
-//! sub-clusters are visited in turn.
+//! subtree's boxes); otherwise the polygons it holds directly are intersected exactly (a hit makes the
+//! transmittance 0) and its sub-clusters are visited in turn.
 //!
 //! Limits: `s = 0` descends everywhere and gives exactly the BVH's answer (the same ray–polygon test on
 //! the same numbers, `brute_force::ray_polygon`); `s = ∞` descends nowhere and gives exactly extinction.
