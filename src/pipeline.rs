@@ -19,6 +19,7 @@ use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
+use crate::visibility::item_buffer::IntraClusterKind;
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
@@ -127,6 +128,8 @@ pub struct SimulationSettings {
     pub clustering: ClusteringKind,
     /// How the cluster tree is built (clustering and extinction visibility).
     pub cluster_tree: ClusterTreeKind,
+    /// Intra-cluster visibility (Sillion–Drettakis §6.1) when clustering is on.
+    pub intra_cluster: IntraClusterKind,
     /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
     pub eps: f64,
     /// Smallest splittable element area relative to the total patch area.
@@ -199,6 +202,7 @@ impl Default for SimulationSettings {
             visibility: VisibilityKind::Bvh,
             clustering: ClusteringKind::None,
             cluster_tree: ClusterTreeKind::Grid,
+            intra_cluster: IntraClusterKind::ItemBuffer,
             eps: 1e-3,
             min_area: 1e-5,
             basis: BasisKind::Constant,
@@ -345,6 +349,9 @@ pub fn simulate(
          --method stochastic-jacobi)"
     );
     hierarchy.add_clusters(settings.cluster_tree, settings.clustering);
+    if hierarchy.root_cluster.is_some() && settings.intra_cluster == IntraClusterKind::ItemBuffer {
+        hierarchy.item_buffers = Some(Default::default());
+    }
     let threshold = settings.eps * hierarchy.total_emission();
     let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);

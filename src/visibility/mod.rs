@@ -9,6 +9,7 @@ pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod extinction;
+pub mod item_buffer;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 
