@@ -104,21 +104,22 @@ pub fn projected_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> 
         .collect()
 }
 
-/// The radiance a cluster sends toward the point `toward`, to multiply its coupling with: with item
-/// buffers the average of its patches' radiances over their visible projected areas `w_k`,
-/// `Σ_k L_k w_k / Σ_k w_k`, so that the coupling (which holds `Σ_k w_k`) carries the intensity of the
-/// patches the other end can see (§6.1, "the energy leaving a cluster"); without, its average radiance.
-pub fn radiance_toward(h: &Hierarchy, cluster: ElementId, toward: DVec3) -> Rgb {
-    let average = h.element(cluster).radiance[0];
-    if h.item_buffers.is_none() {
+/// The (average) radiance a link's source sends toward the point `toward`, to multiply its coupling
+/// with: for a cluster with item buffers the average of its patches' radiances over their visible
+/// projected areas `w_k`, `Σ_k L_k w_k / Σ_k w_k`, so that the coupling (which holds `Σ_k w_k`) carries
+/// the intensity of the patches the other end can see (§6.1, "the energy leaving a cluster"); otherwise
+/// the element's average radiance.
+pub fn radiance_toward(h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
+    let average = h.element(source).radiance[0];
+    if h.item_buffers.is_none() || !h.is_cluster(source) {
         return average;
     }
-    let areas = projected_areas(h, cluster, toward);
+    let areas = projected_areas(h, source, toward);
     let total: f64 = areas.iter().sum();
     if total <= 0.0 {
         return average;
     }
-    let contents = h.contents(h.cluster(cluster).expect("a cluster"));
+    let contents = h.contents(h.cluster(source).expect("a cluster"));
     contents
         .iter()
         .zip(&areas)
@@ -341,7 +342,8 @@ pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
             let e = h.element(id);
             let mut share = vec![Rgb::BLACK; contents.len()];
             for link in &e.links {
-                let gathered = h.element(link.source).radiance[0] * link.coupling.block[0];
+                let gathered =
+                    radiance_toward(h, link.source, h.center_of(id)) * link.coupling.block[0];
                 if kind == ClusteringKind::Isotropic && h.item_buffers.is_none() {
                     share.iter_mut().for_each(|s| *s += gathered);
                     continue;
