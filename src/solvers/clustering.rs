@@ -260,7 +260,11 @@ pub fn couple_cluster(
         ElementKind::Cluster(_) => {
             let c_receiver = mean_cosine(h, receiver, s_centre, kind);
             let r2 = (s_centre - r_centre).length_squared().max(1e-300);
-            let open = (s.area * c_receiver * c_source / (PI * r2)).min(1.0);
+            // The source's factor is bounded by 1 before the receiver's mean cosine scales it, so that
+            // no patch the cluster shares the irradiance with (by its projected area) gets a factor
+            // above its own cosine: a patch-level bound that keeps near clusters from feeding back
+            // more than they receive (with item buffers the shares concentrate on few patches).
+            let open = c_receiver * (s.area * c_source / (PI * r2)).min(1.0);
             let v = if open > 0.0 {
                 sample_visibility(None, 2 * CLUSTER_VISIBILITY_SAMPLES, &mut rng)
             } else {
