@@ -190,3 +190,28 @@ fn isotropic_furnace_with_item_buffers_conserves_energy() {
         r.exitant_power.g
     );
 }
+
+/// Near clusters stay stable: in the shadow-groups scene (clusters of cubes close to each other and to
+/// the wall) an open scene can absorb at most what is emitted, `Φ_a ≤ Φ_e`, and the sweeps converge.
+/// With item buffers a cluster's irradiance goes to its visible patches and it sends their radiance, so
+/// a centre-to-centre factor above one per patch fed back more than it received (the solve diverged
+/// before the source's factor was bounded per patch).
+#[test]
+fn near_clusters_with_item_buffers_stay_within_the_emitted_power() {
+    let scene = generators::ShadowGroups::default().scene();
+    let settings = SimulationSettings {
+        clustering: ClusteringKind::Oriented,
+        intra_cluster: IntraClusterKind::ItemBuffer,
+        eps: 1e-4,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &quiet()).expect("solve");
+    let r = &solution.report;
+    assert!(r.converged, "sweeps did not converge");
+    assert!(
+        r.absorbed_power.g <= r.emitted_power.g,
+        "absorbed {} of emitted {}",
+        r.absorbed_power.g,
+        r.emitted_power.g
+    );
+}
