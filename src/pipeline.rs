@@ -20,6 +20,7 @@ use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
 use crate::visibility::multires::Multires;
+use crate::visibility::item_buffer::IntraClusterKind;
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
@@ -134,6 +135,8 @@ pub struct SimulationSettings {
     /// Multi-resolution visibility: the smallest shadow feature (world units on the receiver) computed
     /// exactly; 0 is exact visibility, ∞ extinction.
     pub feature_size: f64,
+    /// Intra-cluster visibility (Sillion–Drettakis §6.1) when clustering is on.
+    pub intra_cluster: IntraClusterKind,
     /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
     pub eps: f64,
     /// Smallest splittable element area relative to the total patch area.
@@ -207,6 +210,7 @@ impl Default for SimulationSettings {
             clustering: ClusteringKind::None,
             cluster_tree: ClusterTreeKind::Grid,
             feature_size: 0.0,
+            intra_cluster: IntraClusterKind::ItemBuffer,
             eps: 1e-3,
             min_area: 1e-5,
             basis: BasisKind::Constant,
@@ -374,6 +378,9 @@ pub fn simulate(
          --method stochastic-jacobi)"
     );
     hierarchy.add_clusters(settings.cluster_tree, settings.clustering);
+    if hierarchy.root_cluster.is_some() && settings.intra_cluster == IntraClusterKind::ItemBuffer {
+        hierarchy.item_buffers = Some(Default::default());
+    }
     let threshold = settings.eps * hierarchy.total_emission();
     let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);

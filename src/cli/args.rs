@@ -9,6 +9,7 @@ use crate::pipeline::{
 };
 use crate::scene::{self, LoadOptions, Scene};
 use crate::solvers::error_estimate::EstimateKind;
+use crate::visibility::item_buffer::IntraClusterKind;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -156,6 +157,10 @@ pub struct SolveArgs {
     /// How clusters are built: the paper's multi-level grid, a median-split k-d tree or an octree.
     #[arg(long = "hierarchy", value_enum, default_value_t = ClusterTreeKind::Grid)]
     pub cluster_tree: ClusterTreeKind,
+    /// Intra-cluster visibility (Sillion–Drettakis §6.1): an item buffer per cluster and direction
+    /// shares light among the patches the direction sees, or none (contents mutually unoccluded).
+    #[arg(long, value_enum, default_value_t = IntraClusterKind::ItemBuffer)]
+    pub intra_cluster: IntraClusterKind,
     /// Refinement threshold ε of the power, smoothness and mi oracles, relative to the scene's total
     /// emission (Σ A·max(E)); smaller is finer.
     #[arg(long, default_value_t = 3e-5)]
@@ -226,6 +231,7 @@ impl SolveArgs {
             clustering: self.clustering,
             cluster_tree: self.cluster_tree,
             feature_size,
+            intra_cluster: self.intra_cluster,
             eps: self.eps,
             min_area: self.min_area,
             basis: self.basis,

@@ -17,6 +17,7 @@ use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
+use crate::visibility::item_buffer::ItemBuffers;
 use std::sync::Arc;
 
 /// Index of an element in [`Hierarchy::elements`].
@@ -202,6 +203,9 @@ pub struct Hierarchy {
     pub cluster_surfaces: Vec<ElementId>,
     /// How clusters exchange light (`ClusteringKind::None` without clusters).
     pub clustering: clusters::ClusteringKind,
+    /// Intra-cluster visibility (Sillion–Drettakis §6.1): item buffers of the clusters, or `None` when
+    /// a cluster's contents are taken as mutually unoccluded.
+    pub item_buffers: Option<Arc<ItemBuffers>>,
 }
 
 impl Hierarchy {
@@ -218,6 +222,7 @@ impl Hierarchy {
             root_cluster: None,
             cluster_surfaces: Vec::new(),
             clustering: clusters::ClusteringKind::None,
+            item_buffers: None,
         };
         for (index, polygon) in scene.polygons.iter().enumerate() {
             let material = scene.material_of(polygon);

@@ -27,6 +27,14 @@
 //! contains, evenly (isotropic) or with each patch's own cosine toward the link's source, normalised so
 //! that the power the link delivered is what the patches receive (oriented).
 //!
+//! Intra-cluster visibility (Sillion–Drettakis §6.1, `--intra-cluster item-buffer`): an item buffer of
+//! the cluster seen from the other end ([`crate::visibility::item_buffer`]) scales each patch's
+//! projected area by its visible fraction ([`projected_areas`]). Those visible projected areas are then
+//! the cluster's projected area in the kernel (`c = Σ_k w_k / A`, for either transfer kind: the
+//! isotropic 1/4 is only an estimate of it), the shares of received irradiance (hidden patches get
+//! none), the weights of the radiance it sends ([`radiance_toward`]: hidden patches send none) and of its
+//! visibility samples (so that `v` only counts occluders outside the cluster's own contents).
+//!
 //! Visibility error of a cluster link (Sillion–Drettakis Appendix A): spreading the average visibility
 //! `v` over the receiver deviates from the binary visibility by `2v(1−v)` in L¹ and `sqrt(v(1−v))` in L²
 //! (eqs. (5), (10)); the L² form times the unoccluded factor is the link's `visibility_error`, which the
@@ -50,7 +58,8 @@ pub const CLUSTER_VISIBILITY_SAMPLES: usize = 4;
 
 const CLUSTER_STREAM: u64 = 3;
 
-/// The mean cosine `c` of element `id` toward the point `toward` (see the module documentation).
+/// The mean cosine `c` of element `id` toward the point `toward` (see the module documentation); with
+/// item buffers, a cluster's is its visible projected area over its area for either transfer kind.
 pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: ClusteringKind) -> f64 {
     let e = h.element(id);
     match &e.kind {
@@ -58,23 +67,64 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
             let d = (toward - s.shape.centroid()).normalize_or_zero();
             h.patches[s.patch as usize].normal.dot(d).max(0.0)
         }
-        ElementKind::Cluster(_) if kind == ClusteringKind::Isotropic => 0.25,
-        ElementKind::Cluster(c) => {
+        ElementKind::Cluster(_)
+            if kind == ClusteringKind::Isotropic && h.item_buffers.is_none() =>
+        {
+            0.25
+        }
+        ElementKind::Cluster(_) => {
             if e.area <= 0.0 {
                 return 0.0;
             }
-            let projected: f64 = h
-                .contents(c)
-                .iter()
-                .map(|&s| {
-                    let surface = h.element(s);
-                    let d = (toward - surface.shape().centroid()).normalize_or_zero();
-                    surface.area * h.patch_of(s).normal.dot(d).max(0.0)
-                })
-                .sum();
-            projected / e.area
+            projected_areas(h, id, toward).iter().sum::<f64>() / e.area
         }
     }
+}
+
+/// The projected area of each patch of cluster `id` toward the point `toward`, `A_k max(0, n_k · d_k)`
+/// (Smits et al. 1994), times, with intra-cluster visibility on, the patch's visible fraction in the
+/// cluster's item buffer along the direction from its centre to `toward` (Sillion–Drettakis §6.1: "the
+/// projected area of each patch visible from the direction of the source").
+pub fn projected_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> {
+    let contents = h.contents(h.cluster(id).expect("a cluster"));
+    let fractions = h.item_buffers.as_ref().map(|buffers| {
+        buffers.fractions(id, toward - h.center_of(id), || {
+            contents.iter().map(|&s| *h.element(s).shape()).collect()
+        })
+    });
+    contents
+        .iter()
+        .enumerate()
+        .map(|(k, &s)| {
+            let surface = h.element(s);
+            let d = (toward - surface.shape().centroid()).normalize_or_zero();
+            let visible = fractions.as_ref().map_or(1.0, |f| f64::from(f[k]));
+            surface.area * h.patch_of(s).normal.dot(d).max(0.0) * visible
+        })
+        .collect()
+}
+
+/// The (average) radiance a link's source sends toward the point `toward`, to multiply its coupling
+/// with: for a cluster with item buffers the average of its patches' radiances over their visible
+/// projected areas `w_k`, `Σ_k L_k w_k / Σ_k w_k`, so that the coupling (which holds `Σ_k w_k`) carries
+/// the intensity of the patches the other end can see (§6.1, "the energy leaving a cluster"); otherwise
+/// the element's average radiance.
+pub fn radiance_toward(h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
+    let average = h.element(source).radiance[0];
+    if h.item_buffers.is_none() || !h.is_cluster(source) {
+        return average;
+    }
+    let areas = projected_areas(h, source, toward);
+    let total: f64 = areas.iter().sum();
+    if total <= 0.0 {
+        return average;
+    }
+    let contents = h.contents(h.cluster(source).expect("a cluster"));
+    contents
+        .iter()
+        .zip(&areas)
+        .map(|(&s, &w)| h.element(s).radiance[0] * (w / total))
+        .sum()
 }
 
 /// The transport `A_i F_ij` a link can carry (per unit source radiance, in the power oracle's units of
@@ -119,8 +169,9 @@ pub fn cluster_can_interact(h: &Hierarchy, receiver: ElementId, source: ElementI
 }
 
 /// Where visibility samples of a link end are drawn: uniformly on a surface, or on a cluster's patches
-/// with probability proportional to their projected area toward the other end (`A_k max(0, cos_k)`), so
-/// that the back faces the mean cosine already discounts are not counted a second time as occluded.
+/// with probability proportional to their (visible, with item buffers) projected area toward the other
+/// end ([`projected_areas`]), so that what the mean cosine already discounts (back faces, patches hidden
+/// by the cluster's own contents) is not counted a second time as occluded.
 enum SampleEnd<'a> {
     Surface(&'a crate::geometry::Shape),
     Cluster {
@@ -135,11 +186,10 @@ impl<'a> SampleEnd<'a> {
             ElementKind::Surface(s) => SampleEnd::Surface(&s.shape),
             ElementKind::Cluster(c) => {
                 let surfaces = h.contents(c);
-                let cumulative = surfaces
-                    .iter()
-                    .scan(0.0, |sum, &s| {
-                        let cos = mean_cosine(h, s, toward, ClusteringKind::Oriented);
-                        *sum += h.element(s).area * cos;
+                let cumulative = projected_areas(h, id, toward)
+                    .into_iter()
+                    .scan(0.0, |sum, w| {
+                        *sum += w;
                         Some(*sum)
                     })
                     .collect();
@@ -210,7 +260,11 @@ pub fn couple_cluster(
         ElementKind::Cluster(_) => {
             let c_receiver = mean_cosine(h, receiver, s_centre, kind);
             let r2 = (s_centre - r_centre).length_squared().max(1e-300);
-            let open = (s.area * c_receiver * c_source / (PI * r2)).min(1.0);
+            // The source's factor is bounded by 1 before the receiver's mean cosine scales it, so that
+            // no patch the cluster shares the irradiance with (by its projected area) gets a factor
+            // above its own cosine: a patch-level bound that keeps near clusters from feeding back
+            // more than they receive (with item buffers the shares concentrate on few patches).
+            let open = c_receiver * (s.area * c_source / (PI * r2)).min(1.0);
             let v = if open > 0.0 {
                 sample_visibility(None, 2 * CLUSTER_VISIBILITY_SAMPLES, &mut rng)
             } else {
@@ -292,26 +346,22 @@ pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
             let e = h.element(id);
             let mut share = vec![Rgb::BLACK; contents.len()];
             for link in &e.links {
-                let gathered = h.element(link.source).radiance[0] * link.coupling.block[0];
-                if kind == ClusteringKind::Isotropic {
+                let gathered =
+                    radiance_toward(h, link.source, h.center_of(id)) * link.coupling.block[0];
+                if kind == ClusteringKind::Isotropic && h.item_buffers.is_none() {
                     share.iter_mut().for_each(|s| *s += gathered);
                     continue;
                 }
-                let target = h.center_of(link.source);
-                let cosines: Vec<f64> = contents
-                    .iter()
-                    .map(|&s| mean_cosine(h, s, target, kind))
-                    .collect();
-                let projected: f64 = contents
-                    .iter()
-                    .zip(&cosines)
-                    .map(|(&s, c)| h.element(s).area * c)
-                    .sum();
+                let areas = projected_areas(h, id, h.center_of(link.source));
+                let projected: f64 = areas.iter().sum();
                 if projected > 0.0 {
-                    // H_s = H A_cluster cos_s / Σ_k A_k cos_k: the patches receive the power the link
-                    // delivered, each by its own cosine.
-                    for (s, c) in share.iter_mut().zip(&cosines) {
-                        *s += gathered * (e.area * c / projected);
+                    // H_s = H A_cluster w_s / (A_s Σ_k w_k): the patches receive the power the link
+                    // delivered, each by its (visible) projected area w_s.
+                    for ((s, w), &p) in share.iter_mut().zip(&areas).zip(contents) {
+                        let area = h.element(p).area;
+                        if area > 0.0 {
+                            *s += gathered * (e.area * w / (area * projected));
+                        }
                     }
                 }
             }

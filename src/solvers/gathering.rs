@@ -4,7 +4,7 @@
 //! patches before it; sequential but converging about twice as fast) and Southwell (the patch with the
 //! largest unshot change first).
 
-use super::clustering::irradiance_from_clusters;
+use super::clustering::{irradiance_from_clusters, radiance_toward};
 use super::push_pull::{push_pull, PatchUpdate};
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -32,6 +32,15 @@ pub trait GatheringSolver: Sync + Send {
 pub fn gather(hierarchy: &Hierarchy, id: ElementId, out: &mut [Rgb]) {
     let size = out.len();
     for link in &hierarchy.element(id).links {
+        if hierarchy.item_buffers.is_some() && hierarchy.is_cluster(link.source) {
+            // A cluster's coupling is constant in the source (column 0 only); what it sends this way
+            // comes from its visible patches (§6.1).
+            let l = radiance_toward(hierarchy, link.source, hierarchy.center_of(id));
+            for (alpha, h) in out.iter_mut().enumerate() {
+                *h += l * link.coupling.block[alpha * size];
+            }
+            continue;
+        }
         let source = &hierarchy.element(link.source).radiance;
         for (alpha, h) in out.iter_mut().enumerate() {
             let row = &link.coupling.block[alpha * size..(alpha + 1) * size];

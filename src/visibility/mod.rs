@@ -10,6 +10,7 @@ pub mod bvh;
 pub mod embree;
 pub mod extinction;
 pub mod multires;
+pub mod item_buffer;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 

@@ -1,0 +1,55 @@
+//! Scenes and measures shared by the clustering tests.
+
+use radiosity::geometry::{DVec3, Shape};
+use radiosity::hierarchy::Hierarchy;
+use radiosity::progress::Progress;
+use radiosity::scene::{generators, Polygon, Scene};
+
+pub fn quiet() -> Progress {
+    Progress::new(true)
+}
+
+/// A closed furnace (all surfaces reflect ρ and emit E) holding a grid of small cubes.
+pub fn furnace_with_cubes(per_axis: usize, rho: f64, e: f64) -> Scene {
+    let size = DVec3::new(2.0, 1.5, 1.8);
+    let mut scene = generators::furnace(size, rho, e);
+    let side = 0.12;
+    for i in 0..per_axis {
+        for j in 0..per_axis {
+            for k in 0..per_axis {
+                let cell = DVec3::new(i as f64, j as f64, k as f64) + DVec3::splat(0.5);
+                let corner = cell * size / per_axis as f64 - DVec3::splat(side / 2.0);
+                for f in generators::box_faces(DVec3::splat(side)) {
+                    let v = f.vertices();
+                    scene.polygons.push(Polygon {
+                        // Reversed: the cube's faces look outward.
+                        shape: Shape::Quad([
+                            v[3] + corner,
+                            v[2] + corner,
+                            v[1] + corner,
+                            v[0] + corner,
+                        ]),
+                        material: 0,
+                        object: 0,
+                        two_sided: false,
+                    });
+                }
+            }
+        }
+    }
+    scene
+}
+
+/// Area-weighted mean radiance (green) of the patches `which` selects.
+pub fn mean_radiance_of(h: &Hierarchy, which: impl Fn(usize) -> bool) -> f64 {
+    let (mut sum, mut area) = (0.0, 0.0);
+    for (k, p) in h.patches.iter().enumerate() {
+        if !which(k) {
+            continue;
+        }
+        let e = h.element(p.root);
+        sum += e.area * e.average_radiance().g;
+        area += e.area;
+    }
+    sum / area
+}
