@@ -14,7 +14,9 @@
 //!   `c = 1/4`; a cluster of area `A` and radiance `L` then has intensity `L A / 4` in every direction
 //!   and radiates `π L A`, its power;
 //! * oriented (Smits et al. 1994): `c = Σ_k A_k max(0, n_k · d_k) / A`, the projected area of its
-//!   patches toward the other end over their area.
+//!   patches toward the other end over their area, summed over the cluster's groups of patches of
+//!   nearly equal normal ([`crate::hierarchy::clusters::Orientation`]) so that it costs one term per
+//!   normal direction, not one per patch.
 //!
 //! `v` is the transmittance averaged over sample segments between the two ends (rays from points on the
 //! receiver to area-sampled points on the source's contents; with `--visibility extinction` these are
@@ -24,7 +26,7 @@
 //!
 //! Push-pull through clusters ([`irradiance_from_clusters`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
 //! radiance is pulled up area-weighted; irradiance gathered at a cluster is pushed to the patches it
-//! contains, evenly (isotropic) or with each patch's own cosine toward the link's source, normalised so
+//! contains, evenly (isotropic) or with each patch group's cosine toward the link's source, normalised so
 //! that the power the link delivered is what the patches receive (oriented).
 //!
 //! Visibility error of a cluster link (Sillion–Drettakis Appendix A): spreading the average visibility
@@ -59,21 +61,8 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
             h.patches[s.patch as usize].normal.dot(d).max(0.0)
         }
         ElementKind::Cluster(_) if kind == ClusteringKind::Isotropic => 0.25,
-        ElementKind::Cluster(c) => {
-            if e.area <= 0.0 {
-                return 0.0;
-            }
-            let projected: f64 = h
-                .contents(c)
-                .iter()
-                .map(|&s| {
-                    let surface = h.element(s);
-                    let d = (toward - surface.shape().centroid()).normalize_or_zero();
-                    surface.area * h.patch_of(s).normal.dot(d).max(0.0)
-                })
-                .sum();
-            projected / e.area
-        }
+        ElementKind::Cluster(c) if e.area > 0.0 => c.orientation.projected_area(toward) / e.area,
+        ElementKind::Cluster(_) => 0.0,
     }
 }
 
@@ -119,12 +108,14 @@ pub fn cluster_can_interact(h: &Hierarchy, receiver: ElementId, source: ElementI
 }
 
 /// Where visibility samples of a link end are drawn: uniformly on a surface, or on a cluster's patches
-/// with probability proportional to their projected area toward the other end (`A_k max(0, cos_k)`), so
-/// that the back faces the mean cosine already discounts are not counted a second time as occluded.
+/// with probability proportional to their projected area toward the other end (`A_k max(0, cos_k)`,
+/// by normal group, then by area within the group), so that the back faces the mean cosine already
+/// discounts are not counted a second time as occluded.
 enum SampleEnd<'a> {
     Surface(&'a crate::geometry::Shape),
     Cluster {
         surfaces: &'a [ElementId],
+        orientation: &'a crate::hierarchy::clusters::Orientation,
         cumulative: Vec<f64>,
     },
 }
@@ -133,21 +124,18 @@ impl<'a> SampleEnd<'a> {
     fn new(h: &'a Hierarchy, id: ElementId, toward: DVec3) -> Self {
         match &h.element(id).kind {
             ElementKind::Surface(s) => SampleEnd::Surface(&s.shape),
-            ElementKind::Cluster(c) => {
-                let surfaces = h.contents(c);
-                let cumulative = surfaces
-                    .iter()
-                    .scan(0.0, |sum, &s| {
-                        let cos = mean_cosine(h, s, toward, ClusteringKind::Oriented);
-                        *sum += h.element(s).area * cos;
+            ElementKind::Cluster(c) => SampleEnd::Cluster {
+                surfaces: h.contents(c),
+                orientation: &c.orientation,
+                cumulative: c
+                    .orientation
+                    .projected_areas(toward)
+                    .scan(0.0, |sum, a| {
+                        *sum += a;
                         Some(*sum)
                     })
-                    .collect();
-                SampleEnd::Cluster {
-                    surfaces,
-                    cumulative,
-                }
-            }
+                    .collect(),
+            },
         }
     }
 
@@ -158,6 +146,7 @@ impl<'a> SampleEnd<'a> {
             SampleEnd::Surface(shape) => Some(shape.sample_uniform(uv)),
             SampleEnd::Cluster {
                 surfaces,
+                orientation,
                 cumulative,
             } => {
                 let total = *cumulative.last()?;
@@ -165,10 +154,15 @@ impl<'a> SampleEnd<'a> {
                     return None;
                 }
                 let target = rng.random::<f64>() * total;
-                let k = cumulative
+                let group = cumulative
                     .partition_point(|&p| p <= target)
-                    .min(surfaces.len() - 1);
-                Some(h.element(surfaces[k]).shape().sample_uniform(uv))
+                    .min(cumulative.len() - 1);
+                let member = orientation.member_at(group, rng.random());
+                Some(
+                    h.element(surfaces[member as usize])
+                        .shape()
+                        .sample_uniform(uv),
+                )
             }
         }
     }
@@ -274,7 +268,7 @@ pub fn couple_cluster(
 
 /// Irradiance (constant coefficient) pushed from the clusters to each patch root, indexed by the root's
 /// element id (patch roots are the first elements): the sum over its ancestor clusters of what their
-/// links gathered, spread evenly (isotropic) or by each patch's cosine toward the link's source
+/// links gathered, spread evenly (isotropic) or by each patch group's cosine toward the link's source
 /// (oriented). Empty without clusters.
 pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
     let kind = h.clustering;
@@ -290,29 +284,34 @@ pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
             let cluster = h.cluster(id).expect("cluster");
             let contents = h.contents(cluster);
             let e = h.element(id);
-            let mut share = vec![Rgb::BLACK; contents.len()];
+            let mut group_share = vec![Rgb::BLACK; cluster.orientation.groups.len()];
+            let mut even = Rgb::BLACK;
             for link in &e.links {
                 let gathered = h.element(link.source).radiance[0] * link.coupling.block[0];
                 if kind == ClusteringKind::Isotropic {
-                    share.iter_mut().for_each(|s| *s += gathered);
+                    even += gathered;
                     continue;
                 }
+                // H_s = H A_cluster cos_s / Σ_k A_k cos_k: the patches receive the power the link
+                // delivered, each by its group's cosine.
                 let target = h.center_of(link.source);
-                let cosines: Vec<f64> = contents
-                    .iter()
-                    .map(|&s| mean_cosine(h, s, target, kind))
-                    .collect();
-                let projected: f64 = contents
-                    .iter()
-                    .zip(&cosines)
-                    .map(|(&s, c)| h.element(s).area * c)
-                    .sum();
-                if projected > 0.0 {
-                    // H_s = H A_cluster cos_s / Σ_k A_k cos_k: the patches receive the power the link
-                    // delivered, each by its own cosine.
-                    for (s, c) in share.iter_mut().zip(&cosines) {
-                        *s += gathered * (e.area * c / projected);
+                let projected: Vec<f64> = cluster.orientation.projected_areas(target).collect();
+                let total: f64 = projected.iter().sum();
+                if total > 0.0 {
+                    for (g, p) in group_share.iter_mut().zip(&projected) {
+                        *g += gathered * (e.area * p / total);
                     }
+                }
+            }
+            let mut share = vec![even; contents.len()];
+            let orientation = &cluster.orientation;
+            for (g, s) in orientation.groups.iter().zip(&group_share) {
+                if g.area <= 0.0 {
+                    continue;
+                }
+                let per_area = *s / g.area;
+                for &m in &orientation.members[g.members.start as usize..g.members.end as usize] {
+                    share[m as usize] += per_area;
                 }
             }
             (id, share)
