@@ -382,6 +382,7 @@ pub fn simulate(
         });
     }
     let solve_settings = deterministic_settings(settings, &hierarchy);
+    crate::solvers::refine::check_initial_links(&hierarchy, solve_settings.refine.max_links)?;
     let solver = make_solver(settings.solver);
     let report = solve(
         &mut hierarchy,

@@ -93,18 +93,50 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
     (0..patches.len())
         .into_par_iter()
         .flat_map_iter(|i| {
-            let receiver = &patches[i];
-            patches.iter().enumerate().filter_map(move |(j, source)| {
-                let useful = !receiver.reflectance.is_black()
-                    && (!source.emission.is_black() || !source.reflectance.is_black());
-                (i != j
-                    && useful
-                    && receiver.polygon != source.polygon
-                    && can_interact(&receiver.shape, &source.shape))
-                .then(|| Candidate::new(receiver.root, source.root, None))
-            })
+            (0..patches.len())
+                .filter(move |&j| initially_linked(hierarchy, i, j))
+                .map(move |j| Candidate::new(patches[i].root, patches[j].root, None))
         })
         .collect()
+}
+
+/// Whether patch `j` starts linked to receiver patch `i` without clusters (see [`initial_candidates`]).
+fn initially_linked(hierarchy: &Hierarchy, i: usize, j: usize) -> bool {
+    let (receiver, source) = (&hierarchy.patches[i], &hierarchy.patches[j]);
+    i != j
+        && !receiver.reflectance.is_black()
+        && (!source.emission.is_black() || !source.reflectance.is_black())
+        && receiver.polygon != source.polygon
+        && can_interact(&receiver.shape, &source.shape)
+}
+
+/// Refuses a solve without clusters whose initial links alone exceed the link budget `max_links`
+/// (from `--max-memory`): they are all built before any budget can stop refinement, so the count is
+/// taken first, without storing a pair, and stops as soon as it passes the budget.
+pub fn check_initial_links(hierarchy: &Hierarchy, max_links: usize) -> anyhow::Result<()> {
+    if hierarchy.root_cluster.is_some() {
+        return Ok(());
+    }
+    let n = hierarchy.patches.len();
+    let counted = std::sync::atomic::AtomicUsize::new(0);
+    (0..n).into_par_iter().for_each(|i| {
+        use std::sync::atomic::Ordering::Relaxed;
+        if counted.load(Relaxed) > max_links {
+            return;
+        }
+        let row = (0..n)
+            .filter(|&j| initially_linked(hierarchy, i, j))
+            .count();
+        counted.fetch_add(row, Relaxed);
+    });
+    let counted = counted.into_inner();
+    anyhow::ensure!(
+        counted <= max_links,
+        "without clustering every facing pair of the {n} patches starts linked: at least {counted} \
+         initial links, over the link budget of {max_links} that --max-memory allows; use \
+         --clustering oriented (or isotropic), or a larger --max-memory"
+    );
+    Ok(())
 }
 
 /// Removes every link from the hierarchy and returns them as candidates (for re-refinement after the
