@@ -339,12 +339,22 @@ pub fn simulate(
     let visibility = build_visibility_with(scene, settings.visibility, settings.cluster_tree)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, settings.basis);
+    let clustering = match settings.clustering {
+        ClusteringKind::Auto if settings.method == MethodKind::Deterministic => {
+            let max_links = deterministic_settings(settings, &hierarchy)
+                .refine
+                .max_links;
+            crate::solvers::refine::automatic_clustering(&hierarchy, max_links)
+        }
+        ClusteringKind::Auto => ClusteringKind::None,
+        chosen => chosen,
+    };
     anyhow::ensure!(
-        settings.clustering == ClusteringKind::None || settings.method == MethodKind::Deterministic,
+        clustering == ClusteringKind::None || settings.method == MethodKind::Deterministic,
         "clustering works with the deterministic method (use --clustering none with \
          --method stochastic-jacobi)"
     );
-    hierarchy.add_clusters(settings.cluster_tree, settings.clustering);
+    hierarchy.add_clusters(settings.cluster_tree, clustering);
     let threshold = settings.eps * hierarchy.total_emission();
     let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);

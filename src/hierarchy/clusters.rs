@@ -33,6 +33,10 @@ pub enum ClusteringKind {
     Isotropic,
     /// Clusters by the projected area of their patches toward the other end (Smits et al. 1994).
     Oriented,
+    /// Oriented where the unclustered start (every facing pair of patches linked) would not fit the
+    /// link budget of `--max-memory`, none where it fits (small scenes such as the Cornell box keep
+    /// their unclustered solution; BENCHMARKS.md, "Scale").
+    Auto,
 }
 
 /// An object to cluster: its bounds and the area it contributes to a cluster's total.

@@ -282,7 +282,8 @@ impl Hierarchy {
 
     /// Groups the patch roots into a tree of cluster elements (Sillion–Drettakis §4) built by `kind`,
     /// exchanging light by `transfer`; cluster radiance starts at the area-weighted average emission
-    /// of the contents. Call before any element is split; does nothing for `ClusteringKind::None`,
+    /// of the contents (`ClusteringKind::Auto` is resolved before, by the pipeline; here it builds
+    /// oriented clusters). Call before any element is split; does nothing for `ClusteringKind::None`,
     /// without patches, or if clusters exist already.
     pub fn add_clusters(
         &mut self,

@@ -9,6 +9,7 @@ use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{couple, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
+use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
 use crate::visibility::Visibility;
@@ -110,31 +111,47 @@ fn initially_linked(hierarchy: &Hierarchy, i: usize, j: usize) -> bool {
         && can_interact(&receiver.shape, &source.shape)
 }
 
+/// The number of initial links without clusters ([`initial_candidates`]), counted without storing a
+/// pair; the count stops soon after it passes `limit` (the result is then only known to exceed it).
+pub fn initial_link_count(hierarchy: &Hierarchy, limit: usize) -> usize {
+    use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+    let n = hierarchy.patches.len();
+    let counted = AtomicUsize::new(0);
+    (0..n).into_par_iter().for_each(|i| {
+        if counted.load(Relaxed) <= limit {
+            let row = (0..n)
+                .filter(|&j| initially_linked(hierarchy, i, j))
+                .count();
+            counted.fetch_add(row, Relaxed);
+        }
+    });
+    counted.into_inner()
+}
+
+/// What `--clustering auto` means for `hierarchy` (before clusters are added): oriented clusters when
+/// the unclustered initial links would exceed the link budget `max_links`, none otherwise.
+pub fn automatic_clustering(hierarchy: &Hierarchy, max_links: usize) -> ClusteringKind {
+    if initial_link_count(hierarchy, max_links) > max_links {
+        ClusteringKind::Oriented
+    } else {
+        ClusteringKind::None
+    }
+}
+
 /// Refuses a solve without clusters whose initial links alone exceed the link budget `max_links`
-/// (from `--max-memory`): they are all built before any budget can stop refinement, so the count is
-/// taken first, without storing a pair, and stops as soon as it passes the budget.
+/// (from `--max-memory`): they are all built before any budget can stop refinement, so they are
+/// counted first ([`initial_link_count`]).
 pub fn check_initial_links(hierarchy: &Hierarchy, max_links: usize) -> anyhow::Result<()> {
     if hierarchy.root_cluster.is_some() {
         return Ok(());
     }
-    let n = hierarchy.patches.len();
-    let counted = std::sync::atomic::AtomicUsize::new(0);
-    (0..n).into_par_iter().for_each(|i| {
-        use std::sync::atomic::Ordering::Relaxed;
-        if counted.load(Relaxed) > max_links {
-            return;
-        }
-        let row = (0..n)
-            .filter(|&j| initially_linked(hierarchy, i, j))
-            .count();
-        counted.fetch_add(row, Relaxed);
-    });
-    let counted = counted.into_inner();
+    let counted = initial_link_count(hierarchy, max_links);
     anyhow::ensure!(
         counted <= max_links,
-        "without clustering every facing pair of the {n} patches starts linked: at least {counted} \
+        "without clustering every facing pair of the {} patches starts linked: at least {counted} \
          initial links, over the link budget of {max_links} that --max-memory allows; use \
-         --clustering oriented (or isotropic), or a larger --max-memory"
+         --clustering oriented (or auto, or isotropic), or a larger --max-memory",
+        hierarchy.patches.len()
     );
     Ok(())
 }
