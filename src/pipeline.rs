@@ -19,8 +19,8 @@ use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
-use crate::visibility::multires::Multires;
 use crate::visibility::item_buffer::IntraClusterKind;
+use crate::visibility::multires::Multires;
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::time::Instant;
 
@@ -372,12 +372,22 @@ pub fn simulate(
     let visibility = build_visibility_for(scene, settings)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
     let mut hierarchy = Hierarchy::new(scene, settings.basis);
+    let clustering = match settings.clustering {
+        ClusteringKind::Auto if settings.method == MethodKind::Deterministic => {
+            let max_links = deterministic_settings(settings, &hierarchy)
+                .refine
+                .max_links;
+            crate::solvers::refine::automatic_clustering(&hierarchy, max_links)
+        }
+        ClusteringKind::Auto => ClusteringKind::None,
+        chosen => chosen,
+    };
     anyhow::ensure!(
-        settings.clustering == ClusteringKind::None || settings.method == MethodKind::Deterministic,
+        clustering == ClusteringKind::None || settings.method == MethodKind::Deterministic,
         "clustering works with the deterministic method (use --clustering none with \
          --method stochastic-jacobi)"
     );
-    hierarchy.add_clusters(settings.cluster_tree, settings.clustering);
+    hierarchy.add_clusters(settings.cluster_tree, clustering);
     if hierarchy.root_cluster.is_some() && settings.intra_cluster == IntraClusterKind::ItemBuffer {
         hierarchy.item_buffers = Some(Default::default());
     }
@@ -418,6 +428,7 @@ pub fn simulate(
         });
     }
     let solve_settings = deterministic_settings(settings, &hierarchy);
+    crate::solvers::refine::check_initial_links(&hierarchy, solve_settings.refine.max_links)?;
     let solver = make_solver(settings.solver);
     let report = solve(
         &mut hierarchy,

@@ -152,7 +152,7 @@ pub struct SolveArgs {
     pub feature_size: Option<f64>,
     /// Clustering (Sillion–Drettakis §4): start from one self-link on the root cluster; clusters
     /// exchange light as isotropic volumes or by the projected area of their patches.
-    #[arg(long, value_enum, default_value_t = ClusteringKind::None)]
+    #[arg(long, value_enum, default_value_t = ClusteringKind::Auto)]
     pub clustering: ClusteringKind,
     /// How clusters are built: the paper's multi-level grid, a median-split k-d tree or an octree.
     #[arg(long = "hierarchy", value_enum, default_value_t = ClusterTreeKind::Grid)]

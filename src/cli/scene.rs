@@ -111,6 +111,14 @@ pub enum SceneKind {
         #[command(flatten)]
         out: OutputArg,
     },
+    /// A hall of boxes lit by ceiling panels, of about the given number of polygons (for scaling runs).
+    BoxHall {
+        /// About this many polygons (five per box).
+        #[arg(long, default_value_t = 10_000)]
+        polygons: usize,
+        #[command(flatten)]
+        out: OutputArg,
+    },
 }
 
 fn check_light(light: &LightArgs) -> Result<()> {
@@ -202,6 +210,13 @@ impl SceneCommand {
                     .validate()
                     .map_err(|e| anyhow::anyhow!("shadow-groups: {e}"))?;
                 (groups.scene(), out)
+            }
+            SceneKind::BoxHall { polygons, out } => {
+                ensure!(
+                    (1..=50_000_000).contains(polygons),
+                    "--polygons must be in 1..=50000000, not {polygons}"
+                );
+                (generators::BoxHall::with_polygons(*polygons).scene(), out)
             }
         };
         writer::save(&scene, &out.output)?;

@@ -33,6 +33,10 @@ pub enum ClusteringKind {
     Isotropic,
     /// Clusters by the projected area of their patches toward the other end (Smits et al. 1994).
     Oriented,
+    /// Oriented where the unclustered start (every facing pair of patches linked) would not fit the
+    /// link budget of `--max-memory`, none where it fits (small scenes such as the Cornell box keep
+    /// their unclustered solution; BENCHMARKS.md, "Scale").
+    Auto,
 }
 
 /// An object to cluster: its bounds and the area it contributes to a cluster's total.
@@ -615,4 +619,138 @@ mod tests {
             assert!(ClusterTree::build(&[], kind).root().is_none());
         }
     }
+}
+
+/// Octahedral cells per axis of the normal quantisation of [`Orientation`]: cells of about 5°.
+pub const NORMAL_CELLS: u32 = 32;
+
+/// A cluster's patches grouped by normal direction: its projected area toward any point (Smits et al.
+/// 1994's oriented transfer, `Σ_k A_k max(0, n_k · d_k)`) costs one term per group instead of one per
+/// patch, and so does pushing what the cluster gathers down to its patches. Patches whose normals fall
+/// in one octahedral cell of [`NORMAL_CELLS`]² form a group with their area-weighted mean normal
+/// `n̄ = Σ A_k n_k / A` and centroid: `A max(0, n̄ · d)` equals the group's projected area exactly while
+/// every member faces `d`, and it is what the push distributes by, so the push conserves the power a
+/// link delivers whatever the grouping.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Orientation {
+    pub groups: Vec<NormalGroup>,
+    /// Positions in the cluster's contents, group after group.
+    pub members: Box<[u32]>,
+    /// Running area over `members` (inclusive), to sample a member by area within its group.
+    pub cumulative_area: Box<[f64]>,
+}
+
+/// Patches of a cluster with nearly the same normal (see [`Orientation`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalGroup {
+    /// Area-weighted mean normal (length at most 1).
+    pub normal: DVec3,
+    pub area: f64,
+    /// Area-weighted centroid.
+    pub centroid: DVec3,
+    /// Range in [`Orientation::members`].
+    pub members: std::ops::Range<u32>,
+}
+
+/// A patch as [`Orientation::new`] groups it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Facing {
+    pub normal: DVec3,
+    pub area: f64,
+    pub centroid: DVec3,
+}
+
+impl Orientation {
+    /// Groups `patches` (a cluster's contents, in order) by the octahedral cell of their normal;
+    /// members keep content order within a group, groups are in cell order (deterministic).
+    pub fn new(patches: &[Facing]) -> Self {
+        let mut order: Vec<(u32, u32)> = patches
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (octahedral_cell(p.normal), k as u32))
+            .collect();
+        order.sort_unstable();
+        let mut groups: Vec<NormalGroup> = Vec::new();
+        let mut cumulative = Vec::with_capacity(order.len());
+        let mut running = 0.0;
+        let mut previous = None;
+        for (position, &(cell, k)) in order.iter().enumerate() {
+            let p = &patches[k as usize];
+            if previous != Some(cell) {
+                groups.push(NormalGroup {
+                    normal: DVec3::ZERO,
+                    area: 0.0,
+                    centroid: DVec3::ZERO,
+                    members: position as u32..position as u32,
+                });
+                previous = Some(cell);
+            }
+            let g = groups.last_mut().expect("a group was just pushed");
+            g.normal += p.normal * p.area;
+            g.centroid += p.centroid * p.area;
+            g.area += p.area;
+            g.members.end += 1;
+            running += p.area;
+            cumulative.push(running);
+        }
+        for g in &mut groups {
+            if g.area > 0.0 {
+                g.normal /= g.area;
+                g.centroid /= g.area;
+            } else {
+                let first = &patches[order[g.members.start as usize].1 as usize];
+                g.centroid = first.centroid;
+            }
+        }
+        Orientation {
+            groups,
+            members: order.into_iter().map(|(_, k)| k).collect(),
+            cumulative_area: cumulative.into(),
+        }
+    }
+
+    /// Projected area of each group toward the point `toward`: `A max(0, n̄ · d)`, `d` the unit
+    /// direction from the group's centroid.
+    pub fn projected_areas(&self, toward: DVec3) -> impl Iterator<Item = f64> + '_ {
+        self.groups.iter().map(move |g| {
+            let d = (toward - g.centroid).normalize_or_zero();
+            g.area * g.normal.dot(d).max(0.0)
+        })
+    }
+
+    /// Total projected area toward `toward`.
+    pub fn projected_area(&self, toward: DVec3) -> f64 {
+        self.projected_areas(toward).sum()
+    }
+
+    /// The member (a position in the cluster's contents) of group `group` at `fraction` ∈ [0, 1) of
+    /// the group's area.
+    pub fn member_at(&self, group: usize, fraction: f64) -> u32 {
+        let range = self.groups[group].members.clone();
+        let (start, end) = (range.start as usize, range.end as usize);
+        let base = if start == 0 {
+            0.0
+        } else {
+            self.cumulative_area[start - 1]
+        };
+        let target = base + fraction * (self.cumulative_area[end - 1] - base);
+        let k = start + self.cumulative_area[start..end].partition_point(|&c| c <= target);
+        self.members[k.min(end - 1)]
+    }
+}
+
+/// The cell of unit vector `n` on a [`NORMAL_CELLS`]² octahedral map of the sphere.
+fn octahedral_cell(n: DVec3) -> u32 {
+    let l1 = n.x.abs() + n.y.abs() + n.z.abs();
+    if l1 <= 0.0 {
+        return 0;
+    }
+    let (mut u, mut v) = (n.x / l1, n.y / l1);
+    if n.z < 0.0 {
+        let (fu, fv) = (u, v);
+        u = (1.0 - fv.abs()) * fu.signum();
+        v = (1.0 - fu.abs()) * fv.signum();
+    }
+    let cell = |t: f64| (((t + 1.0) * 0.5 * NORMAL_CELLS as f64) as u32).min(NORMAL_CELLS - 1);
+    cell(u) * NORMAL_CELLS + cell(v)
 }

@@ -18,6 +18,7 @@ use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
 use crate::visibility::item_buffer::ItemBuffers;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Index of an element in [`Hierarchy::elements`].
@@ -117,6 +118,9 @@ pub struct Cluster {
     pub emission: Rgb,
     /// Its patch roots: `Hierarchy::cluster_surfaces[contents]`.
     pub contents: std::ops::Range<u32>,
+    /// Its patch roots grouped by normal: projected area and push-down without a loop over every
+    /// patch ([`clusters::Orientation`]).
+    pub orientation: clusters::Orientation,
 }
 
 /// The two kinds of element.
@@ -283,7 +287,8 @@ impl Hierarchy {
 
     /// Groups the patch roots into a tree of cluster elements (Sillion–Drettakis §4) built by `kind`,
     /// exchanging light by `transfer`; cluster radiance starts at the area-weighted average emission
-    /// of the contents. Call before any element is split; does nothing for `ClusteringKind::None`,
+    /// of the contents (`ClusteringKind::Auto` is resolved before, by the pipeline; here it builds
+    /// oriented clusters). Call before any element is split; does nothing for `ClusteringKind::None`,
     /// without patches, or if clusters exist already.
     pub fn add_clusters(
         &mut self,
@@ -331,6 +336,7 @@ impl Hierarchy {
                     reflectance,
                     emission,
                     contents: 0..0,
+                    orientation: clusters::Orientation::default(),
                 }),
                 parent: None,
                 children,
@@ -345,7 +351,36 @@ impl Hierarchy {
         let root = self.elements.len() as ElementId - 1;
         self.root_cluster = Some(root);
         self.order_contents(root);
+        self.orient_clusters(first);
         self.pull_clusters();
+    }
+
+    /// Builds every cluster's [`clusters::Orientation`] (clusters are the elements from `first` on).
+    fn orient_clusters(&mut self, first: ElementId) {
+        let h = &*self;
+        let orientations: Vec<clusters::Orientation> = (first as usize..h.elements.len())
+            .into_par_iter()
+            .map(|id| {
+                let cluster = h
+                    .cluster(id as ElementId)
+                    .expect("clusters follow the patch roots");
+                let facings: Vec<clusters::Facing> = h
+                    .contents(cluster)
+                    .iter()
+                    .map(|&s| clusters::Facing {
+                        normal: h.patch_of(s).normal,
+                        area: h.element(s).area,
+                        centroid: h.element(s).shape().centroid(),
+                    })
+                    .collect();
+                clusters::Orientation::new(&facings)
+            })
+            .collect();
+        for (e, orientation) in self.elements[first as usize..].iter_mut().zip(orientations) {
+            if let ElementKind::Cluster(c) = &mut e.kind {
+                c.orientation = orientation;
+            }
+        }
     }
 
     /// Lists the patch roots below `id` into `cluster_surfaces` and records each cluster's range.

@@ -1,5 +1,6 @@
 //! Test scenes with known answers: the analytic form factor configurations, the closed "furnace" box, and
-//! the shadow-group scene of Sillion & Drettakis (Figures 1 and 9) for the feature-based error metric.
+//! the shadow-group scene of Sillion & Drettakis (Figures 1 and 9) for the feature-based error metric;
+//! and a hall of boxes of any size ([`BoxHall`]) to measure how solves scale.
 
 use super::{CameraSpec, Material, Object, Polygon, Scene};
 use crate::color::Rgb;
@@ -93,6 +94,14 @@ pub fn box_faces(size: DVec3) -> [Shape; 6] {
         quad(p(0., 0., 0.), p(x, 0., 0.), p(x, y, 0.), p(0., y, 0.)),
         quad(p(0., 0., z), p(0., y, z), p(x, y, z), p(x, 0., z)),
     ]
+}
+
+/// The six outward-facing faces of the box `corner + [0, size]`, in the order of [`box_faces`].
+fn outward_box_faces(corner: DVec3, size: DVec3) -> [Shape; 6] {
+    box_faces(size).map(|f| {
+        let v = f.vertices();
+        quad(v[3] + corner, v[2] + corner, v[1] + corner, v[0] + corner)
+    })
 }
 
 /// The white furnace: a closed box whose faces all reflect ρ and emit E; every point converges to
@@ -331,10 +340,7 @@ impl ShadowGroups {
                         self.cube_distance,
                     );
                     let corner = centre - DVec3::splat(s / 2.0);
-                    for f in box_faces(DVec3::splat(s)) {
-                        let v = f.vertices();
-                        let outward =
-                            quad(v[3] + corner, v[2] + corner, v[1] + corner, v[0] + corner);
+                    for outward in outward_box_faces(corner, DVec3::splat(s)) {
                         faces.push((outward, 2, name.clone()));
                     }
                 }
@@ -382,6 +388,121 @@ impl ShadowGroups {
                 two_sided: false,
             });
         }
+        scene
+    }
+}
+
+/// A hall of boxes that grows to any polygon count, for measuring how solves scale: a closed room
+/// (one-sided faces pointing in) whose floor carries an `m × m` grid of boxes (five outward faces each,
+/// no bottom) of pseudo-random heights, lit by one ceiling panel per `4 × 4` boxes. The density of
+/// boxes, lights and area per box is the same at every size, so the work per polygon of a solver that
+/// scales is too.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxHall {
+    /// Boxes per side.
+    pub boxes_per_side: usize,
+}
+
+/// Polygons of a [`BoxHall`] per box.
+const FACES_PER_BOX: usize = 5;
+
+impl BoxHall {
+    /// Grid pitch of the boxes, and the room's height.
+    const PITCH: f64 = 1.0;
+    const HEIGHT: f64 = 3.0;
+
+    /// The hall with about `polygons` polygons (at least one box).
+    pub fn with_polygons(polygons: usize) -> Self {
+        let boxes = polygons as f64 / (FACES_PER_BOX as f64 + 1.0 / 16.0);
+        BoxHall {
+            boxes_per_side: (boxes.sqrt().round() as usize).max(1),
+        }
+    }
+
+    /// Number of ceiling panels per side.
+    fn lights_per_side(&self) -> usize {
+        self.boxes_per_side.div_ceil(4)
+    }
+
+    /// Polygons of the scene: room, lights and boxes.
+    pub fn polygon_count(&self) -> usize {
+        6 + self.lights_per_side().pow(2) + FACES_PER_BOX * self.boxes_per_side.pow(2)
+    }
+
+    pub fn scene(&self) -> Scene {
+        let m = self.boxes_per_side;
+        let side = m as f64 * Self::PITCH;
+        let h = Self::HEIGHT;
+        let p = DVec3::new;
+        let mut faces: Vec<(Shape, usize)> = box_faces(p(side, side, h))
+            .into_iter()
+            .map(|f| (f, 0))
+            .collect();
+        let lights = self.lights_per_side();
+        let cell = side / lights as f64;
+        let half = 0.15 * cell;
+        for i in 0..lights {
+            for j in 0..lights {
+                let (x, y) = ((i as f64 + 0.5) * cell, (j as f64 + 0.5) * cell);
+                let z = 0.99 * h;
+                faces.push((
+                    quad(
+                        p(x - half, y - half, z),
+                        p(x - half, y + half, z),
+                        p(x + half, y + half, z),
+                        p(x + half, y - half, z),
+                    ),
+                    1,
+                ));
+            }
+        }
+        for i in 0..m {
+            for j in 0..m {
+                let key = crate::solvers::splitmix64((i * m + j) as u64);
+                let height = 0.3 + 0.6 * (key >> 11) as f64 / (1u64 << 53) as f64;
+                let corner = p(
+                    (i as f64 + 0.25) * Self::PITCH,
+                    (j as f64 + 0.25) * Self::PITCH,
+                    0.0,
+                );
+                let size = p(0.5 * Self::PITCH, 0.5 * Self::PITCH, height);
+                // Without the bottom (-z), which touches the floor.
+                for (k, outward) in outward_box_faces(corner, size).into_iter().enumerate() {
+                    if k != 4 {
+                        faces.push((outward, 2));
+                    }
+                }
+            }
+        }
+        let mut scene = scene_of(
+            Vec::new(),
+            vec![
+                Material::diffuse("walls", Rgb::splat(0.6)),
+                Material::emitter("light", Rgb::BLACK, Rgb::splat(10.0)),
+                Material::diffuse("boxes", Rgb::new(0.6, 0.4, 0.3)),
+            ],
+        );
+        scene.objects = ["room", "lights", "boxes"]
+            .iter()
+            .map(|name| Object {
+                name: name.to_string(),
+            })
+            .collect();
+        scene.polygons = faces
+            .into_iter()
+            .map(|(shape, material)| Polygon {
+                shape,
+                material,
+                object: material,
+                two_sided: false,
+            })
+            .collect();
+        scene.camera = Some(CameraSpec {
+            eye: p(0.02 * side, 0.02 * side, 0.9 * h),
+            look_at: p(0.5 * side, 0.5 * side, 0.0),
+            up: DVec3::Z,
+            fov_degrees: 60.0,
+        });
         scene
     }
 }
@@ -453,5 +574,26 @@ mod tests {
         }
         .validate()
         .is_err());
+    }
+
+    #[test]
+    fn box_hall_has_the_polygons_it_counts_and_is_closed() {
+        let hall = BoxHall::with_polygons(10_000);
+        let scene = hall.scene();
+        assert_eq!(scene.polygons.len(), hall.polygon_count());
+        assert!((scene.polygons.len() as f64 / 10_000.0 - 1.0).abs() < 0.05);
+        // Every box face points away from its box, every room face into the room.
+        let side = hall.boxes_per_side as f64 * BoxHall::PITCH;
+        let centre = DVec3::new(0.5 * side, 0.5 * side, 0.5 * BoxHall::HEIGHT);
+        for polygon in &scene.polygons[..6] {
+            let s = polygon.shape;
+            assert!(s.normal().dot(centre - s.centroid()) > 0.0);
+        }
+        for polygon in scene.polygons.iter().filter(|p| p.material == 2) {
+            let s = polygon.shape;
+            let cell = (s.centroid() / BoxHall::PITCH).floor() + DVec3::new(0.5, 0.5, 0.0);
+            let box_base = DVec3::new(cell.x, cell.y, 0.0) * BoxHall::PITCH;
+            assert!(s.normal().dot(s.centroid() - box_base) > 0.0);
+        }
     }
 }

@@ -14,7 +14,9 @@
 //!   `c = 1/4`; a cluster of area `A` and radiance `L` then has intensity `L A / 4` in every direction
 //!   and radiates `π L A`, its power;
 //! * oriented (Smits et al. 1994): `c = Σ_k A_k max(0, n_k · d_k) / A`, the projected area of its
-//!   patches toward the other end over their area.
+//!   patches toward the other end over their area, summed over the cluster's groups of patches of
+//!   nearly equal normal ([`crate::hierarchy::clusters::Orientation`]) so that it costs one term per
+//!   normal direction, not one per patch.
 //!
 //! `v` is the transmittance averaged over sample segments between the two ends (rays from points on the
 //! receiver to area-sampled points on the source's contents; with `--visibility extinction` these are
@@ -24,7 +26,7 @@
 //!
 //! Push-pull through clusters ([`irradiance_from_clusters`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
 //! radiance is pulled up area-weighted; irradiance gathered at a cluster is pushed to the patches it
-//! contains, evenly (isotropic) or with each patch's own cosine toward the link's source, normalised so
+//! contains, evenly (isotropic) or with each patch group's cosine toward the link's source, normalised so
 //! that the power the link delivered is what the patches receive (oriented).
 //!
 //! Intra-cluster visibility (Sillion–Drettakis §6.1, `--intra-cluster item-buffer`): an item buffer of
@@ -72,12 +74,11 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
         {
             0.25
         }
-        ElementKind::Cluster(_) => {
-            if e.area <= 0.0 {
-                return 0.0;
-            }
-            projected_areas(h, id, toward).iter().sum::<f64>() / e.area
+        ElementKind::Cluster(_) if e.area <= 0.0 => 0.0,
+        ElementKind::Cluster(c) if h.item_buffers.is_none() => {
+            c.orientation.projected_area(toward) / e.area
         }
+        ElementKind::Cluster(_) => projected_areas(h, id, toward).iter().sum::<f64>() / e.area,
     }
 }
 
@@ -169,13 +170,17 @@ pub fn cluster_can_interact(h: &Hierarchy, receiver: ElementId, source: ElementI
 }
 
 /// Where visibility samples of a link end are drawn: uniformly on a surface, or on a cluster's patches
-/// with probability proportional to their (visible, with item buffers) projected area toward the other
-/// end ([`projected_areas`]), so that what the mean cosine already discounts (back faces, patches hidden
-/// by the cluster's own contents) is not counted a second time as occluded.
+/// with probability proportional to their projected area toward the other end (`A_k max(0, cos_k)`:
+/// by normal group, then by area within the group; with item buffers per patch, times its visible
+/// fraction, [`projected_areas`]), so that what the mean cosine already discounts (back faces, patches
+/// hidden by the cluster's own contents) is not counted a second time as occluded.
 enum SampleEnd<'a> {
     Surface(&'a crate::geometry::Shape),
     Cluster {
         surfaces: &'a [ElementId],
+        /// The cluster's normal groups when `cumulative` runs over groups; `None` when it runs over
+        /// the patches themselves (item buffers: each patch has its own visible fraction).
+        orientation: Option<&'a crate::hierarchy::clusters::Orientation>,
         cumulative: Vec<f64>,
     },
 }
@@ -185,17 +190,24 @@ impl<'a> SampleEnd<'a> {
         match &h.element(id).kind {
             ElementKind::Surface(s) => SampleEnd::Surface(&s.shape),
             ElementKind::Cluster(c) => {
-                let surfaces = h.contents(c);
-                let cumulative = projected_areas(h, id, toward)
-                    .into_iter()
-                    .scan(0.0, |sum, w| {
-                        *sum += w;
-                        Some(*sum)
-                    })
-                    .collect();
+                let (orientation, weights): (_, Box<dyn Iterator<Item = f64>>) =
+                    if h.item_buffers.is_some() {
+                        (None, Box::new(projected_areas(h, id, toward).into_iter()))
+                    } else {
+                        (
+                            Some(&c.orientation),
+                            Box::new(c.orientation.projected_areas(toward)),
+                        )
+                    };
                 SampleEnd::Cluster {
-                    surfaces,
-                    cumulative,
+                    surfaces: h.contents(c),
+                    orientation,
+                    cumulative: weights
+                        .scan(0.0, |sum, a| {
+                            *sum += a;
+                            Some(*sum)
+                        })
+                        .collect(),
                 }
             }
         }
@@ -208,6 +220,7 @@ impl<'a> SampleEnd<'a> {
             SampleEnd::Surface(shape) => Some(shape.sample_uniform(uv)),
             SampleEnd::Cluster {
                 surfaces,
+                orientation,
                 cumulative,
             } => {
                 let total = *cumulative.last()?;
@@ -215,10 +228,18 @@ impl<'a> SampleEnd<'a> {
                     return None;
                 }
                 let target = rng.random::<f64>() * total;
-                let k = cumulative
+                let index = cumulative
                     .partition_point(|&p| p <= target)
-                    .min(surfaces.len() - 1);
-                Some(h.element(surfaces[k]).shape().sample_uniform(uv))
+                    .min(cumulative.len() - 1);
+                let member = match orientation {
+                    Some(groups) => groups.member_at(index, rng.random()),
+                    None => index as u32,
+                };
+                Some(
+                    h.element(surfaces[member as usize])
+                        .shape()
+                        .sample_uniform(uv),
+                )
             }
         }
     }
@@ -328,7 +349,7 @@ pub fn couple_cluster(
 
 /// Irradiance (constant coefficient) pushed from the clusters to each patch root, indexed by the root's
 /// element id (patch roots are the first elements): the sum over its ancestor clusters of what their
-/// links gathered, spread evenly (isotropic) or by each patch's cosine toward the link's source
+/// links gathered, spread evenly (isotropic) or by each patch group's cosine toward the link's source
 /// (oriented). Empty without clusters.
 pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
     let kind = h.clustering;
@@ -344,25 +365,51 @@ pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
             let cluster = h.cluster(id).expect("cluster");
             let contents = h.contents(cluster);
             let e = h.element(id);
-            let mut share = vec![Rgb::BLACK; contents.len()];
+            let mut group_share = vec![Rgb::BLACK; cluster.orientation.groups.len()];
+            let mut patch_share = vec![Rgb::BLACK; contents.len()];
+            let mut even = Rgb::BLACK;
             for link in &e.links {
                 let gathered =
                     radiance_toward(h, link.source, h.center_of(id)) * link.coupling.block[0];
                 if kind == ClusteringKind::Isotropic && h.item_buffers.is_none() {
-                    share.iter_mut().for_each(|s| *s += gathered);
+                    even += gathered;
                     continue;
                 }
-                let areas = projected_areas(h, id, h.center_of(link.source));
-                let projected: f64 = areas.iter().sum();
-                if projected > 0.0 {
+                let target = h.center_of(link.source);
+                if h.item_buffers.is_some() {
                     // H_s = H A_cluster w_s / (A_s Σ_k w_k): the patches receive the power the link
-                    // delivered, each by its (visible) projected area w_s.
-                    for ((s, w), &p) in share.iter_mut().zip(&areas).zip(contents) {
-                        let area = h.element(p).area;
-                        if area > 0.0 {
-                            *s += gathered * (e.area * w / (area * projected));
+                    // delivered, each by its visible projected area w_s.
+                    let areas = projected_areas(h, id, target);
+                    let total: f64 = areas.iter().sum();
+                    if total > 0.0 {
+                        for ((s, w), &p) in patch_share.iter_mut().zip(&areas).zip(contents) {
+                            let area = h.element(p).area;
+                            if area > 0.0 {
+                                *s += gathered * (e.area * w / (area * total));
+                            }
                         }
                     }
+                    continue;
+                }
+                // H_s = H A_cluster cos_s / Σ_k A_k cos_k: the patches receive the power the link
+                // delivered, each by its group's cosine.
+                let projected: Vec<f64> = cluster.orientation.projected_areas(target).collect();
+                let total: f64 = projected.iter().sum();
+                if total > 0.0 {
+                    for (g, p) in group_share.iter_mut().zip(&projected) {
+                        *g += gathered * (e.area * p / total);
+                    }
+                }
+            }
+            let mut share: Vec<Rgb> = patch_share.into_iter().map(|s| s + even).collect();
+            let orientation = &cluster.orientation;
+            for (g, s) in orientation.groups.iter().zip(&group_share) {
+                if g.area <= 0.0 {
+                    continue;
+                }
+                let per_area = *s / g.area;
+                for &m in &orientation.members[g.members.start as usize..g.members.end as usize] {
+                    share[m as usize] += per_area;
                 }
             }
             (id, share)

@@ -9,6 +9,7 @@ use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{couple, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
+use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
 use crate::visibility::Visibility;
@@ -93,18 +94,66 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
     (0..patches.len())
         .into_par_iter()
         .flat_map_iter(|i| {
-            let receiver = &patches[i];
-            patches.iter().enumerate().filter_map(move |(j, source)| {
-                let useful = !receiver.reflectance.is_black()
-                    && (!source.emission.is_black() || !source.reflectance.is_black());
-                (i != j
-                    && useful
-                    && receiver.polygon != source.polygon
-                    && can_interact(&receiver.shape, &source.shape))
-                .then(|| Candidate::new(receiver.root, source.root, None))
-            })
+            (0..patches.len())
+                .filter(move |&j| initially_linked(hierarchy, i, j))
+                .map(move |j| Candidate::new(patches[i].root, patches[j].root, None))
         })
         .collect()
+}
+
+/// Whether patch `j` starts linked to receiver patch `i` without clusters (see [`initial_candidates`]).
+fn initially_linked(hierarchy: &Hierarchy, i: usize, j: usize) -> bool {
+    let (receiver, source) = (&hierarchy.patches[i], &hierarchy.patches[j]);
+    i != j
+        && !receiver.reflectance.is_black()
+        && (!source.emission.is_black() || !source.reflectance.is_black())
+        && receiver.polygon != source.polygon
+        && can_interact(&receiver.shape, &source.shape)
+}
+
+/// The number of initial links without clusters ([`initial_candidates`]), counted without storing a
+/// pair; the count stops soon after it passes `limit` (the result is then only known to exceed it).
+pub fn initial_link_count(hierarchy: &Hierarchy, limit: usize) -> usize {
+    use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+    let n = hierarchy.patches.len();
+    let counted = AtomicUsize::new(0);
+    (0..n).into_par_iter().for_each(|i| {
+        if counted.load(Relaxed) <= limit {
+            let row = (0..n)
+                .filter(|&j| initially_linked(hierarchy, i, j))
+                .count();
+            counted.fetch_add(row, Relaxed);
+        }
+    });
+    counted.into_inner()
+}
+
+/// What `--clustering auto` means for `hierarchy` (before clusters are added): oriented clusters when
+/// the unclustered initial links would exceed the link budget `max_links`, none otherwise.
+pub fn automatic_clustering(hierarchy: &Hierarchy, max_links: usize) -> ClusteringKind {
+    if initial_link_count(hierarchy, max_links) > max_links {
+        ClusteringKind::Oriented
+    } else {
+        ClusteringKind::None
+    }
+}
+
+/// Refuses a solve without clusters whose initial links alone exceed the link budget `max_links`
+/// (from `--max-memory`): they are all built before any budget can stop refinement, so they are
+/// counted first ([`initial_link_count`]).
+pub fn check_initial_links(hierarchy: &Hierarchy, max_links: usize) -> anyhow::Result<()> {
+    if hierarchy.root_cluster.is_some() {
+        return Ok(());
+    }
+    let counted = initial_link_count(hierarchy, max_links);
+    anyhow::ensure!(
+        counted <= max_links,
+        "without clustering every facing pair of the {} patches starts linked: at least {counted} \
+         initial links, over the link budget of {max_links} that --max-memory allows; use \
+         --clustering oriented (or auto, or isotropic), or a larger --max-memory",
+        hierarchy.patches.len()
+    );
+    Ok(())
 }
 
 /// Removes every link from the hierarchy and returns them as candidates (for re-refinement after the

@@ -9,8 +9,8 @@ pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod extinction;
-pub mod multires;
 pub mod item_buffer;
+pub mod multires;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 
