@@ -107,25 +107,47 @@ fn item_buffer_gives_a_clusters_irradiance_to_the_patches_that_see_the_source() 
     let leak = RHO * slit_factor_bound();
     let tolerance = 2.0 * (TOP as f64 * GAP / 2.0) / top_distance() + top_distance().powi(-2);
     let hidden = |k: usize| k != 0 && k != plate(TOP);
-    for intra in [IntraClusterKind::ItemBuffer, IntraClusterKind::None] {
-        let solution = simulate(&scene, &settings(intra), &quiet()).expect("solve");
+    let solution =
+        simulate(&scene, &settings(IntraClusterKind::ItemBuffer), &quiet()).expect("solve");
+    let h = &solution.hierarchy;
+    assert!(has_cluster_link(h, true), "no cluster receives");
+    let top = mean_radiance_of(h, |k| k == plate(TOP));
+    let below = mean_radiance_of(h, hidden);
+    assert!(
+        (top - analytic).abs() <= tolerance * analytic,
+        "top plate {top}, analytic {analytic}"
+    );
+    assert!(below <= leak, "hidden plates {below}, slit bound {leak}");
+    // Without it every plate facing the square gets the same share, and the link's visibility is the
+    // fraction `v` of its samples (on the plates, by projected area) that see the square: 1/8 in
+    // expectation, from 2 × 4 Bernoulli samples, so one seed may give 0. Over 16 seeds the mean of `v`
+    // is 1/8 with standard deviation sqrt(7/64 / 128) = 0.029, and the leak bound (0.03 of the analytic
+    // top radiance) is 3.3 standard deviations below it.
+    const SEEDS: u64 = 16;
+    let mut hidden_mean = 0.0;
+    for seed in 1..=SEEDS {
+        let settings = SimulationSettings {
+            seed,
+            ..settings(IntraClusterKind::None)
+        };
+        let solution = simulate(&scene, &settings, &quiet()).expect("solve");
         let h = &solution.hierarchy;
-        assert!(has_cluster_link(h, true), "{intra:?}: no cluster receives");
+        assert!(
+            has_cluster_link(h, true),
+            "seed {seed}: no cluster receives"
+        );
         let top = mean_radiance_of(h, |k| k == plate(TOP));
         let below = mean_radiance_of(h, hidden);
-        if intra == IntraClusterKind::ItemBuffer {
-            assert!(
-                (top - analytic).abs() <= tolerance * analytic,
-                "top plate {top}, analytic {analytic}"
-            );
-            assert!(below <= leak, "hidden plates {below}, slit bound {leak}");
-        } else {
-            assert!(
-                below > leak,
-                "without item buffer the hidden plates are lit: {below}"
-            );
-        }
+        assert!(
+            (top - below).abs() <= 1e-9 * top,
+            "seed {seed}: without item buffer the plates share alike: top {top}, hidden {below}"
+        );
+        hidden_mean += below / SEEDS as f64;
     }
+    assert!(
+        hidden_mean > leak,
+        "without item buffer the hidden plates are lit: mean {hidden_mean}, slit bound {leak}"
+    );
 }
 
 /// Plates emitting under a dark lid (the top plate, black): no light can leave the stack but through
