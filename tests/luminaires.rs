@@ -525,13 +525,9 @@ fn illuminance_follows_the_inverse_square_cosine_law() {
     }
 }
 
-/// Flux balance: RenderPark's examp1.ies (up- and downlight) placed by MGF's `ies` entity with `-m 2`
-/// in a closed black room: the power absorbed by the walls equals 2 × ∫ I dΩ / 179 W per channel, up
-/// to the cubature error of ∫ E dA (elements refined until the direct term's projection residual is
-/// below eps = 1e-4 of the emission per element; well under 1% in total).
-#[test]
-fn a_black_room_absorbs_the_luminaires_flux() {
-    let dir = temp_dir("room");
+/// An MGF file of a closed black 4 × 3 × 3 m room (one-sided walls facing in) followed by `entity`.
+fn black_room(name: &str, entity: &str) -> std::path::PathBuf {
+    let dir = temp_dir(name);
     let room = dir.join("room.mgf");
     let faces = radiosity::scene::generators::box_faces(DVec3::new(4.0, 3.0, 3.0));
     let mut text = String::from("m black =\n\tsides 1\n");
@@ -541,8 +537,74 @@ fn a_black_room_absorbs_the_luminaires_flux() {
         }
         text += &format!("f v{k}0 v{k}1 v{k}2 v{k}3\n");
     }
-    text += &format!("ies {EXAMPLE} -m 2 -rz 30 -t 2 1.5 1.5\n");
+    text += entity;
+    text += "\n";
     std::fs::write(&room, text).unwrap();
+    room
+}
+
+/// LM-63's lumens field with relative photometry (lumens > 0): the lamps' rated flux, which the table's
+/// ∫ I dΩ equals times the luminaire's efficiency (−1 marks absolute photometry, with no rating). A
+/// table written with efficiency 1: 100 cd in every direction (0–180°, one plane), so ∫ I dΩ = 400π lm
+/// exactly (linear interpolation of a constant), from two lamps of 200π lm, with a candela multiplier
+/// of 1.5 and MGF's `ies -m 2`. Its flux is lamps × lumens × multipliers up to the file's rounding (no
+/// warning), the room absorbs that flux / 179 W per channel (cubature error well under 1%, as for
+/// examp1 below), and a file claiming 10% fewer lumens warns of an efficiency above 1.
+#[test]
+fn a_consistent_table_emits_its_rated_lumens() {
+    let dir = temp_dir("rated");
+    let write = |name: &str, lumens: f64| {
+        let path = dir.join(name);
+        std::fs::write(
+            &path,
+            format!(
+                "IESNA:LM-63-2002\nTILT=NONE\n2 {lumens:.4} 1.5 3 1 1 2 0.3 0.3 0.1\n1 1 20\n0 90 180\n0\n\
+                 100 100 100\n"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let consistent = write("consistent.ies", 200.0 * PI);
+    let p = load(&consistent).unwrap();
+    assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+    let rated = p.rated_lumens().unwrap();
+    assert!((rated - 2.0 * 200.0 * PI * 1.5).abs() < 1e-3);
+    assert!((p.flux() - rated).abs() <= p.flux_precision);
+    let room = black_room(
+        "rated-room",
+        &format!("ies {} -m 2 -t 2 1.5 2", consistent.display()),
+    );
+    let scene = radiosity::scene::load(&room, &Default::default()).unwrap();
+    let summary = radiosity::scene::summary(&scene);
+    assert_eq!(summary.rated_lumens, Some(2.0 * rated));
+    assert!(
+        summary.to_string().contains("efficiency 100.0%"),
+        "{summary}"
+    );
+    let settings = SimulationSettings {
+        eps: 1e-4,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &quiet()).unwrap();
+    let expected = 2.0 * rated / WHITE_EFFICACY;
+    let absorbed = solution.report.absorbed_power.g;
+    assert!(
+        (absorbed / expected - 1.0).abs() < 0.01,
+        "{absorbed} vs {expected}"
+    );
+    let overrated = load(&write("overrated.ies", 0.9 * 200.0 * PI)).unwrap();
+    assert_eq!(overrated.warnings.len(), 1);
+    assert!(overrated.warnings[0].message.contains("efficiency above 1"));
+}
+
+/// Flux balance: RenderPark's examp1.ies (up- and downlight) placed by MGF's `ies` entity with `-m 2`
+/// in a closed black room: the power absorbed by the walls equals 2 × ∫ I dΩ / 179 W per channel, up
+/// to the cubature error of ∫ E dA (elements refined until the direct term's projection residual is
+/// below eps = 1e-4 of the emission per element; well under 1% in total).
+#[test]
+fn a_black_room_absorbs_the_luminaires_flux() {
+    let room = black_room("room", &format!("ies {EXAMPLE} -m 2 -rz 30 -t 2 1.5 1.5"));
     let scene = radiosity::scene::load(&room, &Default::default()).unwrap();
     assert_eq!(scene.luminaires.len(), 1);
     assert!(scene.warnings.iter().any(|w| w
@@ -656,7 +718,10 @@ fn the_command_line_places_luminaires() {
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     let flux = load(Path::new(EXAMPLE)).unwrap().flux();
-    let line = format!("luminaires:    1 ({flux:.1} lm from the tables; lamps rated 5800.0 lm)");
+    let line = format!(
+        "luminaires:    1 ({flux:.1} lm from the tables; lamps rated 5800.0 lm, efficiency {:.1}%)",
+        100.0 * flux / 5800.0
+    );
     assert!(stdout.contains(&line), "{stdout}");
     let out = run(&["info", "--luminaire", "missing.ies@1,2"]);
     assert!(!out.status.success());

@@ -411,8 +411,14 @@ impl fmt::Display for SceneSummary {
         write!(f, "luminaires:    {}", self.luminaires)?;
         if self.luminaires > 0 {
             write!(f, " ({:.1} lm from the tables", self.luminaire_lumens)?;
-            if let Some(rated) = self.rated_lumens {
-                write!(f, "; lamps rated {rated:.1} lm")?;
+            match self.rated_lumens {
+                Some(rated) if rated > 0.0 => write!(
+                    f,
+                    "; lamps rated {rated:.1} lm, efficiency {:.1}%",
+                    100.0 * self.luminaire_lumens / rated
+                )?,
+                Some(rated) => write!(f, "; lamps rated {rated:.1} lm")?,
+                None => write!(f, "; absolute photometry, no lamp rating")?,
             }
             write!(f, ")")?;
         }
