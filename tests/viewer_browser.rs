@@ -79,6 +79,20 @@ fn chromium() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
+/// The browser, or `None` (the test is skipped, and says so) when there is none and
+/// RADIOSITY_REQUIRE_BROWSER is not 1; with it, a missing browser fails the test.
+fn browser_or_skip() -> Option<PathBuf> {
+    let browser = chromium();
+    if browser.is_none() {
+        assert!(
+            std::env::var("RADIOSITY_REQUIRE_BROWSER").as_deref() != Ok("1"),
+            "RADIOSITY_REQUIRE_BROWSER=1 but no Chromium: run scripts/install-chromium.sh"
+        );
+        eprintln!("skipped: no Chromium (scripts/install-chromium.sh installs it)");
+    }
+    browser
+}
+
 /// Screenshot of `page` (with URL fragment `fragment`) at `WIDTH` x `HEIGHT`, and the browser's log.
 fn screenshot(
     browser: &Path,
@@ -262,12 +276,7 @@ fn page_is_self_contained_and_bounded() {
 
 #[test]
 fn chromium_screenshot_of_the_page_matches_the_png_render() {
-    let Some(browser) = chromium() else {
-        assert!(
-            std::env::var("RADIOSITY_REQUIRE_BROWSER").as_deref() != Ok("1"),
-            "RADIOSITY_REQUIRE_BROWSER=1 but no Chromium: run scripts/install-chromium.sh"
-        );
-        eprintln!("skipped: no Chromium (scripts/install-chromium.sh installs it)");
+    let Some(browser) = browser_or_skip() else {
         return;
     };
     let dir = temp_dir("screenshot");
@@ -508,12 +517,7 @@ fn changed_share(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
 ///   single-precision arithmetic.
 #[test]
 fn viewer_controls_respond_to_replayed_input() {
-    let Some(browser) = chromium() else {
-        assert!(
-            std::env::var("RADIOSITY_REQUIRE_BROWSER").as_deref() != Ok("1"),
-            "RADIOSITY_REQUIRE_BROWSER=1 but no Chromium: run scripts/install-chromium.sh"
-        );
-        eprintln!("skipped: no Chromium (scripts/install-chromium.sh installs it)");
+    let Some(browser) = browser_or_skip() else {
         return;
     };
     let dir = temp_dir("controls");
