@@ -396,11 +396,6 @@ pub fn simulate(
     let oracle = make_oracle(settings, &hierarchy);
     if settings.method == MethodKind::StochasticJacobi {
         anyhow::ensure!(
-            scene.luminaires.is_empty(),
-            "hierarchical Monte Carlo radiosity does not handle IES luminaires (goniometric emission) \
-             yet: use --method deterministic"
-        );
-        anyhow::ensure!(
             settings.basis == BasisKind::Constant && settings.oracle != OracleKind::Error,
             "hierarchical Monte Carlo radiosity works with the constant basis and the power, smoothness \
              or mi oracle (use --basis constant and --oracle power|smoothness|mi)"
@@ -413,6 +408,15 @@ pub fn simulate(
             tolerance: settings.tolerance,
             seed: settings.seed,
         };
+        // Goniometric luminaires light the leaves by the deterministic first gather; the Monte Carlo
+        // iterations shoot that light onward with the emitters' (solvers::stochastic).
+        let refine = deterministic_settings(settings, &hierarchy).refine;
+        crate::solvers::direct::FirstGather::default().refine_and_gather(
+            &mut hierarchy,
+            visibility.as_ref(),
+            &refine,
+            false,
+        );
         let report = solve_stochastic(
             &mut hierarchy,
             visibility.as_ref(),

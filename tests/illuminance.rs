@@ -305,17 +305,29 @@ fn grid_writes_csv_json_and_isolux_svg_and_never_overwrites_the_scene() {
     let svg = std::fs::read_to_string(dir.join("floor.svg")).unwrap();
     let points = json["points"].as_array().unwrap();
     assert_eq!(csv.lines().count(), points.len() + 1);
-    assert!(csv.starts_with("x,y,z,lux,error_lux\n"));
+    assert!(csv.starts_with("x,y,z,lux,error_lux,inside_solid\n"));
+    // Points inside the blocks (closed, wound outward) are flagged and left out of the statistics:
+    // exactly those that see only the blocks' black insides (zero lux, up to the gather's estimated
+    // error); every other point of the lit room receives light.
+    let inside = json["summary"]["points_inside_solids"].as_u64().unwrap();
+    assert!(inside > 0);
     assert_eq!(
-        json["summary"]["points"].as_u64(),
-        Some(points.len() as u64)
+        json["summary"]["points"].as_u64().unwrap() + inside,
+        points.len() as u64
     );
+    for p in points {
+        let (lux, error) = (p["lux"].as_f64().unwrap(), p["error_lux"].as_f64().unwrap());
+        if p["inside_solid"].as_bool().unwrap() {
+            assert!(lux <= error, "{p}");
+        } else {
+            assert!(lux > 0.0, "{p}");
+        }
+    }
     let (min, mean) = (
         json["summary"]["min_lux"].as_f64().unwrap(),
         json["summary"]["mean_lux"].as_f64().unwrap(),
     );
-    // Points inside the blocks see only their black insides: zero.
-    assert!(min >= 0.0 && mean > min);
+    assert!(min > 0.0 && mean > min);
     let uniformity = json["summary"]["uniformity_min_over_mean"]
         .as_f64()
         .unwrap();
@@ -402,5 +414,47 @@ fn photometric_units_scale_exr_and_probe_values_by_179_lm_per_w() {
         let luminance = row["photometric"]["luminance"].as_f64().unwrap();
         assert!((luminance - 179.0 * radiance.luminance()).abs() <= 1e-9 * luminance);
         assert!(row["photometric"]["illuminance"].as_f64().unwrap() > 0.0);
+    }
+}
+
+/// Which work-plane points lie inside solids, against the geometry by construction: a 4 × 3 × 3 room
+/// (walls facing in), a closed cabinet standing on the floor (1 × 1 × 1.2 at x, y in [0.5, 1.5], faces
+/// wound outward, no bottom face, as furniture usually has), and a desk top (a single quad facing up,
+/// 0.7 high over x in [2.5, 3.5], y in [1, 2]). On the plane z = 0.5 exactly the points over the
+/// cabinet's footprint are inside; those under the desk and in the open are not.
+#[test]
+fn points_inside_furniture_are_found_and_points_under_desks_are_not() {
+    use radiosity::measures::illuminance::inside_solid;
+    let mut polygons: Vec<Shape> = generators::box_faces(DVec3::new(4.0, 3.0, 3.0)).to_vec();
+    let cabinet = generators::box_faces(DVec3::new(1.0, 1.0, 1.2));
+    // box_faces are wound inward, in the order -x, +x, -y, +y, -z, +z: flip them, drop the bottom.
+    for (k, face) in cabinet.iter().enumerate() {
+        if k != 4 {
+            let moved = face
+                .vertices()
+                .iter()
+                .map(|v| *v + DVec3::new(0.5, 0.5, 0.0));
+            let v: Vec<DVec3> = moved.collect();
+            polygons.push(Shape::Quad([v[0], v[3], v[2], v[1]]));
+        }
+    }
+    let p = |x: f64, y: f64| DVec3::new(x, y, 0.7);
+    polygons.push(Shape::Quad([
+        p(2.5, 1.0),
+        p(3.5, 1.0),
+        p(3.5, 2.0),
+        p(2.5, 2.0),
+    ]));
+    let visibility = radiosity::visibility::bvh::Bvh::new(&polygons);
+    for i in 0..40 {
+        for j in 0..30 {
+            let (x, y) = (0.05 + 0.1 * f64::from(i), 0.05 + 0.1 * f64::from(j));
+            let expected = (0.5..1.5).contains(&x) && (0.5..1.5).contains(&y);
+            assert_eq!(
+                inside_solid(&visibility, DVec3::new(x, y, 0.5), DVec3::Z),
+                expected,
+                "({x}, {y})"
+            );
+        }
     }
 }

@@ -79,6 +79,20 @@ fn chromium() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
+/// The browser, or `None` (the test is skipped, and says so) when there is none and
+/// RADIOSITY_REQUIRE_BROWSER is not 1; with it, a missing browser fails the test.
+fn browser_or_skip() -> Option<PathBuf> {
+    let browser = chromium();
+    if browser.is_none() {
+        assert!(
+            std::env::var("RADIOSITY_REQUIRE_BROWSER").as_deref() != Ok("1"),
+            "RADIOSITY_REQUIRE_BROWSER=1 but no Chromium: run scripts/install-chromium.sh"
+        );
+        eprintln!("skipped: no Chromium (scripts/install-chromium.sh installs it)");
+    }
+    browser
+}
+
 /// Screenshot of `page` (with URL fragment `fragment`) at `WIDTH` x `HEIGHT`, and the browser's log.
 fn screenshot(
     browser: &Path,
@@ -262,12 +276,7 @@ fn page_is_self_contained_and_bounded() {
 
 #[test]
 fn chromium_screenshot_of_the_page_matches_the_png_render() {
-    let Some(browser) = chromium() else {
-        assert!(
-            std::env::var("RADIOSITY_REQUIRE_BROWSER").as_deref() != Ok("1"),
-            "RADIOSITY_REQUIRE_BROWSER=1 but no Chromium: run scripts/install-chromium.sh"
-        );
-        eprintln!("skipped: no Chromium (scripts/install-chromium.sh installs it)");
+    let Some(browser) = browser_or_skip() else {
         return;
     };
     let dir = temp_dir("screenshot");
@@ -475,4 +484,104 @@ fn render_export_and_view_write_the_page() {
     }
     assert!(!dir.join("w.html").exists());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// sRGB code (0–255) to linear (IEC 61966-2-1), for a code moved by `offset` (quantisation bounds).
+fn srgb_to_linear(code: u8, offset: f64) -> f64 {
+    let c = ((f64::from(code) + offset) / 255.0).clamp(0.0, 1.0);
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Share of pixels whose channels differ by more than 2 codes (rasterisation may move an edge pixel).
+fn changed_share(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
+    let changed = a
+        .pixels()
+        .zip(b.pixels())
+        .filter(|(p, q)| p.0.iter().zip(q.0).any(|(&x, y)| x.abs_diff(y) > 2))
+        .count();
+    changed as f64 / (a.width() * a.height()) as f64
+}
+
+/// The viewer's controls, driven by replayed input events through the page's own handlers (`#play=`):
+/// - orbiting (drag), zooming (wheel) and the exposure slider change the image (over 5% of pixels);
+/// - orbiting right, up, down and left by the same amounts, zooming out and in, and R after an orbit
+///   and an exposure change each return to the start image (under 0.1% of pixels changed: rounding
+///   of the rotations may move an edge pixel);
+/// - one stop up doubles every pixel in linear space: with the linear tone curve, wherever the start
+///   image is unclipped after doubling (codes 40 to 170), the ratio of the decoded values lies within
+///   the bounds that half a code of quantisation on either side allows, widened by 1% for the GPU's
+///   single-precision arithmetic.
+#[test]
+fn viewer_controls_respond_to_replayed_input() {
+    let Some(browser) = browser_or_skip() else {
+        return;
+    };
+    let dir = temp_dir("controls");
+    let solution = solved_cornell();
+    let camera = camera();
+    let mesh = ViewerMesh::new(&solution.hierarchy, Shading::Basis, None, usize::MAX).unwrap();
+    let page = dir.join("cornell.html");
+    let tone = ToneMap::default();
+    let image = render(
+        &solution.hierarchy,
+        solution.visibility.as_ref(),
+        &camera,
+        &RenderOptions::default(),
+    );
+    write_page(
+        &page,
+        &mesh,
+        &Page {
+            title: "Cornell box",
+            camera: &camera,
+            curve: radiosity::output::tonemap::Curve::Linear,
+            exposure: tone.exposure_scale(image.pixels.iter().copied()),
+            shading: Shading::Basis,
+        },
+    )
+    .unwrap();
+    let shot = |steps: &str| {
+        let fragment = if steps.is_empty() {
+            "bare".to_string()
+        } else {
+            format!("bare&play={steps}")
+        };
+        let (image, log) = screenshot(&browser, &page, &fragment, &dir);
+        assert!(!log.contains("unknown replay step"), "{log}");
+        image
+    };
+    let start = shot("");
+    for steps in ["drag:60:0", "wheel:400", "stops:1"] {
+        let share = changed_share(&start, &shot(steps));
+        assert!(share > 0.05, "{steps}: only {share} of the pixels changed");
+    }
+    for steps in [
+        "drag:60:0;drag:0:25;drag:0:-25;drag:-60:0",
+        "wheel:400;wheel:-400",
+        "drag:60:0;stops:2;key:r",
+    ] {
+        let share = changed_share(&start, &shot(steps));
+        assert!(share < 0.001, "{steps}: {share} of the pixels changed");
+    }
+    let brighter = shot("stops:1");
+    let mut checked = 0;
+    for (a, b) in start.pixels().zip(brighter.pixels()) {
+        for (&ca, cb) in a.0.iter().zip(b.0) {
+            if !(40..=170).contains(&ca) {
+                continue;
+            }
+            let low = srgb_to_linear(cb, -0.5) / srgb_to_linear(ca, 0.5);
+            let high = srgb_to_linear(cb, 0.5) / srgb_to_linear(ca, -0.5);
+            assert!(
+                low / 1.01 <= 2.0 && 2.0 <= high * 1.01,
+                "codes {ca} -> {cb}: ratio in [{low}, {high}]"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 10_000, "only {checked} channels checked");
 }

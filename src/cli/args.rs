@@ -76,7 +76,7 @@ impl SceneArgs {
             scene
                 .warnings
                 .extend(luminaire.photometry.warnings.iter().cloned());
-            scene.luminaires.push(luminaire);
+            scene.add_luminaire(luminaire);
         }
         Ok((scene, name))
     }

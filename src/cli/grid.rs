@@ -28,7 +28,8 @@ pub struct GridCommand {
     #[arg(long, default_value_t = 0.25, value_name = "D")]
     pub spacing: f64,
     /// Rectangle of the grid in the plane's two axes (z: x,y; y: x,z; x: y,z); default: the scene's
-    /// bounds at that height, 1% inside on every side.
+    /// bounds at that height, 1% inside on every side. Points inside solids (the surfaces along and
+    /// against the normal both seen from behind) are reported but left out of the statistics.
     #[arg(long, value_parser = Region::parse, allow_hyphen_values = true, value_name = "X0,Y0,X1,Y1")]
     pub region: Option<Region>,
     /// Base path of the outputs: BASE.csv, BASE.json and BASE.svg.
@@ -122,7 +123,7 @@ impl GridCommand {
         outln!(
             "{name}: {} × {} points on {}={}: min {:.1}, mean {:.1}, max {:.1} lux, uniformity \
              (min/mean) {:.3}, max/min {max_over_min}; estimated error ≤ {:.1} lux (mean {:.1}); \
-             solve {solve_seconds:.2}s, grid {grid_seconds:.2}s -> {}, {}, {}",
+             solve {solve_seconds:.2}s, grid {grid_seconds:.2}s{} -> {}, {}, {}",
             grid.columns,
             grid.rows,
             self.plane.axis.name(),
@@ -133,6 +134,14 @@ impl GridCommand {
             s.uniformity,
             report.max_error_lux,
             report.mean_error_lux,
+            if report.inside_solid > 0 {
+                format!(
+                    "; {} points inside solids left out of the statistics",
+                    report.inside_solid
+                )
+            } else {
+                String::new()
+            },
             written[0].display(),
             written[1].display(),
             written[2].display()

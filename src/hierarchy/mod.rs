@@ -197,6 +197,9 @@ pub struct Hierarchy {
     pub basis: Arc<Basis>,
     /// The scene's goniometric luminaires, whose light reaches the elements by a first gather.
     pub luminaires: Vec<Luminaire>,
+    /// For each polygon, the luminaire whose opening it is: such polygons have no patch (they reflect
+    /// nothing, and their emission is the luminaire's), but they occlude.
+    pub openings: Vec<Option<u32>>,
     /// Irradiance coefficients (divided by π, like gathered ones) from the luminaires, `basis size` per
     /// element, on leaves only; empty without luminaires ([`crate::solvers::direct`]).
     pub direct: Vec<Rgb>,
@@ -222,6 +225,7 @@ impl Hierarchy {
             polygon_patches: vec![[None, None]; scene.polygons.len()],
             basis: Arc::new(Basis::new(basis)),
             luminaires: scene.luminaires.clone(),
+            openings: scene.opening_luminaires(),
             direct: Vec::new(),
             root_cluster: None,
             cluster_surfaces: Vec::new(),
@@ -229,6 +233,9 @@ impl Hierarchy {
             item_buffers: None,
         };
         for (index, polygon) in scene.polygons.iter().enumerate() {
+            if h.openings[index].is_some() {
+                continue;
+            }
             let material = scene.material_of(polygon);
             let sides: &[bool] = if polygon.two_sided {
                 &[true, false]
@@ -551,8 +558,14 @@ impl Hierarchy {
         }
     }
 
+    /// The luminaire whose opening `polygon` is, if any.
+    pub fn opening_at(&self, polygon: usize) -> Option<&Luminaire> {
+        let k = (*self.openings.get(polygon)?)?;
+        self.luminaires.get(k as usize)
+    }
+
     /// The patch seen by a ray hitting `polygon` on its front (`front = true`) or back side; `None` for the
-    /// back of a one-sided polygon (an opaque black surface).
+    /// back of a one-sided polygon (an opaque black surface) and for a luminaire's opening.
     pub fn patch_for_side(&self, polygon: usize, front: bool) -> Option<u32> {
         self.polygon_patches[polygon][usize::from(!front)]
     }

@@ -624,6 +624,8 @@ pub struct GridValue {
     pub error_lux: f64,
     /// The path-traced estimate and its standard error (lux), when asked for.
     pub reference: Option<PhotometricEstimate>,
+    /// The point lies inside a solid ([`inside_solid`]): reported, but left out of the statistics.
+    pub inside_solid: bool,
 }
 
 /// Illuminance over a work-plane grid, with its statistics.
@@ -632,7 +634,10 @@ pub struct GridReport {
     pub grid: Grid,
     /// Row-major, as [`Grid::points`].
     pub values: Vec<GridValue>,
+    /// Over the points outside solids.
     pub statistics: Statistics,
+    /// Points inside solids (furniture, walls with thickness), left out of the statistics.
+    pub inside_solid: usize,
     /// Largest and mean estimated error, lux.
     pub max_error_lux: f64,
     pub mean_error_lux: f64,
@@ -673,24 +678,50 @@ pub fn illuminance_grid(
         .iter()
         .zip(&gathered)
         .zip(references)
-        .map(|((&(x, _), g), reference)| GridValue {
+        .map(|((&(x, n), g), reference)| GridValue {
             point: x.to_array(),
             lux: g.lux(),
             error_lux: g.error_lux(),
             reference,
+            inside_solid: inside_solid(visibility, x, n),
         })
         .collect();
-    let lux: Vec<f64> = values.iter().map(|v| v.lux).collect();
+    let lux: Vec<f64> = values
+        .iter()
+        .filter(|v| !v.inside_solid)
+        .map(|v| v.lux)
+        .collect();
     let errors = values.iter().map(|v| v.error_lux);
     GridReport {
         grid: grid.clone(),
         statistics: Statistics::of(&lux),
+        inside_solid: values.iter().filter(|v| v.inside_solid).count(),
         max_error_lux: errors.clone().fold(0.0, f64::max),
         mean_error_lux: errors.sum::<f64>() / values.len().max(1) as f64,
         pieces: gathered.iter().map(|g| u64::from(g.pieces)).sum(),
         rays: gathered.iter().map(|g| u64::from(g.rays)).sum(),
         values,
     }
+}
+
+/// Whether the work-plane point `x` lies inside a solid: the first surfaces along its normal and along
+/// the four directions of the plane (two tangents, both ways) are all met from behind (their normals
+/// point away from `x`, as the outward faces of a closed object do when seen from within: a cabinet,
+/// a block, a wall with thickness; furniture standing on the floor needs no bottom face). A room's
+/// own ceiling and walls face into it and are met from the front, so points in the open are kept, and
+/// so are points under a desk top (the room's walls around them face them). Relies on solids wound
+/// outward, as MGF's solids and most modellers make them; points in open or inward-wound furniture
+/// are not caught (`--region` then).
+pub fn inside_solid(visibility: &dyn Visibility, x: DVec3, normal: DVec3) -> bool {
+    let tangent = normal.any_orthonormal_vector();
+    let bitangent = normal.cross(tangent);
+    [normal, tangent, -tangent, bitangent, -bitangent]
+        .into_iter()
+        .all(|d| {
+            visibility
+                .intersect(&crate::geometry::Ray::new(x, d), 0.0, f64::INFINITY)
+                .is_some_and(|hit| !hit.front)
+        })
 }
 
 /// Photometric values at a surface probe (`radiosity probe --units photometric`).

@@ -144,6 +144,13 @@ impl Tracer<'_> {
         let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
             return self.nothing();
         };
+        // A luminaire's opening glows at I(ω)/A_proj(ω) toward the eye.
+        if let Some(luminaire) = self.hierarchy.opening_at(hit.polygon) {
+            return match self.options.quantity {
+                Quantity::Radiance => luminaire.luminance(-ray.direction),
+                Quantity::ErrorEstimate => self.nothing(),
+            };
+        }
         // The back of a one-sided polygon is an opaque black surface.
         let Some(patch) = self.hierarchy.patch_for_side(hit.polygon, hit.front) else {
             return self.nothing();
@@ -227,7 +234,7 @@ fn stratified(n: u32, rng: &mut Pcg64Mcg) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Pixels that see an emitting surface through any of 16 stratified points, and their 8 neighbours (so
+/// Pixels that see an emitting surface or a luminaire's opening through any of 16 stratified points, and their 8 neighbours (so
 /// that a pixel the emitter's outline grazes is masked whatever the jitter of either image): the mask
 /// that leaves light sources out of an image comparison, where their radiance, orders of magnitude above
 /// the rest, would dominate every norm.
@@ -236,8 +243,12 @@ pub fn emitter_mask(hierarchy: &Hierarchy, visibility: &dyn Visibility, camera: 
         let ray = camera.ray(x, y);
         visibility
             .intersect(&ray, 0.0, f64::INFINITY)
-            .and_then(|hit| hierarchy.patch_for_side(hit.polygon, hit.front))
-            .is_some_and(|p| !hierarchy.patches[p as usize].emission.is_black())
+            .is_some_and(|hit| {
+                hierarchy.opening_at(hit.polygon).is_some()
+                    || hierarchy
+                        .patch_for_side(hit.polygon, hit.front)
+                        .is_some_and(|p| !hierarchy.patches[p as usize].emission.is_black())
+            })
     };
     let rows: Vec<Vec<bool>> = (0..camera.height)
         .into_par_iter()

@@ -10,12 +10,16 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// `x,y,z,lux,error_lux` per point (and `reference_lux,reference_stderr_lux` when the report has a
-/// path-traced reference), row-major.
+/// path-traced reference, `inside_solid` (0 or 1) when some point lies inside a solid), row-major.
 pub fn csv(report: &GridReport) -> String {
     let reference = report.values.iter().any(|v| v.reference.is_some());
+    let inside = report.inside_solid > 0;
     let mut out = String::from("x,y,z,lux,error_lux");
     if reference {
         out.push_str(",reference_lux,reference_stderr_lux");
+    }
+    if inside {
+        out.push_str(",inside_solid");
     }
     out.push('\n');
     for v in &report.values {
@@ -23,6 +27,9 @@ pub fn csv(report: &GridReport) -> String {
         let _ = write!(out, "{x},{y},{z},{},{}", v.lux, v.error_lux);
         if let Some(r) = v.reference {
             let _ = write!(out, ",{},{}", r.value, r.stderr);
+        }
+        if inside {
+            let _ = write!(out, ",{}", u8::from(v.inside_solid));
         }
         out.push('\n');
     }
@@ -40,6 +47,7 @@ pub fn json(report: &GridReport, settings: serde_json::Value) -> Result<String> 
         },
         "summary": {
             "points": s.count,
+            "points_inside_solids": report.inside_solid,
             "min_lux": s.min,
             "mean_lux": s.mean,
             "max_lux": s.max,
@@ -300,10 +308,12 @@ mod tests {
                     lux,
                     error_lux: 0.0,
                     reference: None,
+                    inside_solid: false,
                 })
                 .collect(),
             grid,
             statistics: Statistics::of(values),
+            inside_solid: 0,
             max_error_lux: 0.0,
             mean_error_lux: 0.0,
             pieces: 0,

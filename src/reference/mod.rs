@@ -5,8 +5,10 @@
 //! cos θ dω, evaluated by path tracing with
 //! - next-event estimation: at every vertex one emitting polygon side is chosen with probability
 //!   proportional to its power π L_e A, a point on it uniformly by area, and a shadow segment tests it;
-//!   every goniometric luminaire ([`crate::scene::luminaire`]) gets a shadow segment to a uniform point
-//!   of its opening, weighted by its intensity toward the vertex;
+//!   every goniometric luminaire ([`crate::scene::luminaire`]) gets a shadow segment to a point of its
+//!   opening's faces that the vertex sees (chosen by projected area), weighted by the opening's
+//!   radiance I(ω)/A_proj(ω) toward the vertex (a point opening: I(ω) from its centre); a bounce ray
+//!   that hits an opening ends there (the opening is black, its light is all counted by this estimate);
 //! - cosine-weighted bounce directions, so the throughput only picks up ρ;
 //! - Russian roulette after [`ReferenceSettings::roulette_depth`] bounces with survival probability
 //!   max(ρ) (unbiased: the surviving throughput is divided by it).
@@ -184,8 +186,10 @@ pub struct PathTracer<'a> {
     /// Smallest accepted hit distance for rays leaving a surface, relative to the scene size.
     t_min: f64,
     roulette_depth: usize,
-    /// Goniometric luminaires (not hittable: reached by next-event estimation only).
+    /// Goniometric luminaires, reached by next-event estimation; their openings are black polygons.
     luminaires: Vec<Luminaire>,
+    /// For each polygon, the luminaire whose opening it is.
+    openings: Vec<Option<u32>>,
 }
 
 /// Relative (to the scene diagonal) distance below which a hit of a ray leaving a surface is taken to be
@@ -275,14 +279,15 @@ impl<'a> PathTracer<'a> {
             t_min: SELF_HIT_EPSILON * if diagonal > 0.0 { diagonal } else { 1.0 },
             roulette_depth,
             luminaires: scene.luminaires.clone(),
+            openings: scene.opening_luminaires(),
         }
     }
 
     /// The vertex where a ray arriving at `polygon` on side `front` leaves from, or `None` for the back of
-    /// a one-sided polygon (an opaque black absorber).
+    /// a one-sided polygon and for a luminaire's opening (opaque black absorbers).
     fn vertex(&self, point: DVec3, polygon: usize, front: bool) -> Option<(Vertex, Rgb)> {
         let s = &self.surfaces[polygon];
-        if !front && !s.two_sided {
+        if (!front && !s.two_sided) || self.openings[polygon].is_some() {
             return None;
         }
         let normal = if front { s.normal } else { -s.normal };
@@ -392,24 +397,34 @@ impl<'a> PathTracer<'a> {
         Some(emitter.emission * (bounce_pdf * weight / light_pdf))
     }
 
-    /// Next-event estimation of every luminaire: I(ω) cos θx / (π r²) toward one opening point, uniform
-    /// over the opening from `point_u` (the luminaire model spreads the intensity evenly over its
-    /// opening); the BRDF's ρ is applied by the caller. Luminaires cannot be hit, so no MIS is needed.
+    /// Next-event estimation of every luminaire, one opening point each from `point_u`
+    /// ([`Luminaire::sample_point`]): L(ω) cos θx cos θy / (π r²) / pdf, or I(ω) cos θx / (π r²) for a
+    /// point opening; the BRDF's ρ is applied by the caller. Bounce rays that hit an opening add
+    /// nothing, so no MIS is needed.
     fn sample_luminaires(&self, vertex: &Vertex, point_u: DVec2) -> Rgb {
         let mut sum = Rgb::BLACK;
         for luminaire in &self.luminaires {
-            let y = luminaire.opening_point(point_u);
+            let Some((y, face_normal, density)) = luminaire.sample_point(vertex.point, point_u)
+            else {
+                continue;
+            };
             let d = vertex.point - y;
             let r2 = d.length_squared();
             let cos_x = -vertex.normal.dot(d);
             if r2 <= 0.0 || cos_x <= 0.0 {
                 continue;
             }
-            let intensity = luminaire.intensity(d);
-            if intensity.is_black() || self.visibility.segment_occluded(vertex.point, y) {
+            let r = r2.sqrt();
+            let contribution = if density > 0.0 {
+                let cos_y = face_normal.dot(d).abs() / r;
+                luminaire.luminance(d) * (cos_x * cos_y / (PI * r2 * r * density))
+            } else {
+                luminaire.intensity(d) * (cos_x / (PI * r2 * r))
+            };
+            if contribution.is_black() || self.visibility.segment_occluded(vertex.point, y) {
                 continue;
             }
-            sum += intensity * (cos_x / (PI * r2 * r2.sqrt()));
+            sum += contribution;
         }
         sum
     }
@@ -550,6 +565,10 @@ impl<'a> PathTracer<'a> {
             let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
                 continue;
             };
+            if let Some(k) = self.openings[hit.polygon] {
+                *sum = self.luminaires[k as usize].luminance(-ray.direction) * per_batch as f64;
+                continue;
+            }
             let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front) else {
                 continue;
             };

@@ -18,16 +18,17 @@ pub struct ProbePoint {
     pub normal: DVec3,
 }
 
-/// `n` points uniform by area over the sides of the polygons that do not emit (a two-sided polygon's
-/// sides each by its area), with the normal of the side: a seeded sample for checking a solution against
-/// the reference anywhere in a scene. `line` numbers the points from 1.
+/// `n` points uniform by area over the sides of the polygons that do not emit and are no luminaire's
+/// opening (a two-sided polygon's sides each by its area), with the normal of the side: a seeded sample
+/// for checking a solution against the reference anywhere in a scene. `line` numbers the points from 1.
 pub fn random_points(scene: &Scene, n: usize, seed: u64) -> Vec<ProbePoint> {
     use rand::{Rng, SeedableRng};
+    let openings = scene.opening_luminaires();
     let sides: Vec<(f64, usize, bool)> = scene
         .polygons
         .iter()
         .enumerate()
-        .filter(|(_, p)| scene.material_of(p).emission.is_black())
+        .filter(|&(i, p)| scene.material_of(p).emission.is_black() && openings[i].is_none())
         .flat_map(|(i, p)| {
             let area = p.shape.area();
             let back = p.two_sided.then_some((area, i, false));

@@ -28,9 +28,6 @@ pub const MAX_ANGLES: usize = 10_000;
 pub const MAX_VALUES: usize = 1_000_000;
 /// Metres per foot (LM-63 units type 1).
 const FOOT: f64 = 0.3048;
-/// The luminaire's flux may exceed its lamps' rated lumens by this fraction before a warning (rounding in
-/// real files; an efficiency above 1 is impossible).
-const FLUX_TOLERANCE: f64 = 0.03;
 
 /// The luminous opening as LM-63 describes it, in metres, centred on the photometric centre: a
 /// rectangle (height 0), a box, a disk (`round`, height 0), a vertical cylinder (`round`) or a point
@@ -76,6 +73,10 @@ pub struct Photometry {
     pub lumens_per_lamp: Option<f64>,
     /// Candela multiplier × ballast factor × ballast–lamp factor (1995 and older), as applied to `candela`.
     pub multiplier: f64,
+    /// How far the flux and the rated lumens may differ from the file's rounding alone (lm): half a
+    /// unit of the coarsest printed candela digit integrated like the table, plus half a unit of the
+    /// lumens' last digit per lamp, multipliers applied.
+    pub flux_precision: f64,
     pub input_watts: f64,
     pub opening: Opening,
     /// Vertical angles θ in degrees, increasing, within [0, 180].
@@ -145,9 +146,11 @@ pub fn parse(path: &Path, text: &str) -> Result<Photometry> {
             })
             .peekable(),
         last_line: tilt_line,
+        last_unit: 1.0,
     };
     let lamps = numbers.next("number of lamps")?;
     let lumens = numbers.next("lumens per lamp")?;
+    let lumens_unit = numbers.last_unit;
     let candela_multiplier = numbers.next("candela multiplier")?;
     let n_vertical = numbers.count("number of vertical angles")?;
     let n_horizontal = numbers.count("number of horizontal angles")?;
@@ -209,11 +212,13 @@ pub fn parse(path: &Path, text: &str) -> Result<Photometry> {
         ));
     }
     let mut candela = Vec::with_capacity(n_vertical * n_horizontal);
+    let mut candela_unit: f64 = 0.0;
     for _ in 0..n_vertical * n_horizontal {
         let (line, value) = numbers.next_at("candela value")?;
         if value < 0.0 {
             return Err(error(line, format!("negative candela value {value}")));
         }
+        candela_unit = candela_unit.max(numbers.last_unit);
         candela.push(value * multiplier);
     }
     let opening = Opening {
@@ -229,6 +234,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Photometry> {
         lamps,
         lumens_per_lamp: (lumens > 0.0).then_some(lumens),
         multiplier,
+        flux_precision: 0.0,
         input_watts,
         opening,
         vertical,
@@ -237,15 +243,21 @@ pub fn parse(path: &Path, text: &str) -> Result<Photometry> {
         candela,
         warnings: Vec::new(),
     };
+    // The flux of a table of half units of the last printed digit bounds the flux's rounding error.
+    let mut unit_table = photometry.clone();
+    unit_table.candela.fill(0.5 * candela_unit * multiplier);
+    photometry.flux_precision = unit_table.flux() + 0.5 * lumens_unit * lamps.abs() * multiplier;
     if let Some(rated) = photometry.rated_lumens() {
         let flux = photometry.flux();
-        if flux > rated * (1.0 + FLUX_TOLERANCE) {
+        if flux > rated + photometry.flux_precision {
             photometry.warnings.push(Diagnostic {
                 file: path.to_path_buf(),
                 line: tilt_line,
                 message: format!(
                     "the intensity table integrates to {flux:.1} lm, more than the lamps' rated \
-                     {rated:.1} lm (lamps × lumens × multipliers): check the file"
+                     {rated:.1} lm (lamps × lumens × multipliers) beyond the file's rounding \
+                     (±{:.2} lm): an efficiency above 1, check the file",
+                    photometry.flux_precision
                 ),
             });
         }
@@ -277,6 +289,8 @@ struct Numbers<'a, I: Iterator<Item = (usize, &'a str)>> {
     path: &'a Path,
     tokens: std::iter::Peekable<I>,
     last_line: usize,
+    /// One unit of the last number's last printed digit (1 for "12", 0.01 for "1.25", 1e3 for "2e3").
+    last_unit: f64,
 }
 
 impl<'a, I: Iterator<Item = (usize, &'a str)>> Numbers<'a, I> {
@@ -289,6 +303,7 @@ impl<'a, I: Iterator<Item = (usize, &'a str)>> Numbers<'a, I> {
             ));
         };
         self.last_line = line;
+        self.last_unit = printed_unit(word);
         match word.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok((line, v)),
             _ => Err(SceneError::new(
@@ -451,6 +466,18 @@ impl Photometry {
         };
         copies * sum
     }
+}
+
+/// One unit of the last digit of a printed number: 10^−(digits after the point) × 10^exponent.
+fn printed_unit(word: &str) -> f64 {
+    let (mantissa, exponent) = match word.find(['e', 'E']) {
+        Some(i) => (&word[..i], word[i + 1..].parse::<i32>().unwrap_or(0)),
+        None => (word, 0),
+    };
+    let decimals = mantissa
+        .split_once('.')
+        .map_or(0, |(_, fraction)| fraction.len().min(300) as i32);
+    10f64.powi(exponent.clamp(-300, 300) - decimals)
 }
 
 /// `∫_a^b f(θ) sin θ dθ` for `f` linear from `fa` at `a` to `fb` at `b` (closed form).

@@ -244,6 +244,55 @@ impl Scene {
             .count()
     }
 
+    /// Adds a luminaire and its opening's faces as black, two-sided polygons of an object of its own
+    /// (they occlude, reflect nothing, and renderers draw them at the luminaire's luminance).
+    pub fn add_luminaire(&mut self, mut luminaire: luminaire::Luminaire) {
+        if !luminaire.faces.is_empty() {
+            let name = "luminaire opening";
+            let material =
+                match self.materials.iter().position(|m| {
+                    m.name == name && m.reflectance.is_black() && m.emission.is_black()
+                }) {
+                    Some(m) => m,
+                    None => {
+                        self.materials.push(Material::diffuse(name, Rgb::BLACK));
+                        self.materials.len() - 1
+                    }
+                };
+            let object = self.objects.len();
+            self.objects.push(Object {
+                name: format!(
+                    "luminaire {} ({})",
+                    self.luminaires.len() + 1,
+                    luminaire.photometry.file.display()
+                ),
+            });
+            self.polygons
+                .extend(luminaire.faces.iter().map(|&shape| Polygon {
+                    shape,
+                    material,
+                    object,
+                    two_sided: true,
+                }));
+            luminaire.object = Some(object);
+        }
+        self.luminaires.push(luminaire);
+    }
+
+    /// For each polygon, the index of the luminaire whose opening it is (see [`Scene::add_luminaire`]).
+    pub fn opening_luminaires(&self) -> Vec<Option<u32>> {
+        let mut of_object = vec![None; self.objects.len()];
+        for (k, l) in self.luminaires.iter().enumerate() {
+            if let Some(slot) = l.object.and_then(|o| of_object.get_mut(o)) {
+                *slot = Some(k as u32);
+            }
+        }
+        self.polygons
+            .iter()
+            .map(|p| of_object.get(p.object).copied().flatten())
+            .collect()
+    }
+
     /// Makes every polygon two-sided or one-sided (the `--two-sided` / `--one-sided` overrides).
     pub fn set_two_sided(&mut self, two_sided: bool) {
         for p in &mut self.polygons {
@@ -362,8 +411,14 @@ impl fmt::Display for SceneSummary {
         write!(f, "luminaires:    {}", self.luminaires)?;
         if self.luminaires > 0 {
             write!(f, " ({:.1} lm from the tables", self.luminaire_lumens)?;
-            if let Some(rated) = self.rated_lumens {
-                write!(f, "; lamps rated {rated:.1} lm")?;
+            match self.rated_lumens {
+                Some(rated) if rated > 0.0 => write!(
+                    f,
+                    "; lamps rated {rated:.1} lm, efficiency {:.1}%",
+                    100.0 * self.luminaire_lumens / rated
+                )?,
+                Some(rated) => write!(f, "; lamps rated {rated:.1} lm")?,
+                None => write!(f, "; absolute photometry, no lamp rating")?,
             }
             write!(f, ")")?;
         }

@@ -5,7 +5,7 @@
 //! coupling of Bekaert–Willems eq. (3) with a point source). The coefficients are a fixed part of the
 //! leaf's irradiance in every sweep ([`super::push_pull`] adds them, so L = E_self + ρ (H + H_direct)).
 //!
-//! Refinement: a leaf whose projected direct term misses its own node values by more than the threshold
+//! Refinement: a leaf whose projected direct term misses its own node values (and its centroid's) by more than the threshold
 //! is split, max_k |E(x_k)/π − Ê(x_k)/π| × A against the power oracle's threshold (radiance × area), or
 //! that residual against the leaf's error-control threshold (algorithm 6.1), until the minimum area or
 //! the element budget stops it. The receiver's reflectance is left out (the leaf is judged as if white)
@@ -14,7 +14,7 @@
 
 use super::refine::RefineSettings;
 use crate::color::Rgb;
-use crate::geometry::cubature::{nodes_on, rule};
+use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::visibility::Visibility;
 use rayon::prelude::*;
@@ -124,6 +124,25 @@ fn leaf_direct(
     let shape = e.shape();
     let normal = hierarchy.patch_of(id).normal;
     let nodes = nodes_on(shape, rule(shape.domain(), degree));
+    // The centroid too (weight 0: judged, not integrated): the nodes of a symmetric rule can all see
+    // the same value of a peak centred on the leaf (a luminaire straight above its middle), which a
+    // constant then fits exactly at every node.
+    let centre_uv = shape
+        .parameter_corners()
+        .iter()
+        .copied()
+        .sum::<crate::geometry::DVec2>()
+        / shape.vertex_count() as f64;
+    let judged: Vec<Node> = nodes
+        .iter()
+        .copied()
+        .chain(std::iter::once(Node {
+            point: shape.point_at(centre_uv),
+            uv: centre_uv,
+            weight: 0.0,
+        }))
+        .collect();
+    let nodes = judged;
     let phi = super::coupling::basis_values(basis, shape, &nodes);
     let mut rays = 0u64;
     let values: Vec<Rgb> = nodes

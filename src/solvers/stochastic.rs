@@ -3,7 +3,8 @@
 //! the solver Feixas et al. ran their oracles on.
 //!
 //! **Stochastic Jacobi.** Iteration k shoots the unshot power ΔP_j = π A_j ΔB_j of every leaf j (in the
-//! first iteration the self-emitted power, ΔB = E: the direct illumination) with N_k local lines: the
+//! first iteration the self-emitted power, ΔB = E: the direct illumination, plus ρ H of the IES
+//! luminaires' deterministic first gather, [`super::direct`]) with N_k local lines: the
 //! source leaf is chosen with probability proportional to its unshot power (stratified over the
 //! cumulative distribution), the origin uniformly on it and the direction cosine-distributed about its
 //! normal; the line's first hit receives the power it carries, ΔP_j / (N_k p_j). The power received by
@@ -342,6 +343,23 @@ pub fn solve_stochastic(
     let emission: Vec<Rgb> = hierarchy.patches.iter().map(|p| p.emission).collect();
     for e in &mut hierarchy.elements {
         e.radiance[0] = emission[e.patch() as usize];
+    }
+    // Goniometric luminaires: their first gather (`hierarchy.direct`, from solvers::direct) reflected,
+    // ρ H_direct, joins the self-emitted radiance as unshot light of the first iteration; it is then
+    // dropped so that later push-pulls do not add it again.
+    if !hierarchy.direct.is_empty() {
+        let h = &*hierarchy;
+        let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
+            .into_par_iter()
+            .map(|p| push_pull(h, p, &|_, _| {}))
+            .collect();
+        for update in &updates {
+            report.absorbed_power += update.absorbed;
+            for (id, b) in update.entries() {
+                hierarchy.elements[id as usize].radiance[0] = b[0];
+            }
+        }
+        hierarchy.direct.clear();
     }
     let mut unshot: Vec<Rgb> = hierarchy.elements.iter().map(|e| e.radiance[0]).collect();
     let t_min = 1e-9 * scene_diameter(hierarchy);

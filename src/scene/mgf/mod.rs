@@ -766,7 +766,7 @@ impl<'a> Reader<'a> {
                 n,
                 format!(
                     "luminaire fixture geometry '{fixture}' not loaded: the intensity table carries \
-                     the light, and the luminaire itself is not drawn"
+                     the light, and the luminaire is drawn as its luminous opening"
                 ),
             );
         }
@@ -776,14 +776,12 @@ impl<'a> Reader<'a> {
                 return Err(self.error(n, format!("more than {MAX_LUMINAIRES} luminaires")));
             }
             let placement = self.current_transform() * spec.matrix(&index);
-            self.scene
-                .luminaires
-                .push(super::luminaire::Luminaire::place(
-                    std::sync::Arc::clone(&photometry),
-                    placement,
-                    crate::color::Rgb::WHITE,
-                    multiplier,
-                ));
+            self.scene.add_luminaire(super::luminaire::Luminaire::place(
+                std::sync::Arc::clone(&photometry),
+                placement,
+                crate::color::Rgb::WHITE,
+                multiplier,
+            ));
             if !spec.advance(&mut index) {
                 return Ok(());
             }
