@@ -683,3 +683,82 @@ fn negative_emission_reflectance_above_one_and_nan_positions_warn() {
         scene.warnings
     );
 }
+
+/// The Cornell box written by another tool: `tests/data/cornell-blender/cornell.obj` (the built-in box
+/// as triangles) imported into Blender 3.4 and exported as `cornell.glb` by `export.py` there (node
+/// rotations for Y-up, `KHR_materials_emissive_strength` for the light, backface culling for one-sided
+/// faces). Both files must give the same scene and the same solution.
+///
+/// Error model: glTF stores `f32` positions under an `f32` quaternion (the −90° turn about x that
+/// Blender's Z-up scene needs), so positions may differ from the OBJ's (`f32` too) by a few units of
+/// `f32` rounding, 2⁻²³ relative to the box size each; colours are the same `f32` values, and the light's
+/// 12 = 17 × 0.70588… (factor × strength) is off by at most one `f32` rounding of the factor. The solve is
+/// a continuous function of these inputs at fixed refinement, so radiances agree to about 1e-6 of the
+/// largest radiance: the bound below is 1e-5, ten times that, and far below any real reader error (a
+/// wrong rotation, sidedness or emission scale changes them by order one).
+#[test]
+fn a_blender_export_of_the_cornell_box_solves_like_its_obj() {
+    use radiosity::pipeline::{simulate, SimulationSettings};
+    use radiosity::progress::Progress;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cornell-blender");
+    let options = LoadOptions::default();
+    let obj = scene::load(&dir.join("cornell.obj"), &options).expect("obj");
+    let glb = scene::load(&dir.join("cornell.glb"), &options).expect("glb");
+    assert!(glb.diagnostics.is_empty(), "{:?}", glb.diagnostics);
+    assert_eq!(obj.polygons.len(), glb.polygons.len());
+    let size = 600.0;
+    // Polygons matched by object name and vertices (Blender keeps each object's faces, but may order
+    // objects and rotate a face's vertex list).
+    let key = |s: &Scene, k: usize| {
+        let p = &s.polygons[k];
+        (s.objects[p.object].name.clone(), p.shape.centroid())
+    };
+    for k in 0..obj.polygons.len() {
+        let (name, centroid) = key(&obj, k);
+        let twin = (0..glb.polygons.len())
+            .find(|&m| {
+                let (other, c) = key(&glb, m);
+                other == name && (c - centroid).length() < 1e-5 * size
+            })
+            .unwrap_or_else(|| panic!("{name}: no polygon at {centroid} in the glTF"));
+        let (a, b) = (&obj.polygons[k], &glb.polygons[twin]);
+        assert_eq!(a.two_sided, b.two_sided, "{name}: sidedness");
+        assert!((a.shape.area() - b.shape.area()).abs() < 1e-5 * a.shape.area());
+        assert!(a.shape.normal().dot(b.shape.normal()) > 1.0 - 1e-9, "{name}: normal");
+        let (ma, mb) = (&obj.materials[a.material], &glb.materials[b.material]);
+        for (x, y) in [(ma.reflectance, mb.reflectance), (ma.emission, mb.emission)] {
+            for (u, v) in [(x.r, y.r), (x.g, y.g), (x.b, y.b)] {
+                assert!((u - v).abs() <= 1e-6 * u.abs().max(1.0), "{name}: {x:?} vs {y:?}");
+            }
+        }
+    }
+    let settings = SimulationSettings::default();
+    let solve = |s: &Scene| simulate(s, &settings, &Progress::new(true)).expect("solve");
+    let (a, b) = (solve(&obj), solve(&glb));
+    let per_object = |s: &Scene, h: &radiosity::hierarchy::Hierarchy| {
+        let mut out = std::collections::BTreeMap::<String, (f64, f64)>::new();
+        for p in &h.patches {
+            let e = h.element(p.root);
+            let name = s.objects[s.polygons[p.polygon].object].name.clone();
+            let entry = out.entry(name).or_default();
+            entry.0 += e.area * e.average_radiance().g;
+            entry.1 += e.area;
+        }
+        out.into_iter()
+            .map(|(name, (sum, area))| (name, sum / area))
+            .collect::<Vec<_>>()
+    };
+    let (ra, rb) = (
+        per_object(&obj, &a.hierarchy),
+        per_object(&glb, &b.hierarchy),
+    );
+    let largest = ra.iter().map(|(_, l)| *l).fold(0.0, f64::max);
+    assert_eq!(ra.len(), rb.len());
+    for ((name, la), (other, lb)) in ra.iter().zip(&rb) {
+        assert_eq!(name, other);
+        assert!(
+            (la - lb).abs() <= 1e-5 * largest,
+            "{name}: OBJ {la}, Blender glTF {lb}"
+        );
+    }
+}
