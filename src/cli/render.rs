@@ -2,19 +2,19 @@
 
 use super::args::{CameraArgs, SceneArgs, SolveArgs, ToneArgs};
 use crate::color::Units;
+use crate::hierarchy::Hierarchy;
 use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
 use crate::output::false_colour;
+use crate::output::image::Image;
 use crate::output::mesh_values::VertexRadiosity;
 use crate::output::render::{emitter_mask, render_with, Quantity, RenderOptions, Shading};
 use crate::output::tonemap::write_png;
 use crate::output::viewer::{write_page, Page, ViewerMesh, DEFAULT_MAX_TRIANGLES};
-use crate::hierarchy::Hierarchy;
-use crate::output::image::Image;
 use crate::pipeline::simulate_observed;
+use crate::progress::Progress;
 use crate::solvers::multigrid::StepReport;
 use crate::visibility::Visibility;
-use crate::progress::Progress;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -102,13 +102,16 @@ impl RenderCommand {
             seed,
             ..Default::default()
         };
-        let mut on_step = |step: &StepReport, hierarchy: &Hierarchy, visibility: &dyn Visibility| {
+        let mut on_step = |step: &StepReport,
+                           hierarchy: &Hierarchy,
+                           visibility: &dyn Visibility| {
             let path = self.progressive.then(|| step_path(&self.output, step.step));
             if let Some(path) = &path {
                 super::args::check_outputs(&[("--progressive", path.as_path())], &scene.sources)?;
                 let vertices =
                     (self.shading == Shading::Smooth).then(|| VertexRadiosity::new(hierarchy));
-                let image = render_with(hierarchy, visibility, &camera, &options, vertices.as_ref());
+                let image =
+                    render_with(hierarchy, visibility, &camera, &options, vertices.as_ref());
                 self.write_image(path, &image, &tone)?;
             }
             if !progress.quiet {
@@ -248,7 +251,12 @@ pub fn error_summary(error: &crate::solvers::ErrorReport, units: Units) -> Strin
 impl RenderCommand {
     /// Writes `image` as the PNG --show asks for: tone-mapped radiance, or the error estimate in false
     /// colour (in --units).
-    fn write_image(&self, path: &Path, image: &Image, tone: &crate::output::tonemap::ToneMap) -> Result<()> {
+    fn write_image(
+        &self,
+        path: &Path,
+        image: &Image,
+        tone: &crate::output::tonemap::ToneMap,
+    ) -> Result<()> {
         match self.show {
             Quantity::Radiance => write_png(path, image, tone),
             Quantity::ErrorEstimate => {
@@ -281,7 +289,10 @@ impl RenderCommand {
 
 /// `out.png` → `out-step03.png`, beside it.
 fn step_path(output: &Path, step: usize) -> PathBuf {
-    let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("radiosity");
+    let stem = output
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("radiosity");
     output.with_file_name(format!("{stem}-step{step:02}.png"))
 }
 

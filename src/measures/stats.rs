@@ -121,7 +121,12 @@ impl RunStats {
         if let Some(map) = v.as_object_mut() {
             map.remove("seconds");
             map.remove("threads");
-            for step in map.get_mut("steps").and_then(|s| s.as_array_mut()).into_iter().flatten() {
+            for step in map
+                .get_mut("steps")
+                .and_then(|s| s.as_array_mut())
+                .into_iter()
+                .flatten()
+            {
                 if let Some(step) = step.as_object_mut() {
                     step.remove("seconds");
                     step.remove("cpu_seconds");

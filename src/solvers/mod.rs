@@ -158,7 +158,15 @@ pub fn solve(
             sweep_to_tolerance(hierarchy, solver, settings, &mut report, progress, pass);
         let changed = outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
         let refused = outcome.refused_by_budget + direct.refused_by_budget > 0;
-        if end_pass(hierarchy, settings, &mut report, changed || pass == 1, refused, swept_to_tolerance) {
+        let pass_state = (changed || pass == 1, true);
+        if end_pass(
+            hierarchy,
+            settings,
+            &mut report,
+            pass_state,
+            refused,
+            swept_to_tolerance,
+        ) {
             break;
         }
     }
@@ -188,13 +196,14 @@ fn finish_report(hierarchy: &Hierarchy, settings: &SolveSettings, report: &mut S
 }
 
 /// After a pass: the a-posteriori estimate, then whether to stop: under error control when the accuracy
-/// is reached or the element budget `refused` a split (else the failing leaves' thresholds are lowered),
-/// without it when the pass left the hierarchy as it was (`changed` false).
+/// is reached or the element budget `refused` a split (else, once refinement has `settled` every link
+/// at its threshold, the failing leaves' thresholds are lowered), without it when the pass left the
+/// hierarchy as it was (`changed` false).
 fn end_pass(
     hierarchy: &mut Hierarchy,
     settings: &SolveSettings,
     report: &mut SolveReport,
-    changed: bool,
+    (changed, settled): (bool, bool),
     refused: bool,
     swept_to_tolerance: bool,
 ) -> bool {
@@ -210,7 +219,9 @@ fn end_pass(
             report.error.stopped_by = "element budget".into();
             return true;
         }
-        lower_thresholds(hierarchy, control, settings.refine.min_area);
+        if settled {
+            lower_thresholds(hierarchy, control, settings.refine.min_area);
+        }
     } else if !changed {
         report.converged = swept_to_tolerance;
         report.error.stopped_by = "stable".into();

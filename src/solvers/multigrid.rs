@@ -190,12 +190,7 @@ impl RefinementSchedule for StepSchedule {
             .filter(|&i| judged[i].refine && ErrorHistogram::bin(judged[i].error) >= self.cut)
             .collect();
         if chosen.len() > self.remaining {
-            chosen.sort_by(|&a, &b| {
-                judged[b]
-                    .error
-                    .total_cmp(&judged[a].error)
-                    .then(a.cmp(&b))
-            });
+            chosen.sort_by(|&a, &b| judged[b].error.total_cmp(&judged[a].error).then(a.cmp(&b)));
             self.deferred += chosen.len() - self.remaining;
             chosen.truncate(self.remaining);
         }
@@ -226,7 +221,10 @@ pub fn solve_progressive(
     progress: &Progress,
     on_step: &mut dyn FnMut(&StepReport, &Hierarchy) -> anyhow::Result<()>,
 ) -> anyhow::Result<SolveReport> {
-    anyhow::ensure!(multigrid.link_budget >= 1, "the link budget must be at least 1");
+    anyhow::ensure!(
+        multigrid.link_budget >= 1,
+        "the link budget must be at least 1"
+    );
     let mut report = start_report(hierarchy, settings);
     report.error.stopped_by = "step limit".into();
     let mut first_gather = FirstGather::default();
@@ -265,7 +263,17 @@ pub fn solve_progressive(
         let changed =
             step == 1 || outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
         let refused = outcome.refused_by_budget + direct.refused_by_budget > 0;
-        let stop = end_pass(hierarchy, settings, &mut report, changed, refused, swept);
+        // Error control lowers thresholds only once no link is left above its own: a leaf whose links
+        // wait for a later step fails for want of refinement, not of a lower threshold.
+        let settled = schedule.above_target == 0 && !schedule.coarse;
+        let stop = end_pass(
+            hierarchy,
+            settings,
+            &mut report,
+            (changed, settled),
+            refused,
+            swept,
+        );
         let threshold = if step == 1 {
             f64::INFINITY
         } else {
