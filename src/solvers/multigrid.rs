@@ -323,7 +323,8 @@ mod tests {
             let cut = h.cut(budget);
             let lowest = *h.counts.keys().next().unwrap();
             assert!(h.predicted_refinements(cut) >= budget as f64 || cut == lowest);
-            if let Some((&above, _)) = h.counts.range(cut + 1..).next() {
+            let above_cut = (std::ops::Bound::Excluded(cut), std::ops::Bound::Unbounded);
+            if let Some((&above, _)) = h.counts.range(above_cut).next() {
                 assert!(h.predicted_refinements(above) < budget as f64);
             }
         }
