@@ -15,6 +15,7 @@ use crate::scene::Scene;
 use crate::solvers::coupling::CouplingSettings;
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};
+use crate::solvers::multigrid::{solve_progressive, MultigridSettings, StepReport};
 use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
@@ -167,6 +168,9 @@ pub struct SimulationSettings {
     /// Stochastic Jacobi: most iterations.
     pub stochastic_iterations: usize,
     pub seed: u64,
+    /// Progressive multi-gridding (Sillion–Drettakis §6.2, `--link-budget`); `None`: one refinement per
+    /// pass at the final threshold.
+    pub multigrid: Option<MultigridSettings>,
 }
 
 /// The default accuracy of error control: 10% of the mean radiance (in max norm per element, which on
@@ -227,6 +231,7 @@ impl Default for SimulationSettings {
             rays_per_iteration: 100_000,
             stochastic_iterations: 100,
             seed: 1,
+            multigrid: None,
         }
     }
 }
@@ -368,6 +373,21 @@ pub fn simulate(
     settings: &SimulationSettings,
     progress: &Progress,
 ) -> anyhow::Result<Solution> {
+    simulate_observed(scene, settings, progress, &mut |_, _, _| Ok(()))
+}
+
+/// What sees each step of progressive multi-gridding: the step, the solution so far, and the
+/// visibility to render it with.
+pub type StepObserver<'a> =
+    dyn FnMut(&StepReport, &Hierarchy, &dyn Visibility) -> anyhow::Result<()> + 'a;
+
+/// [`simulate`], with `on_step` called after every step of progressive multi-gridding.
+pub fn simulate_observed(
+    scene: &Scene,
+    settings: &SimulationSettings,
+    progress: &Progress,
+    on_step: &mut StepObserver,
+) -> anyhow::Result<Solution> {
     let start = Instant::now();
     let visibility = build_visibility_for(scene, settings)?;
     let visibility_seconds = start.elapsed().as_secs_f64();
@@ -395,6 +415,10 @@ pub fn simulate(
     let min_area = settings.min_area * hierarchy.total_area();
     let oracle = make_oracle(settings, &hierarchy);
     if settings.method == MethodKind::StochasticJacobi {
+        anyhow::ensure!(
+            settings.multigrid.is_none(),
+            "progressive multi-gridding (--link-budget) works with the deterministic method"
+        );
         anyhow::ensure!(
             settings.basis == BasisKind::Constant && settings.oracle != OracleKind::Error,
             "hierarchical Monte Carlo radiosity works with the constant basis and the power, smoothness \
@@ -434,14 +458,26 @@ pub fn simulate(
     let solve_settings = deterministic_settings(settings, &hierarchy);
     crate::solvers::refine::check_initial_links(&hierarchy, solve_settings.refine.max_links)?;
     let solver = make_solver(settings.solver);
-    let report = solve(
-        &mut hierarchy,
-        visibility.as_ref(),
-        oracle.as_ref(),
-        solver.as_ref(),
-        &solve_settings,
-        progress,
-    );
+    let report = match &settings.multigrid {
+        None => solve(
+            &mut hierarchy,
+            visibility.as_ref(),
+            oracle.as_ref(),
+            solver.as_ref(),
+            &solve_settings,
+            progress,
+        ),
+        Some(multigrid) => solve_progressive(
+            &mut hierarchy,
+            visibility.as_ref(),
+            oracle.as_ref(),
+            solver.as_ref(),
+            &solve_settings,
+            multigrid,
+            progress,
+            &mut |step, hierarchy| on_step(step, hierarchy, visibility.as_ref()),
+        )?,
+    };
     if report.refused_by_budget > 0 && !progress.quiet {
         crate::progress::stderr_line(format_args!(
             "warning: the element and link budget ({} elements, {} links, from --max-elements and \

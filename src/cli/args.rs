@@ -10,6 +10,7 @@ use crate::pipeline::{
 use crate::scene::{self, LoadOptions, Scene};
 use crate::solvers::error_estimate::EstimateKind;
 use crate::visibility::item_buffer::IntraClusterKind;
+use crate::solvers::multigrid::MultigridSettings;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -189,6 +190,13 @@ pub struct SolveArgs {
     /// --tolerance times the emitted power).
     #[arg(long, default_value_t = 100, value_name = "N", value_parser = count(0, 100_000))]
     pub iterations: usize,
+    /// Progressive multi-gridding (Sillion–Drettakis §6.2): solve in steps that each refine at most K
+    /// links, lowering the threshold from a coarse solution to --eps (or --accuracy).
+    #[arg(long, value_name = "K", value_parser = count(1, 1 << 31))]
+    pub link_budget: Option<usize>,
+    /// Most steps of progressive multi-gridding.
+    #[arg(long, default_value_t = 1000, value_name = "N", value_parser = count(1, 1_000_000))]
+    pub max_steps: usize,
 }
 
 impl SolveArgs {
@@ -250,6 +258,10 @@ impl SolveArgs {
             rays_per_iteration: self.rays,
             stochastic_iterations: self.iterations,
             seed,
+            multigrid: self.link_budget.map(|link_budget| MultigridSettings {
+                link_budget,
+                max_steps: self.max_steps,
+            }),
         })
     }
 }

@@ -2,15 +2,19 @@
 
 use super::args::{CameraArgs, SceneArgs, SolveArgs, ToneArgs};
 use crate::color::Units;
+use crate::hierarchy::Hierarchy;
 use crate::measures::stats::RunStats;
 use crate::output::export::{write_glb, write_ply};
 use crate::output::false_colour;
+use crate::output::image::Image;
 use crate::output::mesh_values::VertexRadiosity;
 use crate::output::render::{emitter_mask, render_with, Quantity, RenderOptions, Shading};
 use crate::output::tonemap::write_png;
 use crate::output::viewer::{write_page, Page, ViewerMesh, DEFAULT_MAX_TRIANGLES};
-use crate::pipeline::simulate;
+use crate::pipeline::simulate_observed;
 use crate::progress::Progress;
+use crate::solvers::multigrid::StepReport;
+use crate::visibility::Visibility;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -65,6 +69,10 @@ pub struct RenderCommand {
     /// tone mapping is the same in both.
     #[arg(long, value_enum, default_value_t = Units::Radiometric)]
     pub units: Units,
+    /// With --link-budget: write the image after every step of progressive multi-gridding too, beside
+    /// --output as NAME-stepNN.png.
+    #[arg(long, requires = "link_budget")]
+    pub progressive: bool,
 }
 
 impl RenderCommand {
@@ -86,11 +94,6 @@ impl RenderCommand {
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene, 512)?;
         super::args::check_samples(camera.width, camera.height, self.spp as usize)?;
-        let solution = simulate(&scene, &settings, progress)?;
-
-        let start = Instant::now();
-        let vertices = (self.shading == Shading::Smooth || !self.export.is_empty())
-            .then(|| VertexRadiosity::new(&solution.hierarchy));
         let options = RenderOptions {
             shading: self.shading,
             quantity: self.show,
@@ -99,6 +102,42 @@ impl RenderCommand {
             seed,
             ..Default::default()
         };
+        let mut on_step = |step: &StepReport,
+                           hierarchy: &Hierarchy,
+                           visibility: &dyn Visibility| {
+            let path = self.progressive.then(|| step_path(&self.output, step.step));
+            if let Some(path) = &path {
+                super::args::check_outputs(&[("--progressive", path.as_path())], &scene.sources)?;
+                let vertices =
+                    (self.shading == Shading::Smooth).then(|| VertexRadiosity::new(hierarchy));
+                let image =
+                    render_with(hierarchy, visibility, &camera, &options, vertices.as_ref());
+                self.write_image(path, &image, &tone)?;
+            }
+            if !progress.quiet {
+                crate::progress::stderr_line(format_args!(
+                    "step {}: threshold {:.3e}, {} links refined ({} above target, {} deferred), \
+                     {} leaves, {} links, {:.2}s ({:.2}s CPU){}",
+                    step.step,
+                    step.threshold,
+                    step.refined_links,
+                    step.above_target,
+                    step.deferred,
+                    step.leaves,
+                    step.links,
+                    step.seconds,
+                    step.cpu_seconds,
+                    path.map(|p| format!(" -> {}", p.display()))
+                        .unwrap_or_default()
+                ));
+            }
+            Ok(())
+        };
+        let solution = simulate_observed(&scene, &settings, progress, &mut on_step)?;
+
+        let start = Instant::now();
+        let vertices = (self.shading == Shading::Smooth || !self.export.is_empty())
+            .then(|| VertexRadiosity::new(&solution.hierarchy));
         let image = render_with(
             &solution.hierarchy,
             solution.visibility.as_ref(),
@@ -113,18 +152,7 @@ impl RenderCommand {
             .iter_mut()
             .for_each(|c| *c *= self.units.scale());
 
-        match self.show {
-            Quantity::Radiance => write_png(&self.output, &image, &tone)?,
-            Quantity::ErrorEstimate => {
-                // Pixels that see no solution (NaN) have no value and show grey.
-                let errors: Vec<Option<f64>> = scaled
-                    .pixels
-                    .iter()
-                    .map(|c| c.r.is_finite().then_some(c.r))
-                    .collect();
-                false_colour::write_png(&self.output, &errors, image.width, image.height)?;
-            }
-        }
+        self.write_image(&self.output, &image, &tone)?;
         if let Some(path) = &self.emitter_mask {
             emitter_mask(&solution.hierarchy, solution.visibility.as_ref(), &camera)
                 .write_png(path, None)?;
@@ -221,6 +249,28 @@ pub fn error_summary(error: &crate::solvers::ErrorReport, units: Units) -> Strin
 }
 
 impl RenderCommand {
+    /// Writes `image` as the PNG --show asks for: tone-mapped radiance, or the error estimate in false
+    /// colour (in --units).
+    fn write_image(
+        &self,
+        path: &Path,
+        image: &Image,
+        tone: &crate::output::tonemap::ToneMap,
+    ) -> Result<()> {
+        match self.show {
+            Quantity::Radiance => write_png(path, image, tone),
+            Quantity::ErrorEstimate => {
+                // Pixels that see no solution (NaN) have no value and show grey.
+                let errors: Vec<Option<f64>> = image
+                    .pixels
+                    .iter()
+                    .map(|c| c.r.is_finite().then_some(c.r * self.units.scale()))
+                    .collect();
+                false_colour::write_png(path, &errors, image.width, image.height).map(|_| ())
+            }
+        }
+    }
+
     /// Refuses outputs that would overwrite the scene, a file it reads, any scene file or each other,
     /// or that go into a directory that does not exist.
     fn check_outputs(&self, inputs: &[PathBuf]) -> Result<()> {
@@ -235,6 +285,15 @@ impl RenderCommand {
         );
         super::args::check_outputs(&outputs, inputs)
     }
+}
+
+/// `out.png` → `out-step03.png`, beside it.
+fn step_path(output: &Path, step: usize) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("radiosity");
+    output.with_file_name(format!("{stem}-step{step:02}.png"))
 }
 
 fn extension(path: &Path) -> String {

@@ -5,6 +5,24 @@ use crate::measures::information::InformationMeasures;
 use crate::pipeline::{SimulationSettings, Solution};
 use serde::Serialize;
 
+/// CPU seconds (user and system, all threads) this process has used so far, from `/proc/self/stat`
+/// (in clock ticks of 1/100 s, Linux's fixed `USER_HZ`); 0 where that cannot be read.
+pub fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // Fields after the command name (which may hold spaces) in parentheses: utime and stime are the
+    // 14th and 15th of the line, the 12th and 13th after it.
+    let after_name = stat.rsplit_once(')').map_or("", |(_, rest)| rest);
+    let ticks: f64 = after_name
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|t| t.parse::<f64>().ok())
+        .sum();
+    ticks / 100.0
+}
+
 /// Seconds spent in each phase of a run.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct PhaseSeconds {
@@ -46,6 +64,9 @@ pub struct RunStats {
     pub error: crate::solvers::ErrorReport,
     /// Splits refused for the element budget (`--max-elements`, `--max-memory`).
     pub refused_by_budget: usize,
+    /// Progressive multi-gridding's steps (`--link-budget`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub steps: Vec<crate::solvers::multigrid::StepReport>,
     pub settings: SimulationSettings,
     /// Information-theoretic measures (`radiosity measure`), Feixas et al. eqs. (3), (10).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -88,6 +109,7 @@ impl RunStats {
             residuals: r.residuals.clone(),
             error: r.error.clone(),
             refused_by_budget: r.refused_by_budget,
+            steps: r.steps.clone(),
             settings: *settings,
             information: None,
         }
@@ -99,6 +121,17 @@ impl RunStats {
         if let Some(map) = v.as_object_mut() {
             map.remove("seconds");
             map.remove("threads");
+            for step in map
+                .get_mut("steps")
+                .and_then(|s| s.as_array_mut())
+                .into_iter()
+                .flatten()
+            {
+                if let Some(step) = step.as_object_mut() {
+                    step.remove("seconds");
+                    step.remove("cpu_seconds");
+                }
+            }
         }
         v
     }

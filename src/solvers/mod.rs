@@ -8,6 +8,7 @@ pub mod coupling;
 pub mod direct;
 pub mod error_estimate;
 pub mod gathering;
+pub mod multigrid;
 pub mod push_pull;
 pub mod refine;
 pub mod stochastic;
@@ -21,7 +22,10 @@ use error_estimate::{estimate_errors, summarize, ErrorSummary, EstimateKind};
 use gathering::GatheringSolver;
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
-use refine::{initial_candidates, refine, take_links, RefineSettings};
+use refine::{
+    initial_candidates, refine_scheduled, take_links, RefineOutcome, RefineSettings,
+    RefinementSchedule,
+};
 use serde::Serialize;
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -102,6 +106,8 @@ pub struct SolveReport {
     pub error: ErrorReport,
     /// Splits refused because the element budget was reached.
     pub refused_by_budget: usize,
+    /// Progressive multi-gridding's steps (empty for a one-shot solve).
+    pub steps: Vec<multigrid::StepReport>,
 }
 
 /// Total self-emitted power Σ π A E of the patches plus the luminaires' flux.
@@ -124,15 +130,7 @@ pub fn solve(
     settings: &SolveSettings,
     progress: &Progress,
 ) -> SolveReport {
-    let mut report = SolveReport {
-        emitted_power: emitted_power(hierarchy),
-        ..Default::default()
-    };
-    report.error.estimate = Some(settings.estimate);
-    if let Some(control) = &settings.error_control {
-        report.error.accuracy = Some(control.accuracy);
-        initialise_thresholds(hierarchy, control.accuracy);
-    }
+    let mut report = start_report(hierarchy, settings);
     report.error.stopped_by = "pass limit".into();
     let mut first_gather = direct::FirstGather::default();
     for pass in 1..=settings.max_passes.max(1) {
@@ -144,78 +142,167 @@ pub fn solve(
         } else {
             take_links(hierarchy)
         };
-        let start = Instant::now();
-        let spinner = progress.spinner("refine");
-        let outcome = refine(
+        let (outcome, direct) = refine_pass(
             hierarchy,
             visibility,
             oracle,
-            &settings.refine,
+            settings,
             candidates,
-            &mut |round, n| {
-                spinner.set_message(format!("pass {pass}, round {round}: {n} candidate links"))
-            },
+            &mut first_gather,
+            &mut report,
+            progress,
+            &format!("pass {pass}"),
+            None,
         );
-        let direct = first_gather.refine_and_gather(
+        let swept_to_tolerance =
+            sweep_to_tolerance(hierarchy, solver, settings, &mut report, progress, pass);
+        let changed = outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
+        let refused = outcome.refused_by_budget + direct.refused_by_budget > 0;
+        let pass_state = (changed || pass == 1, true);
+        if end_pass(
             hierarchy,
-            visibility,
-            &settings.refine,
-            settings.error_control.is_some(),
-        );
-        spinner.finish_and_clear();
-        report.refine_seconds += start.elapsed().as_secs_f64();
-        report.oracle_rays += outcome.oracle_rays;
-        report.form_factor_rays += outcome.form_factor_rays + direct.rays;
-        report.refused_by_budget += outcome.refused_by_budget + direct.refused_by_budget;
-
-        let start = Instant::now();
-        let bar = progress.bar(settings.max_iterations as u64, "solve");
-        let mut previous = f64::NAN;
-        let mut swept_to_tolerance = false;
-        for _ in 0..settings.max_iterations {
-            let sweep = solver.sweep(hierarchy);
-            report.iterations += 1;
-            report.absorbed_power = sweep.absorbed;
-            report.exitant_power = sweep.exitant;
-            bar.inc(1);
-            let total = sweep.exitant.r + sweep.exitant.g + sweep.exitant.b;
-            let change = ((total - previous) / total).abs();
-            bar.set_message(format!("pass {pass}: relative power change {change:.2e}"));
-            report.residuals.push(change);
-            previous = total;
-            if change < settings.tolerance || total == 0.0 {
-                swept_to_tolerance = true;
-                break;
-            }
-        }
-        bar.finish_and_clear();
-        report.solve_seconds += start.elapsed().as_secs_f64();
-        estimate_errors(hierarchy, settings.estimate);
-        if let Some(control) = &settings.error_control {
-            report.error.summary = summarize(hierarchy, control.accuracy);
-            if report.error.summary.leaves_above == 0 {
-                report.converged = swept_to_tolerance;
-                report.error.stopped_by = "accuracy reached".into();
-                break;
-            }
-            if outcome.refused_by_budget + direct.refused_by_budget > 0 {
-                report.error.stopped_by = "element budget".into();
-                break;
-            }
-            lower_thresholds(hierarchy, control, settings.refine.min_area);
-        } else if outcome.subdivisions + direct.subdivisions == 0
-            && outcome.refined_links == 0
-            && pass > 1
-        {
-            report.converged = swept_to_tolerance;
-            report.error.stopped_by = "stable".into();
+            settings,
+            &mut report,
+            pass_state,
+            refused,
+            swept_to_tolerance,
+        ) {
             break;
         }
     }
+    finish_report(hierarchy, settings, &mut report);
+    report
+}
+
+/// An empty report for a solve of `hierarchy`; under error control the thresholds are initialised.
+fn start_report(hierarchy: &mut Hierarchy, settings: &SolveSettings) -> SolveReport {
+    let mut report = SolveReport {
+        emitted_power: emitted_power(hierarchy),
+        ..Default::default()
+    };
+    report.error.estimate = Some(settings.estimate);
+    if let Some(control) = &settings.error_control {
+        report.error.accuracy = Some(control.accuracy);
+        initialise_thresholds(hierarchy, control.accuracy);
+    }
+    report
+}
+
+/// Without error control, the estimate's summary over every leaf (error control summarises each pass).
+fn finish_report(hierarchy: &Hierarchy, settings: &SolveSettings, report: &mut SolveReport) {
     if settings.error_control.is_none() {
         report.error.summary = summarize(hierarchy, f64::INFINITY);
     }
-    report
+}
+
+/// After a pass: the a-posteriori estimate, then whether to stop: under error control when the accuracy
+/// is reached or the element budget `refused` a split (else, once refinement has `settled` every link
+/// at its threshold, the failing leaves' thresholds are lowered), without it when the pass left the
+/// hierarchy as it was (`changed` false).
+fn end_pass(
+    hierarchy: &mut Hierarchy,
+    settings: &SolveSettings,
+    report: &mut SolveReport,
+    (changed, settled): (bool, bool),
+    refused: bool,
+    swept_to_tolerance: bool,
+) -> bool {
+    estimate_errors(hierarchy, settings.estimate);
+    if let Some(control) = &settings.error_control {
+        report.error.summary = summarize(hierarchy, control.accuracy);
+        if report.error.summary.leaves_above == 0 {
+            report.converged = swept_to_tolerance;
+            report.error.stopped_by = "accuracy reached".into();
+            return true;
+        }
+        if refused {
+            report.error.stopped_by = "element budget".into();
+            return true;
+        }
+        if settled {
+            lower_thresholds(hierarchy, control, settings.refine.min_area);
+        }
+    } else if !changed {
+        report.converged = swept_to_tolerance;
+        report.error.stopped_by = "stable".into();
+        return true;
+    }
+    false
+}
+
+/// One refinement: links by `oracle` (through `schedule`, if any), then the luminaires' first gather;
+/// counts and seconds go to `report`.
+#[allow(clippy::too_many_arguments)]
+fn refine_pass(
+    hierarchy: &mut Hierarchy,
+    visibility: &dyn Visibility,
+    oracle: &dyn RefinementOracle,
+    settings: &SolveSettings,
+    candidates: Vec<refine::Candidate>,
+    first_gather: &mut direct::FirstGather,
+    report: &mut SolveReport,
+    progress: &Progress,
+    label: &str,
+    schedule: Option<&mut dyn RefinementSchedule>,
+) -> (RefineOutcome, direct::DirectOutcome) {
+    let start = Instant::now();
+    let spinner = progress.spinner("refine");
+    let outcome = refine_scheduled(
+        hierarchy,
+        visibility,
+        oracle,
+        &settings.refine,
+        candidates,
+        &mut |round, n| spinner.set_message(format!("{label}, round {round}: {n} candidate links")),
+        schedule,
+    );
+    let direct = first_gather.refine_and_gather(
+        hierarchy,
+        visibility,
+        &settings.refine,
+        settings.error_control.is_some(),
+    );
+    spinner.finish_and_clear();
+    report.refine_seconds += start.elapsed().as_secs_f64();
+    report.oracle_rays += outcome.oracle_rays;
+    report.form_factor_rays += outcome.form_factor_rays + direct.rays;
+    report.refused_by_budget += outcome.refused_by_budget + direct.refused_by_budget;
+    (outcome, direct)
+}
+
+/// Sweeps with `solver` until the relative change of the total exitant power is below the tolerance
+/// (then returns true) or the iteration limit.
+fn sweep_to_tolerance(
+    hierarchy: &mut Hierarchy,
+    solver: &dyn GatheringSolver,
+    settings: &SolveSettings,
+    report: &mut SolveReport,
+    progress: &Progress,
+    pass: usize,
+) -> bool {
+    let start = Instant::now();
+    let bar = progress.bar(settings.max_iterations as u64, "solve");
+    let mut previous = f64::NAN;
+    let mut swept_to_tolerance = false;
+    for _ in 0..settings.max_iterations {
+        let sweep = solver.sweep(hierarchy);
+        report.iterations += 1;
+        report.absorbed_power = sweep.absorbed;
+        report.exitant_power = sweep.exitant;
+        bar.inc(1);
+        let total = sweep.exitant.r + sweep.exitant.g + sweep.exitant.b;
+        let change = ((total - previous) / total).abs();
+        bar.set_message(format!("pass {pass}: relative power change {change:.2e}"));
+        report.residuals.push(change);
+        previous = total;
+        if change < settings.tolerance || total == 0.0 {
+            swept_to_tolerance = true;
+            break;
+        }
+    }
+    bar.finish_and_clear();
+    report.solve_seconds += start.elapsed().as_secs_f64();
+    swept_to_tolerance
 }
 
 /// Algorithm 6.1 step 1b: `Δ_p = (1 − ρ_p) ε − max |δ_e|` on every element, with `δ_e = 0` (emission is

@@ -180,14 +180,46 @@ const ORACLE_STREAM: u64 = 1;
 const MAX_NEW_CANDIDATES: usize =
     crate::hierarchy::clusters::MAX_CHILDREN * crate::hierarchy::clusters::MAX_CHILDREN;
 
+/// One candidate's verdict in a round, as a [`RefinementSchedule`] sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Judged {
+    /// The oracle's error estimate (∞ for a cluster self-link, which always splits).
+    pub error: f64,
+    /// Whether the oracle asks to refine it (its error is above its own threshold).
+    pub refine: bool,
+}
+
+/// What a refinement call refines, beyond the oracle's verdicts: progressive multi-gridding
+/// (`solvers::multigrid`, Sillion–Drettakis §6.2) raises the threshold per step and refines one level.
+pub trait RefinementSchedule {
+    /// Sees the verdicts of round `round` (1 = the links refinement starts from) in candidate order and
+    /// clears `refine` on those to keep admissible.
+    fn select(&mut self, round: usize, judged: &mut [Judged]);
+}
+
 /// Refines `candidates` until every one is admissible, then stores them as links at their receivers.
 pub fn refine(
     hierarchy: &mut Hierarchy,
     visibility: &dyn Visibility,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
+    candidates: Vec<Candidate>,
+    on_round: &mut dyn FnMut(usize, usize),
+) -> RefineOutcome {
+    refine_scheduled(
+        hierarchy, visibility, oracle, settings, candidates, on_round, None,
+    )
+}
+
+/// [`refine`], with the oracle's verdicts of each round passed through `schedule`.
+pub fn refine_scheduled(
+    hierarchy: &mut Hierarchy,
+    visibility: &dyn Visibility,
+    oracle: &dyn RefinementOracle,
+    settings: &RefineSettings,
     mut candidates: Vec<Candidate>,
     on_round: &mut dyn FnMut(usize, usize),
+    mut schedule: Option<&mut dyn RefinementSchedule>,
 ) -> RefineOutcome {
     let mut outcome = RefineOutcome::default();
     let mut admissible: Vec<Candidate> = Vec::new();
@@ -195,7 +227,7 @@ pub fn refine(
     while !candidates.is_empty() {
         round += 1;
         on_round(round, candidates.len());
-        let decisions: Vec<Verdict> = {
+        let mut decisions: Vec<Verdict> = {
             let context = OracleContext {
                 hierarchy,
                 visibility,
@@ -205,6 +237,21 @@ pub fn refine(
                 .map(|c| decide(&context, oracle, settings, c))
                 .collect()
         };
+        if let Some(schedule) = schedule.as_deref_mut() {
+            let mut judged: Vec<Judged> = decisions
+                .iter()
+                .map(|v| Judged {
+                    error: v.error,
+                    refine: v.decision != Decision::Admissible,
+                })
+                .collect();
+            schedule.select(round, &mut judged);
+            for (verdict, j) in decisions.iter_mut().zip(judged) {
+                if !j.refine {
+                    verdict.decision = Decision::Admissible;
+                }
+            }
+        }
         let mut next = Vec::new();
         for (c, verdict) in candidates.into_iter().zip(decisions) {
             outcome.oracle_rays += verdict.rays;
@@ -346,6 +393,8 @@ struct Verdict {
     coupling_rays: u64,
     /// The elements cannot exchange light at all (drop the link).
     no_interaction: bool,
+    /// The error estimate compared with the threshold (for a [`RefinementSchedule`]).
+    error: f64,
 }
 
 impl Verdict {
@@ -357,6 +406,7 @@ impl Verdict {
             coupling: None,
             coupling_rays: 0,
             no_interaction: false,
+            error: 0.0,
         }
     }
 }
@@ -375,6 +425,7 @@ fn decide(
     if c.receiver == c.source {
         return Verdict {
             decision: Decision::SubdivideReceiver,
+            error: f64::INFINITY,
             ..Verdict::admissible(None)
         };
     }
@@ -431,6 +482,7 @@ fn decide(
         };
         (error, settings.threshold, None)
     };
+    verdict.error = error;
     if error <= threshold || verdict.no_interaction {
         return verdict;
     }
@@ -476,7 +528,10 @@ fn decide_cluster_link(
     } else {
         (weight * bound, settings.threshold)
     };
-    let mut verdict = Verdict::admissible(None);
+    let mut verdict = Verdict {
+        error,
+        ..Verdict::admissible(None)
+    };
     if error <= threshold {
         return verdict;
     }
