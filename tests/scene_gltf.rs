@@ -724,11 +724,17 @@ fn a_blender_export_of_the_cornell_box_solves_like_its_obj() {
         let (a, b) = (&obj.polygons[k], &glb.polygons[twin]);
         assert_eq!(a.two_sided, b.two_sided, "{name}: sidedness");
         assert!((a.shape.area() - b.shape.area()).abs() < 1e-5 * a.shape.area());
-        assert!(a.shape.normal().dot(b.shape.normal()) > 1.0 - 1e-9, "{name}: normal");
+        assert!(
+            a.shape.normal().dot(b.shape.normal()) > 1.0 - 1e-9,
+            "{name}: normal"
+        );
         let (ma, mb) = (&obj.materials[a.material], &glb.materials[b.material]);
         for (x, y) in [(ma.reflectance, mb.reflectance), (ma.emission, mb.emission)] {
             for (u, v) in [(x.r, y.r), (x.g, y.g), (x.b, y.b)] {
-                assert!((u - v).abs() <= 1e-6 * u.abs().max(1.0), "{name}: {x:?} vs {y:?}");
+                assert!(
+                    (u - v).abs() <= 1e-6 * u.abs().max(1.0),
+                    "{name}: {x:?} vs {y:?}"
+                );
             }
         }
     }

@@ -9,8 +9,8 @@ use crate::pipeline::{
 };
 use crate::scene::{self, LoadOptions, Scene};
 use crate::solvers::error_estimate::EstimateKind;
-use crate::visibility::item_buffer::IntraClusterKind;
 use crate::solvers::multigrid::MultigridSettings;
+use crate::visibility::item_buffer::IntraClusterKind;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
