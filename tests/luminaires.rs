@@ -853,6 +853,35 @@ fn the_opening_is_drawn_at_its_luminance() {
         let mask = emitter_mask(&solution.hierarchy, solution.visibility.as_ref(), &camera);
         assert!(mask.get(4, 4));
     }
+    // The viewer page draws the opening too, each face at its luminance along its normal: the bottom
+    // face (z = 1 − H/2, seen from the nadir, θ = 0) at I(0) / (L W), the top one (θ = 180°) at
+    // I(180°) / (L W); f32 vertex data, hence 1e-6.
+    let mesh = radiosity::output::viewer::ViewerMesh::new(
+        &solution.hierarchy,
+        radiosity::output::render::Shading::Flat,
+        None,
+        usize::MAX,
+    )
+    .unwrap();
+    for (z, theta) in [(1.0 - height / 2.0, 0.0), (1.0 + height / 2.0, 180.0)] {
+        let expected = table.intensity(theta, 0.0) / WHITE_EFFICACY / (length * width);
+        let shown: Vec<f64> = mesh
+            .positions
+            .iter()
+            .zip(mesh.vertex_radiance())
+            .filter(|(p, _)| (f64::from(p[2]) + mesh.origin.z - z).abs() < 1e-6)
+            .map(|(_, c)| c.r)
+            .collect();
+        assert!(
+            shown.len() >= 4
+                && shown
+                    .iter()
+                    .filter(|&&r| (r / expected - 1.0).abs() < 1e-6)
+                    .count()
+                    == 4,
+            "face at z = {z}: {shown:?}, expected four at {expected}"
+        );
+    }
 }
 
 /// Path tracer and solver agree on an image with a luminaire in view: a 0.5 × 0.4 × 0.25 m box of a

@@ -150,7 +150,28 @@ impl ViewerMesh {
                 }
             }
         }
+        mesh.push_openings(hierarchy);
         Ok(mesh)
+    }
+
+    /// The luminaires' openings, which have no patches: each face at its luminance along its normal
+    /// (outward, or toward the nadir for a flat opening), I(n)/A_proj(n)
+    /// ([`crate::scene::luminaire::Luminaire::luminance`]),
+    /// since the page shades per vertex and not per direction; so that the fixture shows as in the
+    /// PNG seen from its main direction rather than as a hole.
+    fn push_openings(&mut self, hierarchy: &Hierarchy) {
+        for luminaire in &hierarchy.luminaires {
+            for face in &luminaire.faces {
+                let radiance = luminaire.luminance(face.normal());
+                let first = self.positions.len() as u32;
+                for &v in face.vertices() {
+                    self.push_vertex(v, radiance);
+                }
+                for k in 1..face.vertices().len() as u32 - 1 {
+                    self.triangles.push([first, first + k, first + k + 1]);
+                }
+            }
+        }
     }
 
     fn push_vertex(&mut self, p: DVec3, radiance: Rgb) {
