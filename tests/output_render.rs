@@ -709,3 +709,27 @@ fn lit_box_renders_with_mesh_overlay() {
     let srgb = to_srgb8(smooth, &tone);
     assert_eq!(srgb.dimensions(), (320, 320));
 }
+
+/// Without a camera in the file, RenderPark's rooms are viewed from inside (their outer faces are
+/// unlit: from outside the image is black) and its lone fixture from outside. office2 and the classroom
+/// have window frames and sills up to 7.5 cm outside their walls, which the enclosure test must allow.
+#[test]
+fn renderpark_rooms_are_viewed_from_inside_and_the_fixture_from_outside() {
+    use radiosity::output::camera::Camera;
+    use radiosity::scene::{self, LoadOptions};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark");
+    for (file, room) in [
+        ("cube.mgf", true),
+        ("corridor.mgf", true),
+        ("office2/office2.mgf", true),
+        ("office3/office.mgf", true),
+        ("salon/classroom.mgf", true),
+        ("examp1.mgf", false),
+    ] {
+        let scene = scene::load(&dir.join(file), &LoadOptions::default()).expect(file);
+        let bounds = scene.bounds();
+        let eye = Camera::auto_view(&scene, 60.0).eye;
+        let inside = (0..3).all(|a| eye[a] > bounds.min[a] && eye[a] < bounds.max[a]);
+        assert_eq!(inside, room, "{file}: eye {eye} in {bounds:?}");
+    }
+}

@@ -141,13 +141,22 @@ impl Camera {
     }
 }
 
-/// Whether the scene is a room seen from outside: polygons lie in at least five of the six faces of the
-/// bounding box, and most primary rays of a small view from `outside` stop on them.
+/// How far (relative to the box's extent on that axis) a wall may lie inside a face of the bounding box
+/// and still count as lying in it, for [`is_enclosure`].
+const WALL_TOLERANCE: f64 = 0.02;
+
+/// Whether the scene is a room seen from outside: polygons lie in (within [`WALL_TOLERANCE`] of) at
+/// least five of the six faces of the bounding box, and most primary rays of a small view from
+/// `outside` stop on them.
 fn is_enclosure(scene: &Scene, bounds: &Aabb, outside: &CameraSpec) -> bool {
     let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
     let visibility = Bvh::new(&shapes);
     let camera = Camera::new(outside, 16, 16);
-    let tolerance = 1e-6 * bounds.diagonal().max(1e-300);
+    // Walls within 2% of the extent of a box face count as lying in it: real rooms have sills, frames
+    // and skirting that stick out past their walls (RenderPark's classroom: 7.5 cm on a 7 m room).
+    let tolerance = |axis: usize| {
+        (WALL_TOLERANCE * (bounds.max[axis] - bounds.min[axis])).max(1e-6 * bounds.diagonal())
+    };
     let on_box_face = |polygon: usize| {
         (0..3).any(|axis| {
             [bounds.min[axis], bounds.max[axis]].iter().any(|&plane| {
@@ -155,7 +164,7 @@ fn is_enclosure(scene: &Scene, bounds: &Aabb, outside: &CameraSpec) -> bool {
                     .shape
                     .vertices()
                     .iter()
-                    .all(|v| (v[axis] - plane).abs() <= tolerance)
+                    .all(|v| (v[axis] - plane).abs() <= tolerance(axis))
             })
         })
     };
@@ -166,7 +175,7 @@ fn is_enclosure(scene: &Scene, bounds: &Aabb, outside: &CameraSpec) -> bool {
                 p.shape
                     .vertices()
                     .iter()
-                    .all(|v| (v[axis] - plane).abs() <= tolerance)
+                    .all(|v| (v[axis] - plane).abs() <= tolerance(axis))
             })
         })
         .count();
