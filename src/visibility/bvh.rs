@@ -393,48 +393,51 @@ impl Bvh {
         loop {
             let node = &self.nodes[current as usize];
             let (mask, enter) = K::slab(&trav, node);
-            // Leaves right away: a blocker ends the ray. Their records are fetched together first.
-            let mut leaves = mask & node.leaves as u32;
+            // The leaves' records and the interior children are fetched first, so that the fetches
+            // overlap each other and the leaf tests.
+            let leaves = mask & node.leaves as u32;
             let mut bits = leaves;
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
                 prefetch(self.leaf(node.child[k], node.count[k] as u32));
             }
-            while leaves != 0 {
-                let k = leaves.trailing_zeros() as usize;
-                leaves &= leaves - 1;
+            // The next node is the nearest interior child, the others pushed: rays from a surface find
+            // nearby blockers soonest.
+            let mut inner = mask & !leaves;
+            let mut next = None;
+            if inner != 0 {
+                let k = inner.trailing_zeros() as usize;
+                inner &= inner - 1;
+                let (mut best, mut best_t) = (node.child[k], enter[k]);
+                prefetch(std::slice::from_ref(&self.nodes[best as usize]));
+                while inner != 0 {
+                    let k = inner.trailing_zeros() as usize;
+                    inner &= inner - 1;
+                    let (c, t) = (node.child[k], enter[k]);
+                    prefetch(std::slice::from_ref(&self.nodes[c as usize]));
+                    if t < best_t {
+                        stack.push(best, best_t);
+                        (best, best_t) = (c, t);
+                    } else {
+                        stack.push(c, t);
+                    }
+                }
+                next = Some(best);
+            }
+            // Leaves before descending: a blocker ends the ray.
+            let mut bits = leaves;
+            while bits != 0 {
+                let k = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
                 if leaf_hit(self, ray, node.child[k], node.count[k] as u32, t_min, t_max) {
                     return true;
                 }
             }
-            // Then the nearest interior child, the others pushed: rays from a surface find nearby
-            // blockers soonest.
-            let mut inner = mask & !(node.leaves as u32);
-            if inner == 0 {
-                match stack.pop() {
-                    Some((next, _)) => current = next,
-                    None => return false,
-                }
-                continue;
-            }
-            let k = inner.trailing_zeros() as usize;
-            inner &= inner - 1;
-            let (mut best, mut best_t) = (node.child[k], enter[k]);
-            while inner != 0 {
-                let k = inner.trailing_zeros() as usize;
-                inner &= inner - 1;
-                let (c, t) = (node.child[k], enter[k]);
-                // Pushed nodes are fetched while the nearest is searched.
-                prefetch(std::slice::from_ref(&self.nodes[c as usize]));
-                if t < best_t {
-                    stack.push(best, best_t);
-                    (best, best_t) = (c, t);
-                } else {
-                    stack.push(c, t);
-                }
-            }
-            current = best;
+            current = match next.or_else(|| stack.pop().map(|(c, _)| c)) {
+                Some(c) => c,
+                None => return false,
+            };
         }
     }
 
@@ -476,6 +479,12 @@ impl Bvh {
                     }
                     order[j] = (enter[k], k);
                     n += 1;
+                }
+                // Interior children are fetched while the leaves are tested.
+                for &(_, k) in &order[..n] {
+                    if node.leaves & (1 << k) == 0 {
+                        prefetch(std::slice::from_ref(&self.nodes[node.child[k] as usize]));
+                    }
                 }
                 // Leaves first, nearer first, so that their hits cull the interior children.
                 for &(t, k) in &order[..n] {
