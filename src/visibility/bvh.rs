@@ -1275,7 +1275,8 @@ mod tests {
         // The scene's largest coordinate is at least 1, so its boxes are padded by at least this.
         let pad = RELATIVE_PAD;
         let mut rng = Pcg64Mcg::seed_from_u64(12);
-        let mut kernels: Vec<fn(&TravRay, &Node) -> (u32, [f32; WIDTH])> = vec![Portable::slab];
+        type SlabFn = fn(&TravRay, &Node) -> (u32, [f32; WIDTH]);
+        let mut kernels: Vec<SlabFn> = vec![Portable::slab];
         #[cfg(target_arch = "x86_64")]
         if Kernel::detect() == Kernel::Avx2 {
             kernels.push(Avx2::slab);
@@ -1296,7 +1297,7 @@ mod tests {
             for node in bvh.nodes.iter().step_by(7) {
                 for kernel in &kernels {
                     let (mask, enter) = kernel(&trav, node);
-                    for k in 0..WIDTH {
+                    for (k, &entry) in enter.iter().enumerate() {
                         if node.valid & (1 << k) == 0 {
                             continue;
                         }
@@ -1313,7 +1314,7 @@ mod tests {
                             met += 1;
                             assert!(mask & (1 << k) != 0, "ray {i} culls a box it meets");
                             let exact = ((lo - trav.t0) * trav.scale) as f32;
-                            assert!(enter[k] <= exact.max(0.0) * (1.0 + 1e-6) + 1e-6);
+                            assert!(entry <= exact.max(0.0) * (1.0 + 1e-6) + 1e-6);
                         }
                     }
                 }
