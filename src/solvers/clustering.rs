@@ -7,18 +7,6 @@
 //!
 //! `F_ij = A_j c_i c_j v / (π r²)`,
 //!
-//! for ends far enough apart ([`SourceSphere`]): seen from a receiver point outside the sphere of radius
-//! `R` about the source's centre that holds it, the source subtends at most the sphere's silhouette
-//! (a factor `(R/r)² < 1`, which the centre estimate approaches with the visibility samples discounting
-//! the source's own hidden parts); where that sphere reaches the receiver's bounding box some receiver
-//! point may lie inside it and nothing bounds the estimate, so such a *near* link carries nothing until
-//! refinement splits it (its refinement bound, [`transport_bound`], is then the largest there is;
-//! RenderPark's Galerkin radiosity does the same for overlapping bounding boxes). Centre estimates of
-//! near clusters made a receiver's links gather a total factor up to 2.9 on office2's coarse solution,
-//! where the exact factors of the disjoint sources they stand for sum to at most 1 (closure): the
-//! gathering iteration's spectral radius passed 1 and the sweeps diverged (with the rule: at most 1.05,
-//! the surface couplings' own cubature error).
-//!
 //! the point-to-point kernel with each cosine replaced by the end's *mean cosine* toward the other:
 //! * isotropic (Sillion 1995, the volume model Sillion–Drettakis §3.1 builds on): a cluster radiates and
 //!   receives like an isotropic volume whose projected area in any direction is a quarter of the area of
@@ -35,6 +23,18 @@
 //! extinction estimates, Sillion–Drettakis §3.1). The coupling is constant in the source (clusters carry
 //! one average radiance); on a surface receiver it is evaluated at the receiver's cubature nodes and
 //! projected onto its basis like any coupling (Bekaert–Willems Algorithm 4.1), so every basis works.
+//!
+//! Near links ([`SourceSphere`]): the estimate holds for ends far enough apart: seen from a receiver
+//! point outside the sphere of radius `R` about the source's centre that holds it, the source subtends
+//! at most the sphere's silhouette (a factor `(R/r)² < 1`, which the centre estimate approaches with
+//! the visibility samples discounting the source's own hidden parts); where that sphere reaches the receiver's bounding box some receiver
+//! point may lie inside it and nothing bounds the estimate, so such a *near* link carries nothing until
+//! refinement splits it (its refinement bound, [`transport_bound`], is then the largest there is;
+//! RenderPark's Galerkin radiosity does the same for overlapping bounding boxes). Centre estimates of
+//! near clusters made a receiver's links gather a total factor up to 2.9 on office2's coarse solution,
+//! where the exact factors of the disjoint sources they stand for sum to at most 1 (closure): the
+//! gathering iteration's spectral radius passed 1 and the sweeps diverged (with the rule: at most 1.05,
+//! the surface couplings' own cubature error).
 //!
 //! Push-pull through clusters ([`irradiance_from_clusters`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
 //! radiance is pulled up area-weighted; irradiance gathered at a cluster is pushed to the patches it
