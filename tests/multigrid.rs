@@ -1,17 +1,24 @@
 //! Progressive multi-gridding (Sillion–Drettakis §6.2): the final solution agrees with the one-shot
 //! solve at the same threshold within both solutions' own a-posteriori error estimates, every step
-//! refines at most the link budget, thresholds never rise, with and without clustering and with every
-//! oracle, and the steps do not depend on the thread count.
+//! creates at most the link budget, thresholds never rise, with and without clustering and with every
+//! oracle, every step's sweeps converge on a real room (office2, whose coarse steps diverged), and the
+//! steps do not depend on the thread count.
 
-use radiosity::hierarchy::clusters::ClusteringKind;
+use radiosity::hierarchy::clusters::{ClusteringKind, MAX_CHILDREN};
 use radiosity::hierarchy::Hierarchy;
 use radiosity::pipeline::{simulate, Accuracy, OracleKind, SimulationSettings, Solution};
 use radiosity::progress::Progress;
 use radiosity::scene::cornell::cornell_box;
+use radiosity::scene::{self, LoadOptions, Scene};
+use radiosity::solvers::error_estimate::EstimateKind;
 use radiosity::solvers::multigrid::{MultigridSettings, StepReport};
 
 fn solve(settings: &SimulationSettings) -> Solution {
-    simulate(&cornell_box(), settings, &Progress::new(true)).expect("solve")
+    solve_scene(&cornell_box(), settings)
+}
+
+fn solve_scene(scene: &Scene, settings: &SimulationSettings) -> Solution {
+    simulate(scene, settings, &Progress::new(true)).expect("solve")
 }
 
 fn progressive(settings: &SimulationSettings, link_budget: usize) -> SimulationSettings {
@@ -63,8 +70,8 @@ fn difference_in_estimates(a: &Hierarchy, b: &Hierarchy) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// The promises of every step after the coarse first: at most the budget refined, thresholds never
-/// rising, and no step that does nothing.
+/// The promises of every step after the coarse first: at most the budget of links created (and so of
+/// refinements, each creating at least one), thresholds never rising, and no step that does nothing.
 fn check_steps(steps: &[StepReport], budget: usize, label: &str) {
     assert!(steps.len() >= 3, "{label}: only {} steps", steps.len());
     assert!(
@@ -81,10 +88,13 @@ fn check_steps(steps: &[StepReport], budget: usize, label: &str) {
             after.step
         );
         assert!(
-            after.refined_links <= budget && after.selected <= after.refined_links,
-            "{label}: step {} refined {} links ({} selected), budget {budget}",
+            after.created_links <= budget
+                && after.refined_links <= after.created_links
+                && after.selected <= after.refined_links,
+            "{label}: step {} refined {} links creating {} ({} selected), budget {budget}",
             after.step,
             after.refined_links,
+            after.created_links,
             after.selected
         );
         assert!(after.links >= before.links && after.leaves >= before.leaves);
@@ -108,12 +118,14 @@ fn progressive_solution_matches_the_one_shot_solve() {
         let label = format!("{clustering:?}");
         check_steps(&stepped.report.steps, budget, &label);
         assert_eq!(stepped.report.error.stopped_by, "stable", "{label}");
+        // A refinement waits for a later step only when its cost, at most MAX_CHILDREN² links (a
+        // cluster's self-link), exceeds what is left of the budget.
         assert!(
             stepped
                 .report
                 .steps
                 .iter()
-                .any(|s| s.refined_links == budget),
+                .any(|s| s.created_links + MAX_CHILDREN * MAX_CHILDREN > budget),
             "{label}: no step filled the budget"
         );
         let ratio = difference_in_estimates(&stepped.hierarchy, &one_shot.hierarchy);
@@ -186,4 +198,50 @@ fn progressive_steps_do_not_depend_on_threads() {
     for (a, b) in one.hierarchy.elements.iter().zip(&three.hierarchy.elements) {
         assert_eq!(a.radiance, b.radiance);
     }
+}
+
+/// office2 (RenderPark), oriented clusters: the coarse step left links between near sibling clusters
+/// whose centre-to-centre transfer made a receiver gather a total factor up to 2.9 (the exact factors
+/// of the disjoint sources it stands for sum to at most 1), and its sweeps diverged (the power grew 22%
+/// per sweep for 200 sweeps). With the bounded cluster transfer (`solvers::clustering`) every step's
+/// sweeps meet the tolerance, no step absorbs more than is emitted, and the final solution agrees with
+/// the one-shot solve within the sum of both solutions' error estimates: the conservative ones (eq.
+/// (11)), since the two reach ε by different refinements and so differ by propagated error too, which
+/// the realistic estimate leaves out (§4.3; with it the gap was 1.07× the estimates).
+#[test]
+fn office2_steps_converge_and_match_the_one_shot_solve() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/scenes/renderpark/office2/office2.mgf");
+    let scene = scene::load(&path, &LoadOptions::default()).expect("office2");
+    let base = SimulationSettings {
+        eps: 1e-3,
+        clustering: ClusteringKind::Oriented,
+        estimate: EstimateKind::Conservative,
+        ..Default::default()
+    };
+    let budget = 5000;
+    let one_shot = solve_scene(&scene, &base);
+    let stepped = solve_scene(&scene, &progressive(&base, budget));
+    check_steps(&stepped.report.steps, budget, "office2");
+    let emitted = stepped.report.emitted_power;
+    for step in &stepped.report.steps {
+        assert!(
+            step.swept_to_tolerance,
+            "step {}: {} sweeps did not converge",
+            step.step, step.sweeps
+        );
+        // The sweeps stop when the power changes by less than the tolerance; what is left of the
+        // iteration is at most that change times 1 / (1 − ρ) ≤ 100 for reflectances below 0.99.
+        let slack = 1.0 + 100.0 * base.tolerance;
+        for (a, e) in [
+            (step.absorbed_power.r, emitted.r),
+            (step.absorbed_power.g, emitted.g),
+            (step.absorbed_power.b, emitted.b),
+        ] {
+            assert!(a <= e * slack, "step {}: absorbed {a} of {e} W", step.step);
+        }
+    }
+    assert_eq!(stepped.report.error.stopped_by, "stable");
+    let ratio = difference_in_estimates(&stepped.hierarchy, &one_shot.hierarchy);
+    assert!(ratio <= 1.0, "difference {ratio} × the estimates");
 }

@@ -190,8 +190,8 @@ pub struct SolveArgs {
     /// --tolerance times the emitted power).
     #[arg(long, default_value_t = 100, value_name = "N", value_parser = count(0, 100_000))]
     pub iterations: usize,
-    /// Progressive multi-gridding (Sillion–Drettakis §6.2): solve in steps that each refine at most K
-    /// links, lowering the threshold from a coarse solution to --eps (or --accuracy).
+    /// Progressive multi-gridding (Sillion–Drettakis §6.2): solve in steps whose refinements each
+    /// create at most K links, lowering the threshold from a coarse solution to --eps (or --accuracy).
     #[arg(long, value_name = "K", value_parser = count(1, 1 << 31))]
     pub link_budget: Option<usize>,
     /// Most steps of progressive multi-gridding.

@@ -116,15 +116,17 @@ impl RenderCommand {
             }
             if !progress.quiet {
                 crate::progress::stderr_line(format_args!(
-                    "step {}: threshold {:.3e}, {} links refined ({} above target, {} deferred), \
-                     {} leaves, {} links, {:.2}s ({:.2}s CPU){}",
+                    "step {}: threshold {:.3e}, {} links refined creating {} ({} above target, \
+                     {} deferred), {} leaves, {} links, {} sweeps, {:.2}s ({:.2}s CPU){}",
                     step.step,
                     step.threshold,
                     step.refined_links,
+                    step.created_links,
                     step.above_target,
                     step.deferred,
                     step.leaves,
                     step.links,
+                    step.sweeps,
                     step.seconds,
                     step.cpu_seconds,
                     path.map(|p| format!(" -> {}", p.display()))

@@ -1,16 +1,24 @@
 //! Progressive multi-gridding (Sillion–Drettakis §6.2): instead of one refinement at the final
-//! threshold, whose cost nobody can predict, a sequence of steps, each refining at most `K` links
+//! threshold, whose cost nobody can predict, a sequence of steps, each creating at most `K` links
 //! (`--link-budget`) and then gathering, so that a usable solution comes early and every step costs
 //! about the same.
+//!
+//! The budget is charged by the work a refinement creates, not by the refinements: each refined link
+//! costs the links it creates ([`crate::solvers::refine::links_created`]: four for a surface split, a
+//! cluster's children for a cluster split), every one of which is judged by the oracle and coupled.
+//! Counting refinements instead made steps that split clusters (up to eight children, each link a
+//! cluster coupling with its visibility samples and item buffers) 5–8× slower than steps that split
+//! surfaces (BENCHMARKS.md, classroom).
 //!
 //! The paper records a histogram of the links' error bounds during refinement and picks the next
 //! threshold so that the bins above it hold at most `k` links. Here the histogram is taken during the
 //! first round of each step's refinement, from the very estimates that round compares with the
 //! thresholds (the oracles' cached factors times the radiance just gathered, `solvers::refine`), so the
 //! promise is exact rather than ignoring "the increase in radiosity values due to the previous gathering
-//! step" (§6.2, footnote 7): a step refines at most `K` links. The links a refinement creates are
-//! judged in the next step, not recursively in this one (footnote 7's "many links in the course of
-//! further subdivision"), which bounds each step's new links by `K` times the children of one split.
+//! step" (§6.2, footnote 7): a step creates at most `K` links. Refinements are taken by decreasing
+//! error while their cost fits what is left of the budget; one that does not fit waits for a later
+//! step (it is counted as deferred), and one that costs more than the whole budget is charged the whole
+//! budget (it then makes a step alone).
 //!
 //! Step 1 is the coarse solution: the initial links (or, with clustering, the root cluster's self-link
 //! split down to links between siblings) all admissible. Each later step's threshold τ is the lower
@@ -43,7 +51,7 @@ pub const BINS_PER_DECADE: f64 = 16.0;
 /// What progressive multi-gridding is asked for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct MultigridSettings {
-    /// Most links one step refines (the paper's `k`).
+    /// Most links one step's refinements create (the paper's `k`, in units of work).
     pub link_budget: usize,
     /// Most steps.
     pub max_steps: usize,
@@ -60,23 +68,33 @@ pub struct StepReport {
     pub threshold: f64,
     /// Links above their own threshold when the step started: the histogram's population.
     pub above_target: usize,
-    /// Links the histogram chose to refine (at most the budget).
+    /// Links the histogram chose to refine in the step's first round.
     pub selected: usize,
     /// Links above τ left for a later step because more than the budget were (see the module comment).
     pub deferred: usize,
     /// Links refinement refined (`selected` less any the element budget refused).
     pub refined_links: usize,
+    /// Links the step's refinements created, as charged to the budget (at most the budget; the
+    /// coarse step's are not charged).
+    pub created_links: usize,
     pub links: usize,
     pub elements: usize,
     pub leaves: usize,
+    /// Gathering sweeps of the step.
+    pub sweeps: usize,
+    /// Whether they met the tolerance (false: they stopped at the iteration limit).
+    pub swept_to_tolerance: bool,
+    /// Power absorbed by the leaves after the step's last sweep (W per channel).
+    pub absorbed_power: crate::color::Rgb,
     /// Wall-clock seconds of the step's refinement, gathering and error estimate.
     pub seconds: f64,
     /// CPU seconds of the process (all threads) over the same span.
     pub cpu_seconds: f64,
 }
 
-/// Counts of link errors in log-spaced bins: bin `b` holds errors in [10^(b/B), 10^((b+1)/B)) with
-/// `B` = [`BINS_PER_DECADE`]; non-finite errors (a link that must split) go to the top bin.
+/// Links created by refining the links of each error bin (each link weighted by its cost), in
+/// log-spaced bins: bin `b` holds errors in [10^(b/B), 10^((b+1)/B)) with `B` = [`BINS_PER_DECADE`];
+/// non-finite errors (a link that must split) go to the top bin.
 #[derive(Clone, Debug, Default)]
 pub struct ErrorHistogram {
     counts: BTreeMap<i32, usize>,
@@ -94,22 +112,24 @@ impl ErrorHistogram {
         }
     }
 
-    pub fn add(&mut self, error: f64) {
-        *self.counts.entry(Self::bin(error)).or_default() += 1;
+    /// Counts a link of error `error` whose refinement creates `cost` links.
+    pub fn add(&mut self, error: f64, cost: usize) {
+        *self.counts.entry(Self::bin(error)).or_default() += cost;
     }
 
     pub fn total(&self) -> usize {
         self.counts.values().sum()
     }
 
-    /// Links in bin `from` and above.
+    /// Created links in bin `from` and above.
     pub fn count_from(&self, from: i32) -> usize {
         self.counts.range(from..).map(|(_, n)| n).sum()
     }
 
-    /// Refinements predicted for refining every link at or above `cut` down to its lower edge τ: a link
-    /// of error `e` ≥ τ becomes a quadtree of links whose errors fall about fourfold per split, about
-    /// `e / τ` refinements in all (§6.2, footnote 7's linear factor), taken at each bin's lower edge.
+    /// Links predicted to be created by refining every link at or above `cut` down to its lower edge
+    /// τ: a link of error `e` ≥ τ becomes a quadtree of links whose errors fall about fourfold per
+    /// split, about `e / τ` times its own cost in all (§6.2, footnote 7's linear factor), taken at each
+    /// bin's lower edge.
     pub fn predicted_refinements(&self, cut: i32) -> f64 {
         self.counts
             .range(cut..)
@@ -150,8 +170,10 @@ struct StepSchedule {
     /// The previous step's cut: thresholds never rise.
     cap: i32,
     cut: i32,
-    /// Refinements the step may still make.
+    /// Links the step's refinements may still create.
     remaining: usize,
+    /// Links the step's refinements create (charged against the budget after the coarse step).
+    created: usize,
     above_target: usize,
     selected: usize,
     deferred: usize,
@@ -164,7 +186,19 @@ impl StepSchedule {
             self.cut = i32::MAX;
         }
         self.remaining = self.budget;
-        (self.above_target, self.selected, self.deferred) = (0, 0, 0);
+        (
+            self.above_target,
+            self.selected,
+            self.deferred,
+            self.created,
+        ) = (0, 0, 0, 0);
+    }
+}
+
+impl StepSchedule {
+    /// What refining `j` is charged: the links it creates, at most the whole budget.
+    fn charge(&self, j: &Judged) -> usize {
+        j.cost.clamp(1, self.budget)
     }
 }
 
@@ -174,35 +208,42 @@ impl RefinementSchedule for StepSchedule {
             // Only cluster self-links split (error ∞, the top bin): links between a cluster's parts.
             for j in judged.iter_mut() {
                 j.refine &= j.error == f64::INFINITY;
+                if j.refine {
+                    self.created += j.cost;
+                }
             }
             return;
         }
         if round == 1 {
             let mut histogram = ErrorHistogram::default();
             for j in judged.iter().filter(|j| j.refine) {
-                histogram.add(j.error);
+                histogram.add(j.error, self.charge(j));
             }
             self.cut = histogram.cut(self.budget).min(self.cap);
-            self.above_target = histogram.total();
+            self.above_target = judged.iter().filter(|j| j.refine).count();
         }
-        // Links at or above the cut, the largest errors first, while the step's budget lasts.
-        let mut chosen: Vec<usize> = (0..judged.len())
+        // Links at or above the cut, the largest errors first, while their cost fits the budget.
+        let mut above: Vec<usize> = (0..judged.len())
             .filter(|&i| judged[i].refine && ErrorHistogram::bin(judged[i].error) >= self.cut)
             .collect();
-        if chosen.len() > self.remaining {
-            chosen.sort_by(|&a, &b| judged[b].error.total_cmp(&judged[a].error).then(a.cmp(&b)));
-            self.deferred += chosen.len() - self.remaining;
-            chosen.truncate(self.remaining);
-        }
+        above.sort_by(|&a, &b| judged[b].error.total_cmp(&judged[a].error).then(a.cmp(&b)));
         for j in judged.iter_mut() {
             j.refine = false;
         }
-        for &i in &chosen {
-            judged[i].refine = true;
+        let mut chosen = 0;
+        for i in above {
+            let cost = self.charge(&judged[i]);
+            if cost <= self.remaining {
+                self.remaining -= cost;
+                self.created += cost;
+                judged[i].refine = true;
+                chosen += 1;
+            } else {
+                self.deferred += 1;
+            }
         }
-        self.remaining -= chosen.len();
         if round == 1 {
-            self.selected = chosen.len();
+            self.selected = chosen;
         }
     }
 }
@@ -234,6 +275,7 @@ pub fn solve_progressive(
         cap: i32::MAX,
         cut: i32::MAX,
         remaining: 0,
+        created: 0,
         above_target: 0,
         selected: 0,
         deferred: 0,
@@ -259,6 +301,7 @@ pub fn solve_progressive(
             &format!("step {step}"),
             Some(&mut schedule),
         );
+        let sweeps_before = report.iterations;
         let swept = sweep_to_tolerance(hierarchy, solver, settings, &mut report, progress, step);
         let changed =
             step == 1 || outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
@@ -290,9 +333,13 @@ pub fn solve_progressive(
                 selected: schedule.selected,
                 deferred: schedule.deferred,
                 refined_links: outcome.refined_links,
+                created_links: schedule.created,
                 links: hierarchy.link_count(),
                 elements: hierarchy.elements.len(),
                 leaves: hierarchy.leaf_count(),
+                sweeps: report.iterations - sweeps_before,
+                swept_to_tolerance: swept,
+                absorbed_power: report.absorbed_power,
                 seconds: start.elapsed().as_secs_f64(),
                 cpu_seconds: cpu_seconds() - cpu_start,
             };
@@ -316,7 +363,7 @@ mod tests {
     fn histogram_cut_fills_the_budget() {
         let mut h = ErrorHistogram::default();
         for e in [1e-3, 2e-3, 1e-2, 1e-2, 0.5, f64::INFINITY] {
-            h.add(e);
+            h.add(e, 1);
         }
         assert_eq!(ErrorHistogram::default().cut(3), EVERYTHING);
         for budget in 1..1000 {

@@ -187,6 +187,29 @@ pub struct Judged {
     pub error: f64,
     /// Whether the oracle asks to refine it (its error is above its own threshold).
     pub refine: bool,
+    /// Candidate links refining it creates ([`links_created`]): the work it costs.
+    pub cost: usize,
+}
+
+/// The candidate links refining `c` as `decision` creates, known before the split: the children of the
+/// end that splits (a surface leaf gets four), or for a cluster's self-link every ordered pair of its
+/// children plus the self-links of those that are clusters. Counted before the interaction test drops
+/// pairs that cannot exchange light, so an upper bound on the links it adds.
+pub fn links_created(h: &Hierarchy, c: &Candidate, decision: Decision) -> usize {
+    let children = |id: ElementId| match h.element(id).children.len() {
+        0 if !h.is_cluster(id) => 4,
+        n => n,
+    };
+    match decision {
+        Decision::Admissible => 0,
+        Decision::SubdivideReceiver if c.receiver == c.source => {
+            let parts = &h.element(c.receiver).children;
+            let clusters = parts.iter().filter(|&&p| h.is_cluster(p)).count();
+            parts.len() * parts.len().saturating_sub(1) + clusters
+        }
+        Decision::SubdivideReceiver => children(c.receiver),
+        Decision::SubdivideSource => children(c.source),
+    }
 }
 
 /// What a refinement call refines, beyond the oracle's verdicts: progressive multi-gridding
@@ -240,9 +263,11 @@ pub fn refine_scheduled(
         if let Some(schedule) = schedule.as_deref_mut() {
             let mut judged: Vec<Judged> = decisions
                 .iter()
-                .map(|v| Judged {
+                .zip(&candidates)
+                .map(|(v, c)| Judged {
                     error: v.error,
                     refine: v.decision != Decision::Admissible,
+                    cost: links_created(hierarchy, c, v.decision),
                 })
                 .collect();
             schedule.select(round, &mut judged);
