@@ -189,6 +189,28 @@ mod tests {
     }
 
     #[test]
+    fn the_hull_of_a_footprint_drops_inner_and_collinear_points() {
+        let points = [
+            (0.0, 0.0),
+            (2.0, 0.0),
+            (1.0, 0.0),
+            (2.0, 1.0),
+            (0.0, 1.0),
+            (1.0, 0.5),
+            (0.0, 1.0),
+        ]
+        .map(|(x, y)| DVec2::new(x, y));
+        let hull = convex_hull(&points);
+        assert_eq!(hull.len(), 4);
+        let area2: f64 = (0..4).map(|k| hull[k].perp_dot(hull[(k + 1) % 4])).sum();
+        assert!((area2 - 4.0).abs() < 1e-12, "counter-clockwise, area 2");
+        assert!(
+            convex_hull(&points[..3]).len() < 3,
+            "collinear points have no hull"
+        );
+    }
+
+    #[test]
     fn an_outline_edge_within_snap_of_a_vertex_leaves_no_sliver() {
         let polygon = square(0.0, 0.0, 1.0);
         // The outline's left edge passes 1e-10 from the polygon's right side: no piece that thin.

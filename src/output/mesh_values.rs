@@ -615,8 +615,7 @@ impl Welder {
     }
 
     fn cell_of(&self, p: DVec3) -> [i64; 3] {
-        let c = (p / self.cell).floor();
-        [c.x as i64, c.y as i64, c.z as i64]
+        cell_index(p, self.cell)
     }
 
     /// The lowest-numbered point within `radius` of `p`.

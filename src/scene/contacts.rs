@@ -31,7 +31,7 @@ pub const DEFAULT_CONTACT_GAP: f64 = 0.02;
 /// Largest contact gap accepted (relative): beyond it, "contact" would mean any nearby parallel surface.
 pub const MAX_CONTACT_GAP: f64 = 0.25;
 /// Points closer than this fraction of P's diameter to an outline's edge lie on it: no piece is thinner.
-const SNAP: f64 = 1e-6;
+const SNAP: f64 = 1e-5;
 /// Most outlines one polygon is cut along (further ones are left out, with a warning).
 const MAX_OUTLINES: usize = 256;
 /// Most pieces one polygon may be cut into (the cut stops there, with a warning).
@@ -249,9 +249,9 @@ fn footprints(p: &Face, edges: &[(usize, DVec3, DVec3, f64)]) -> Vec<Vec<Plane>>
         let mut chain_members = Vec::new();
         while let Some(a) = stack.pop() {
             chain_members.push(a);
-            for b in 0..edges.len() {
-                if chain_of[b] == usize::MAX && joined(a, b) {
-                    chain_of[b] = chain;
+            for (b, slot) in chain_of.iter_mut().enumerate() {
+                if *slot == usize::MAX && joined(a, b) {
+                    *slot = chain;
                     stack.push(b);
                 }
             }
