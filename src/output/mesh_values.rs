@@ -187,18 +187,13 @@ impl VertexRadiosity {
                         .map(|(v, anchor)| (anchor.s, *v))
                         .collect();
                     let (pa, pb) = (positions[a as usize], positions[b as usize]);
-                    if let (Some(ea), Some(eb)) = (
-                        outline_edge(root, pa, tolerance),
-                        outline_edge(root, pb, tolerance),
-                    ) {
-                        if ea == eb {
-                            for found in outline.inside(pa, pb, group, (a, b)) {
-                                if !inside.iter().any(|&(_, v)| v == found.1) {
-                                    inside.push(found);
-                                }
+                    if along_outline(root, pa, pb, tolerance) {
+                        for found in outline.inside(pa, pb, group, (a, b)) {
+                            if !inside.iter().any(|&(_, v)| v == found.1) {
+                                inside.push(found);
                             }
-                            inside.sort_by(|x, y| x.0.total_cmp(&y.0));
                         }
+                        inside.sort_by(|x, y| x.0.total_cmp(&y.0));
                     }
                     loop_ids.extend(inside.iter().map(|&(_, v)| v));
                 }
@@ -485,15 +480,24 @@ impl VertexLookup<'_> {
     }
 }
 
-/// Index of the edge of `shape` that `p` lies on (within `tolerance`), if any.
-fn outline_edge(shape: &Shape, p: DVec3, tolerance: f64) -> Option<usize> {
+/// Whether `p` lies on edge `k` of `shape` (within `tolerance`).
+fn on_edge(shape: &Shape, k: usize, p: DVec3, tolerance: f64) -> bool {
     let v = shape.vertices();
-    (0..v.len()).find(|&k| {
-        let (a, b) = (v[k], v[(k + 1) % v.len()]);
-        let d = b - a;
-        let t = ((p - a).dot(d) / d.length_squared().max(1e-300)).clamp(0.0, 1.0);
-        p.distance(a + d * t) <= tolerance
-    })
+    let (a, b) = (v[k], v[(k + 1) % v.len()]);
+    let d = b - a;
+    let t = ((p - a).dot(d) / d.length_squared().max(1e-300)).clamp(0.0, 1.0);
+    p.distance(a + d * t) <= tolerance
+}
+
+/// Whether `p` lies on the outline of `shape`.
+fn on_outline(shape: &Shape, p: DVec3, tolerance: f64) -> bool {
+    (0..shape.vertex_count()).any(|k| on_edge(shape, k, p, tolerance))
+}
+
+/// Whether the segment (pa, pb) runs along one edge of `shape` (a corner lies on two edges).
+fn along_outline(shape: &Shape, pa: DVec3, pb: DVec3, tolerance: f64) -> bool {
+    (0..shape.vertex_count())
+        .any(|k| on_edge(shape, k, pa, tolerance) && on_edge(shape, k, pb, tolerance))
 }
 
 /// The welded vertices that lie on the outline of their patch, on a uniform grid: the candidates for
@@ -519,7 +523,7 @@ impl<'a> OutlineVertices<'a> {
             let element = hierarchy.element(record.element);
             let root = &hierarchy.patches[element.patch() as usize].shape;
             for &id in &record.corners[..element.shape().vertex_count()] {
-                if outline_edge(root, positions[id as usize], tolerance).is_some() {
+                if on_outline(root, positions[id as usize], tolerance) {
                     ids.push(id);
                 }
             }
