@@ -37,6 +37,36 @@ pub struct SceneArgs {
     /// z-up scene) and spun SPIN degrees about that direction; repeatable.
     #[arg(long, value_name = "FILE.ies@X,Y,Z[@DX,DY,DZ[@SPIN]]")]
     pub luminaire: Vec<scene::luminaire::Placement>,
+    /// Split surfaces along the outlines of objects that touch or nearly touch them (a lamp under a
+    /// ceiling, blocks on a floor), so that no element straddles a contact and light cannot leak
+    /// through it.
+    #[arg(long, value_enum, default_value_t = Switch::On, value_name = "on|off")]
+    pub split_contacts: Switch,
+    /// Largest gap that still counts as a contact, relative to the smaller polygon's diameter.
+    #[arg(long, default_value_t = scene::contacts::DEFAULT_CONTACT_GAP, value_name = "G",
+          value_parser = parse_contact_gap)]
+    pub contact_gap: f64,
+}
+
+/// An option that is on or off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Switch {
+    On,
+    Off,
+}
+
+/// Parses `--contact-gap`: a fraction in [0, MAX_CONTACT_GAP].
+fn parse_contact_gap(text: &str) -> Result<f64> {
+    let value: f64 = text
+        .trim()
+        .parse()
+        .with_context(|| format!("'{text}' is not a number"))?;
+    let max = scene::contacts::MAX_CONTACT_GAP;
+    anyhow::ensure!(
+        (0.0..=max).contains(&value),
+        "the contact gap must be between 0 and {max} (a fraction of the smaller polygon's size)"
+    );
+    Ok(value)
 }
 
 impl SceneArgs {
@@ -66,6 +96,14 @@ impl SceneArgs {
 
     /// Loads the scene (or builds the Cornell box) and returns it with a display name.
     pub fn load(&self) -> Result<(Scene, String)> {
+        let (scene, name, _) = self.load_with_contacts()?;
+        Ok((scene, name))
+    }
+
+    /// [`Self::load`], with what splitting along contacts did (`None` when `--split-contacts off`).
+    pub fn load_with_contacts(
+        &self,
+    ) -> Result<(Scene, String, Option<scene::contacts::ContactSplit>)> {
         let (mut scene, name) = self.load_file()?;
         anyhow::ensure!(
             scene.luminaires.len() + self.luminaire.len() <= scene::luminaire::MAX_LUMINAIRES,
@@ -79,7 +117,9 @@ impl SceneArgs {
                 .extend(luminaire.photometry.warnings.iter().cloned());
             scene.add_luminaire(luminaire);
         }
-        Ok((scene, name))
+        let split = (self.split_contacts == Switch::On)
+            .then(|| scene::contacts::split_contacts(&mut scene, self.contact_gap));
+        Ok((scene, name, split))
     }
 
     fn load_file(&self) -> Result<(Scene, String)> {

@@ -15,12 +15,16 @@ pub struct InfoCommand {
 
 impl InfoCommand {
     pub fn run(&self) -> Result<()> {
-        let (scene, name) = self.scene.load()?;
+        let (scene, name, split) = self.scene.load_with_contacts()?;
         for warning in &scene.warnings {
             crate::progress::stderr_line(format_args!("warning: {warning}"));
         }
         outln!("scene: {name}")?;
         outln!("{}", crate::scene::summary(&scene))?;
+        match split {
+            Some(split) => outln!("contacts:      {split}")?,
+            None => outln!("contacts:      not split (--split-contacts off)")?,
+        }
         if self.materials {
             for m in &scene.materials {
                 let r = m.reflectance;

@@ -4,6 +4,7 @@
 //! Every element of the radiosity hierarchy is a [`Shape`]: the papers' elements are planar triangles and
 //! quadrilaterals (Bekaert–Willems §2 maps its bases onto them with a barycentric or bilinear map).
 
+pub mod clip;
 pub mod cubature;
 pub mod form_factor;
 

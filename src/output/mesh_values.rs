@@ -122,6 +122,7 @@ impl VertexRadiosity {
         let mut positions = Vec::new();
         let mut normals = Vec::new();
         let mut sums: Vec<(Rgb, f64)> = Vec::new();
+        let mut vertex_group: Vec<u32> = Vec::new();
         let mut leaf_slot = vec![NOT_A_LEAF; hierarchy.elements.len()];
         let mut records = Vec::with_capacity(leaves.len());
         for (slot, (&leaf, points)) in leaves.iter().zip(&corner_points).enumerate() {
@@ -132,6 +133,7 @@ impl VertexRadiosity {
                 let id = *vertex_of.entry((points[k], group)).or_insert_with(|| {
                     positions.push(welder.points[points[k] as usize]);
                     normals.push(hierarchy.patches[group as usize].normal);
+                    vertex_group.push(group);
                     sums.push((Rgb::BLACK, 0.0));
                     positions.len() as u32 - 1
                 });
@@ -161,11 +163,17 @@ impl VertexRadiosity {
             positions: &positions,
             tolerance,
         };
+        // Where patches of a group meet without sharing whole edges (a surface split along a contact
+        // outline, scene::contacts), a corner of one lies inside the other's edge at any parameter: such
+        // vertices join the edge's outline (fanned), with their own averaged value, on both sides.
+        let outline =
+            OutlineVertices::new(hierarchy, &records, &positions, &vertex_group, tolerance);
         let found: Vec<_> = records
             .par_iter()
             .map(|record| {
                 let element = hierarchy.element(record.element);
                 let group = group_of[element.patch() as usize];
+                let root = &hierarchy.patches[element.patch() as usize].shape;
                 let n = element.shape().vertex_count();
                 let mut loop_ids = Vec::with_capacity(n);
                 let mut anchors = Vec::new();
@@ -174,7 +182,20 @@ impl VertexRadiosity {
                     loop_ids.push(a);
                     let before = anchors.len();
                     lookup.edge_vertices(group, a, b, &mut anchors);
-                    loop_ids.extend(anchors[before..].iter().map(|(v, _)| *v));
+                    let mut inside: Vec<(f64, u32)> = anchors[before..]
+                        .iter()
+                        .map(|(v, anchor)| (anchor.s, *v))
+                        .collect();
+                    let (pa, pb) = (positions[a as usize], positions[b as usize]);
+                    if along_outline(root, pa, pb, tolerance) {
+                        for found in outline.inside(pa, pb, group, (a, b)) {
+                            if !inside.iter().any(|&(_, v)| v == found.1) {
+                                inside.push(found);
+                            }
+                        }
+                        inside.sort_by(|x, y| x.0.total_cmp(&y.0));
+                    }
+                    loop_ids.extend(inside.iter().map(|&(_, v)| v));
                 }
                 let boundary = (loop_ids.len() > n).then(|| loop_ids.into_boxed_slice());
                 (boundary, anchors)
@@ -459,6 +480,123 @@ impl VertexLookup<'_> {
     }
 }
 
+/// Whether `p` lies on edge `k` of `shape` (within `tolerance`).
+fn on_edge(shape: &Shape, k: usize, p: DVec3, tolerance: f64) -> bool {
+    let v = shape.vertices();
+    let (a, b) = (v[k], v[(k + 1) % v.len()]);
+    let d = b - a;
+    let t = ((p - a).dot(d) / d.length_squared().max(1e-300)).clamp(0.0, 1.0);
+    p.distance(a + d * t) <= tolerance
+}
+
+/// Whether `p` lies on the outline of `shape`.
+fn on_outline(shape: &Shape, p: DVec3, tolerance: f64) -> bool {
+    (0..shape.vertex_count()).any(|k| on_edge(shape, k, p, tolerance))
+}
+
+/// Whether the segment (pa, pb) runs along one edge of `shape` (a corner lies on two edges).
+fn along_outline(shape: &Shape, pa: DVec3, pb: DVec3, tolerance: f64) -> bool {
+    (0..shape.vertex_count())
+        .any(|k| on_edge(shape, k, pa, tolerance) && on_edge(shape, k, pb, tolerance))
+}
+
+/// The welded vertices that lie on the outline of their patch, on a uniform grid: the candidates for
+/// T-vertices inside a neighbouring patch's edge (see [`VertexRadiosity::new`]).
+struct OutlineVertices<'a> {
+    positions: &'a [DVec3],
+    vertex_group: &'a [u32],
+    tolerance: f64,
+    cell: f64,
+    grid: FastMap<[i64; 3], Vec<u32>>,
+}
+
+impl<'a> OutlineVertices<'a> {
+    fn new(
+        hierarchy: &Hierarchy,
+        records: &[LeafVertices],
+        positions: &'a [DVec3],
+        vertex_group: &'a [u32],
+        tolerance: f64,
+    ) -> Self {
+        let mut ids: Vec<u32> = Vec::new();
+        for record in records {
+            let element = hierarchy.element(record.element);
+            let root = &hierarchy.patches[element.patch() as usize].shape;
+            for &id in &record.corners[..element.shape().vertex_count()] {
+                if on_outline(root, positions[id as usize], tolerance) {
+                    ids.push(id);
+                }
+            }
+        }
+        ids.sort_unstable();
+        ids.dedup();
+        let bounds = ids.iter().fold(Aabb::EMPTY, |mut b, &id| {
+            b.grow(positions[id as usize]);
+            b
+        });
+        // About one vertex per cell along a surface.
+        let cell =
+            (bounds.diagonal() / (ids.len().max(1) as f64).sqrt()).max(CELL_SIZE * tolerance);
+        let mut grid: FastMap<[i64; 3], Vec<u32>> = FastMap::default();
+        for &id in &ids {
+            grid.entry(cell_index(positions[id as usize], cell))
+                .or_default()
+                .push(id);
+        }
+        OutlineVertices {
+            positions,
+            vertex_group,
+            tolerance,
+            cell,
+            grid,
+        }
+    }
+
+    /// Vertices of `group` strictly inside the segment (pa, pb), other than its ends, with their
+    /// parameter along it.
+    fn inside(&self, pa: DVec3, pb: DVec3, group: u32, ends: (u32, u32)) -> Vec<(f64, u32)> {
+        let d = pb - pa;
+        let length = d.length();
+        if self.grid.is_empty() || length <= 2.0 * self.tolerance {
+            return Vec::new();
+        }
+        let steps = (2.0 * length / self.cell).ceil() as usize + 1;
+        let mut cells: Vec<[i64; 3]> = Vec::new();
+        for step in 0..=steps {
+            let c = cell_index(pa + d * (step as f64 / steps as f64), self.cell);
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        cells.push([c[0] + dx, c[1] + dy, c[2] + dz]);
+                    }
+                }
+            }
+        }
+        cells.sort_unstable();
+        cells.dedup();
+        let mut found = Vec::new();
+        for cell in cells {
+            for &v in self.grid.get(&cell).into_iter().flatten() {
+                if v == ends.0 || v == ends.1 || self.vertex_group[v as usize] != group {
+                    continue;
+                }
+                let p = self.positions[v as usize];
+                let t = (p - pa).dot(d) / (length * length);
+                let margin = self.tolerance / length;
+                if t > margin && t < 1.0 - margin && p.distance(pa + d * t) <= self.tolerance {
+                    found.push((t, v));
+                }
+            }
+        }
+        found
+    }
+}
+
+fn cell_index(p: DVec3, cell: f64) -> [i64; 3] {
+    let c = (p / cell).floor();
+    [c.x as i64, c.y as i64, c.z as i64]
+}
+
 /// Welding grid cells are this many tolerances wide: a query usually touches a single cell.
 const CELL_SIZE: f64 = 64.0;
 
@@ -481,8 +619,7 @@ impl Welder {
     }
 
     fn cell_of(&self, p: DVec3) -> [i64; 3] {
-        let c = (p / self.cell).floor();
-        [c.x as i64, c.y as i64, c.z as i64]
+        cell_index(p, self.cell)
     }
 
     /// The lowest-numbered point within `radius` of `p`.

@@ -131,6 +131,22 @@ impl Origins {
             .map_or(usize::MAX, |&(place, _)| place as usize)
     }
 
+    /// Gives polygon `i`'s origin to `counts[i]` consecutive polygons (a polygon split into pieces, see
+    /// [`super::contacts`]); polygons without a recorded origin stay without one.
+    pub fn repeat(&mut self, counts: &[usize]) {
+        if self.polygons.is_empty() {
+            return;
+        }
+        let mut repeated = Vec::with_capacity(counts.iter().sum());
+        for (k, &count) in counts.iter().enumerate() {
+            match self.polygons.get(k) {
+                Some(&entry) => repeated.extend(std::iter::repeat_n(entry, count)),
+                None => break,
+            }
+        }
+        self.polygons = repeated;
+    }
+
     fn retain(&mut self, keep: &[bool]) {
         let mut k = 0;
         self.polygons.retain(|_| {

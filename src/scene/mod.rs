@@ -5,6 +5,7 @@
 //! L_e in W/(m² sr) (radiant exitance is π L_e). Radiosity is solved as exitant radiance throughout, so
 //! a closed box of reflectance ρ emitting L_e everywhere converges to L_e / (1 - ρ).
 
+pub mod contacts;
 pub mod cornell;
 pub mod duplicates;
 pub mod generators;

@@ -1,0 +1,413 @@
+//! Surfaces split along the outlines of objects that touch or nearly touch them (issue #7 item 9), before
+//! the hierarchy is built.
+//!
+//! Why: an element that straddles the outline of an object lying on it averages radiosity from both
+//! sides of the contact. `cube.mgf`'s two-sided lamp hangs 1 cm under the ceiling: its back light,
+//! trapped in the gap, leaks into the room through ceiling elements that reach past the lamp's edge;
+//! light from the room leaks under blocks standing on a floor. Refinement can only shrink such elements
+//! down to the minimum area, and they still see both sides; cut along the outline, no element does.
+//!
+//! Contacts of a polygon P with a polygon Q, gap g = `gap` × min(diameter P, diameter Q):
+//! - *lying on P*: all of Q's vertices within g of P's plane (Q parallel to P, on it or just off it): the
+//!   outline is Q's, projected onto P;
+//! - *standing on P*: edges of Q within g of P's plane (the sides of a block on a floor): the contact
+//!   edges of one object that join end to end form a footprint, and its convex hull is the outline (the
+//!   Cornell box's blocks have no bottom face).
+//!
+//! A one-sided P is not split by what lies behind it (it cannot see it). Candidate pairs come from a
+//! uniform grid over the polygons' boxes (no quadratic work); P is then cut along each outline that
+//! crosses its interior ([`crate::geometry::clip`]), and each convex piece becomes triangles and quads
+//! ([`polygonize`]) with P's material, object, sidedness and origin. Luminaire openings are not split.
+
+use super::polygonize::polygonize;
+use super::{Diagnostic, Polygon, Scene, MAX_POLYGONS};
+use crate::geometry::clip::{convex_hull, outline_planes, split_by_outline, Plane};
+use crate::geometry::{Aabb, DVec2, DVec3, Shape};
+use rayon::prelude::*;
+
+/// Default contact gap, relative to the smaller polygon's diameter: `cube.mgf`'s lamp hangs 1 cm under
+/// the ceiling, 0.7% of the lamp's diagonal.
+pub const DEFAULT_CONTACT_GAP: f64 = 0.02;
+/// Largest contact gap accepted (relative): beyond it, "contact" would mean any nearby parallel surface.
+pub const MAX_CONTACT_GAP: f64 = 0.25;
+/// Points closer than this fraction of P's diameter to an outline's edge lie on it: no piece is thinner.
+const SNAP: f64 = 1e-5;
+/// Most outlines one polygon is cut along (further ones are left out, with a warning).
+const MAX_OUTLINES: usize = 256;
+/// Most pieces one polygon may be cut into (the cut stops there, with a warning).
+const MAX_PIECES: usize = 4096;
+/// Most contact edges gathered on one polygon for footprints (further ones are left out).
+const MAX_CONTACT_EDGES: usize = 4096;
+
+/// What [`split_contacts`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ContactSplit {
+    /// Outlines (lying objects and footprints) that crossed a polygon's interior.
+    pub outlines: usize,
+    /// Input polygons that were cut.
+    pub polygons_split: usize,
+    /// The triangles and quads they became.
+    pub pieces: usize,
+}
+
+impl std::fmt::Display for ContactSplit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} polygons split along {} contact outlines into {} pieces",
+            self.polygons_split, self.outlines, self.pieces
+        )
+    }
+}
+
+/// A polygon's plane and size, computed once.
+struct Face {
+    normal: DVec3,
+    point: DVec3,
+    diameter: f64,
+    bounds: Aabb,
+}
+
+impl Face {
+    fn new(shape: &Shape) -> Self {
+        Face {
+            normal: shape.normal(),
+            point: shape.vertices()[0],
+            diameter: shape.diameter(),
+            bounds: shape.bounds(),
+        }
+    }
+
+    fn distance(&self, p: DVec3) -> f64 {
+        self.normal.dot(p - self.point)
+    }
+}
+
+/// Splits every polygon of `scene` along the outlines of the polygons in contact with it (`gap` relative
+/// to the smaller diameter, see the module doc): each is replaced, in place, by its pieces. Budget overruns
+/// are warnings, never errors.
+pub fn split_contacts(scene: &mut Scene, gap: f64) -> ContactSplit {
+    let results = contact_pieces(scene, gap);
+    let mut report = ContactSplit::default();
+    let mut polygons = Vec::with_capacity(scene.polygons.len());
+    let mut counts = Vec::with_capacity(scene.polygons.len());
+    for (i, result) in results.into_iter().enumerate() {
+        let polygon = scene.polygons[i];
+        let fits =
+            |extra: usize| polygons.len() + extra + (scene.polygons.len() - i) <= MAX_POLYGONS;
+        match result {
+            Some(pieces) if fits(pieces.shapes.len()) => {
+                report.outlines += pieces.outlines;
+                report.polygons_split += 1;
+                report.pieces += pieces.shapes.len();
+                counts.push(pieces.shapes.len());
+                polygons.extend(
+                    pieces
+                        .shapes
+                        .iter()
+                        .map(|&shape| Polygon { shape, ..polygon }),
+                );
+                if let Some(message) = pieces.warning {
+                    warn(scene, i, message);
+                }
+            }
+            Some(_) => {
+                warn(
+                    scene,
+                    i,
+                    format!(
+                        "not split along its contacts: the scene would exceed {MAX_POLYGONS} polygons"
+                    ),
+                );
+                counts.push(1);
+                polygons.push(polygon);
+            }
+            None => {
+                counts.push(1);
+                polygons.push(polygon);
+            }
+        }
+    }
+    scene.origins.repeat(&counts);
+    scene.polygons = polygons;
+    report
+}
+
+/// For each polygon of `scene`, its pieces when outlines of polygons in contact with it cross it
+/// (`None` when none does); the scene is left as it is. Luminaire openings are never cut.
+pub fn contact_pieces(scene: &Scene, gap: f64) -> Vec<Option<Pieces>> {
+    let gap = gap.clamp(0.0, MAX_CONTACT_GAP);
+    let faces: Vec<Face> = scene.polygons.iter().map(|p| Face::new(&p.shape)).collect();
+    let grid = BoxGrid::new(&faces);
+    let openings = scene.opening_luminaires();
+    (0..scene.polygons.len())
+        .into_par_iter()
+        .map(|i| {
+            if openings[i].is_some() || faces[i].diameter <= 0.0 {
+                return None;
+            }
+            let outlines = contact_outlines(scene, &faces, &grid, i, gap);
+            cut_polygon(&scene.polygons[i], &faces[i], outlines)
+        })
+        .collect()
+}
+
+fn warn(scene: &mut Scene, polygon: usize, message: String) {
+    let (file, line) = scene.origins.get(polygon);
+    scene.warnings.push(Diagnostic {
+        file,
+        line,
+        message,
+    });
+}
+
+/// The cut of one polygon: convex triangles and quads with its front side, tiling it.
+#[derive(Clone, Debug)]
+pub struct Pieces {
+    pub shapes: Vec<Shape>,
+    /// Outlines that crossed it.
+    pub outlines: usize,
+    /// Why it was cut along fewer outlines than touch it (a budget), if it was.
+    pub warning: Option<String>,
+}
+
+/// The outlines (cutting planes through their edges, in P's projection) of the polygons in contact with
+/// polygon `i`, in a deterministic order: lying polygons by index, then footprints.
+fn contact_outlines(
+    scene: &Scene,
+    faces: &[Face],
+    grid: &BoxGrid,
+    i: usize,
+    gap: f64,
+) -> Vec<Vec<Plane>> {
+    let p = &faces[i];
+    let two_sided = scene.polygons[i].two_sided;
+    let reach = gap * p.diameter;
+    let mut outlines = Vec::new();
+    // Contact edges standing on P: (object, end, end, gap).
+    let mut edges: Vec<(usize, DVec3, DVec3, f64)> = Vec::new();
+    for j in grid.near(&p.bounds, reach) {
+        if j == i {
+            continue;
+        }
+        let q = &faces[j];
+        let g = gap * p.diameter.min(q.diameter);
+        let vertices = scene.polygons[j].shape.vertices();
+        let distances: Vec<f64> = vertices.iter().map(|&v| p.distance(v)).collect();
+        // The vertex farthest from P's plane says on which side Q is.
+        let farthest = distances
+            .iter()
+            .copied()
+            .fold(0.0, |a: f64, d| if d.abs() > a.abs() { d } else { a });
+        if !two_sided && farthest < -SNAP * p.diameter {
+            continue;
+        }
+        if distances.iter().all(|d| d.abs() <= g) {
+            let mut outline = vertices.to_vec();
+            if scene.polygons[j].shape.vector_area().dot(p.normal) < 0.0 {
+                outline.reverse();
+            }
+            outlines.push(outline_planes(&outline, p.normal));
+            continue;
+        }
+        let n = vertices.len();
+        for k in 0..n {
+            let next = (k + 1) % n;
+            if distances[k].abs() <= g
+                && distances[next].abs() <= g
+                && edges.len() < MAX_CONTACT_EDGES
+            {
+                edges.push((scene.polygons[j].object, vertices[k], vertices[next], g));
+            }
+        }
+    }
+    outlines.extend(footprints(p, &edges));
+    outlines
+}
+
+/// Convex hulls, in P's plane, of the chains of contact edges of one object that join end to end (within
+/// their gap); a chain of fewer than three edges (a wall's foot) has no area and is no footprint.
+fn footprints(p: &Face, edges: &[(usize, DVec3, DVec3, f64)]) -> Vec<Vec<Plane>> {
+    let joined = |a: usize, b: usize| {
+        let (ea, eb) = (&edges[a], &edges[b]);
+        let joint = ea.3.max(eb.3);
+        ea.0 == eb.0
+            && [ea.1, ea.2]
+                .iter()
+                .any(|x| x.distance(eb.1) <= joint || x.distance(eb.2) <= joint)
+    };
+    // Chains: connected components of the "joined" relation, by flood fill.
+    let mut chain_of = vec![usize::MAX; edges.len()];
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    for start in 0..edges.len() {
+        if chain_of[start] != usize::MAX {
+            continue;
+        }
+        let chain = members.len();
+        chain_of[start] = chain;
+        let mut stack = vec![start];
+        let mut chain_members = Vec::new();
+        while let Some(a) = stack.pop() {
+            chain_members.push(a);
+            for (b, slot) in chain_of.iter_mut().enumerate() {
+                if *slot == usize::MAX && joined(a, b) {
+                    *slot = chain;
+                    stack.push(b);
+                }
+            }
+        }
+        members.push(chain_members);
+    }
+    let (u, v) = p.normal.any_orthonormal_pair();
+    members
+        .into_iter()
+        .filter(|chain| chain.len() >= 3)
+        .filter_map(|chain| {
+            let flat: Vec<DVec2> = chain
+                .iter()
+                .flat_map(|&k| [edges[k].1, edges[k].2])
+                .map(|x| DVec2::new((x - p.point).dot(u), (x - p.point).dot(v)))
+                .collect();
+            let hull = convex_hull(&flat);
+            let area2: f64 = (0..hull.len())
+                .map(|k| hull[k].perp_dot(hull[(k + 1) % hull.len()]))
+                .sum();
+            (hull.len() >= 3 && area2 > (SNAP * p.diameter).powi(2)).then(|| {
+                let outline: Vec<DVec3> =
+                    hull.iter().map(|h| p.point + h.x * u + h.y * v).collect();
+                outline_planes(&outline, p.normal)
+            })
+        })
+        .collect()
+}
+
+/// Cuts `polygon` along `outlines`; `None` when none crosses its interior.
+fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Option<Pieces> {
+    let snap = SNAP * face.diameter;
+    let mut pieces = vec![polygon.shape.vertices().to_vec()];
+    let mut used = 0;
+    let mut warning = None;
+    if outlines.len() > MAX_OUTLINES {
+        warning = Some(format!(
+            "{} objects touch this polygon: split along the first {MAX_OUTLINES} only",
+            outlines.len()
+        ));
+    }
+    for planes in outlines.iter().take(MAX_OUTLINES) {
+        let mut next = Vec::with_capacity(pieces.len() + planes.len());
+        let mut crossed = false;
+        for piece in &pieces {
+            match split_by_outline(piece, planes, snap) {
+                Some(parts) => {
+                    crossed = true;
+                    next.extend(parts);
+                }
+                None => next.push(piece.clone()),
+            }
+        }
+        if next.len() > MAX_PIECES {
+            warning = Some(format!(
+                "splitting this polygon along its contacts would give more than {MAX_PIECES} pieces: \
+                 split along {used} of {} outlines",
+                outlines.len()
+            ));
+            break;
+        }
+        if crossed {
+            used += 1;
+            pieces = next;
+        }
+    }
+    if used == 0 {
+        return None;
+    }
+    let mut shapes = Vec::new();
+    for piece in &pieces {
+        match polygonize(piece) {
+            Ok(convex) => shapes.extend(convex.shapes),
+            // A piece with no area left after polygonize's tolerances: keep the polygon whole rather
+            // than lose area.
+            Err(_) => return None,
+        }
+    }
+    Some(Pieces {
+        shapes,
+        outlines: used,
+        warning,
+    })
+}
+
+/// Uniform grid over the polygons' boxes: the polygons whose boxes come within a distance of a box.
+struct BoxGrid {
+    origin: DVec3,
+    cell: f64,
+    dims: [usize; 3],
+    cells: Vec<Vec<u32>>,
+}
+
+impl BoxGrid {
+    fn new(faces: &[Face]) -> Self {
+        let bounds = faces.iter().fold(Aabb::EMPTY, |b, f| b.union(&f.bounds));
+        let extent = bounds.extent();
+        // About one cell per polygon, at most 64 per axis.
+        let volume_side =
+            (extent.x.max(1e-300) * extent.y.max(1e-300) * extent.z.max(1e-300)).cbrt();
+        let side = faces.len().max(1) as f64;
+        let cell = (extent.max_element() / 64.0)
+            .max(volume_side / side.cbrt())
+            .max(1e-300);
+        let dims =
+            [extent.x, extent.y, extent.z].map(|e| ((e / cell).floor() as usize + 1).min(64));
+        let mut grid = BoxGrid {
+            origin: if bounds.is_empty() {
+                DVec3::ZERO
+            } else {
+                bounds.min
+            },
+            cell,
+            dims,
+            cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
+        };
+        for (k, f) in faces.iter().enumerate() {
+            if !f.bounds.is_empty() && f.bounds.min.is_finite() && f.bounds.max.is_finite() {
+                for c in grid.cells_of(&f.bounds, 0.0) {
+                    grid.cells[c].push(k as u32);
+                }
+            }
+        }
+        grid
+    }
+
+    fn cells_of(&self, b: &Aabb, margin: f64) -> Vec<usize> {
+        let index = |p: DVec3| {
+            let c = ((p - self.origin) / self.cell).floor();
+            [c.x, c.y, c.z]
+        };
+        let (lo, hi) = (
+            index(b.min - DVec3::splat(margin)),
+            index(b.max + DVec3::splat(margin)),
+        );
+        let clamp = |x: f64, axis: usize| (x.max(0.0) as usize).min(self.dims[axis] - 1);
+        let mut out = Vec::new();
+        for x in clamp(lo[0], 0)..=clamp(hi[0], 0) {
+            for y in clamp(lo[1], 1)..=clamp(hi[1], 1) {
+                for z in clamp(lo[2], 2)..=clamp(hi[2], 2) {
+                    out.push((x * self.dims[1] + y) * self.dims[2] + z);
+                }
+            }
+        }
+        out
+    }
+
+    /// Polygons whose boxes come within `margin` of `b`, each once, in index order.
+    fn near(&self, b: &Aabb, margin: f64) -> Vec<usize> {
+        let mut found: Vec<usize> = self
+            .cells_of(b, margin)
+            .into_iter()
+            .flat_map(|c| self.cells[c].iter().map(|&k| k as usize))
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        found
+    }
+}
