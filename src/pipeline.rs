@@ -156,7 +156,8 @@ pub struct SimulationSettings {
     pub estimate: EstimateKind,
     /// Most elements refinement may create.
     pub max_elements: usize,
-    /// Most bytes the hierarchy (elements, coefficients, links) may take; refinement stops there.
+    /// Most bytes of the whole solve ([`MemoryBudget`]); refinement stops where elements and links would
+    /// pass what the fixed structures leave.
     pub max_memory: usize,
     /// Random point pairs per evaluation of the sampling oracles (eqs. (2) and (15); the paper uses 10).
     pub oracle_samples: usize,
