@@ -13,6 +13,7 @@ pub mod experiments;
 pub mod geometry;
 pub mod hierarchy;
 pub mod measures;
+pub mod memory;
 pub mod oracles;
 pub mod output;
 pub mod pipeline;

@@ -6,6 +6,7 @@
 use crate::bases::BasisKind;
 use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
 use crate::hierarchy::Hierarchy;
+use crate::memory::MemoryBudget;
 use crate::oracles::link_error::LinkErrorOracle;
 use crate::oracles::mutual_information::MutualInformationOracle;
 use crate::oracles::smoothness::SmoothnessOracle;
@@ -20,9 +21,10 @@ use crate::solvers::refine::RefineSettings;
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
-use crate::visibility::item_buffer::IntraClusterKind;
+use crate::visibility::item_buffer::{IntraClusterKind, ItemBuffers};
 use crate::visibility::multires::Multires;
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Refinement criterion (`--oracle`).
@@ -154,7 +156,8 @@ pub struct SimulationSettings {
     pub estimate: EstimateKind,
     /// Most elements refinement may create.
     pub max_elements: usize,
-    /// Most bytes the hierarchy (elements, coefficients, links) may take; refinement stops there.
+    /// Most bytes of the whole solve ([`MemoryBudget`]); refinement stops where elements and links would
+    /// pass what the fixed structures leave.
     pub max_memory: usize,
     /// Random point pairs per evaluation of the sampling oracles (eqs. (2) and (15); the paper uses 10).
     pub oracle_samples: usize,
@@ -318,25 +321,22 @@ pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
 }
 
 /// The deterministic solver's settings for `hierarchy`: absolute refinement threshold and minimum area
-/// from the relative `eps` and `min_area`, the element budget from `max_elements` and `max_memory`, and
-/// error control (with the link error oracle) at the absolute accuracy.
+/// from the relative `eps` and `min_area`, the element and link budgets from `max_elements` and
+/// `budget` (`--max-memory` less what it sets aside, [`MemoryBudget`]), and error control (with the
+/// link error oracle) at the absolute accuracy.
 pub fn deterministic_settings(
     settings: &SimulationSettings,
     hierarchy: &Hierarchy,
+    budget: &MemoryBudget,
 ) -> SolveSettings {
-    let bytes_per_element = hierarchy.memory_bytes() / hierarchy.elements.len().max(1)
-        + LINKS_PER_ELEMENT_ESTIMATE * link_bytes(settings.basis, settings.cubature_degree());
-    let memory_elements = settings.max_memory / bytes_per_element.max(1);
     SolveSettings {
         refine: RefineSettings {
             threshold: settings.eps * hierarchy.total_emission(),
             min_area: settings.min_area * hierarchy.total_area(),
-            max_elements: settings.max_elements.min(memory_elements),
-            // Half the memory budget for links (the element budget above already reserves links per
-            // element; clustering can put many more links on few elements).
-            max_links: settings.max_memory
-                / 2
-                / link_bytes(settings.basis, settings.cubature_degree()).max(1),
+            max_elements: settings
+                .max_elements
+                .min(hierarchy.elements.len() + budget.max_elements(settings.basis)),
+            max_links: budget.max_links(settings.basis, settings.cubature_degree()),
             coupling: CouplingSettings {
                 cubature_degree: settings.cubature_degree(),
                 seed: settings.seed,
@@ -352,19 +352,6 @@ pub fn deterministic_settings(
             threshold_factor: settings.threshold_factor,
         }),
     }
-}
-
-/// Links per element assumed when turning `--max-memory` into an element budget (measured: 10 to 40 on
-/// the Cornell box and office scenes; the larger keeps the budget safe).
-const LINKS_PER_ELEMENT_ESTIMATE: usize = 40;
-
-/// Bytes of one link with its coupling block and error coefficients.
-pub fn link_bytes(basis: BasisKind, cubature_degree: usize) -> usize {
-    let size = basis.size();
-    let nodes = crate::geometry::cubature::rule(crate::geometry::Domain::Square, cubature_degree)
-        .nodes
-        .len();
-    std::mem::size_of::<crate::hierarchy::Link>() + size * size * 8 + nodes * (size + 1) * 4
 }
 
 /// Runs hierarchical radiosity on `scene`.
@@ -394,7 +381,14 @@ pub fn simulate_observed(
     let mut hierarchy = Hierarchy::new(scene, settings.basis);
     let clustering = match settings.clustering {
         ClusteringKind::Auto if settings.method == MethodKind::Deterministic => {
-            let max_links = deterministic_settings(settings, &hierarchy)
+            let budget = MemoryBudget::new(
+                settings.max_memory,
+                scene,
+                visibility.as_ref(),
+                &hierarchy,
+                false,
+            )?;
+            let max_links = deterministic_settings(settings, &hierarchy, &budget)
                 .refine
                 .max_links;
             crate::solvers::refine::automatic_clustering(&hierarchy, max_links)
@@ -408,8 +402,17 @@ pub fn simulate_observed(
          --method stochastic-jacobi)"
     );
     hierarchy.add_clusters(settings.cluster_tree, clustering);
-    if hierarchy.root_cluster.is_some() && settings.intra_cluster == IntraClusterKind::ItemBuffer {
-        hierarchy.item_buffers = Some(Default::default());
+    let item_buffers =
+        hierarchy.root_cluster.is_some() && settings.intra_cluster == IntraClusterKind::ItemBuffer;
+    let budget = MemoryBudget::new(
+        settings.max_memory,
+        scene,
+        visibility.as_ref(),
+        &hierarchy,
+        item_buffers,
+    )?;
+    if item_buffers {
+        hierarchy.item_buffers = Some(Arc::new(ItemBuffers::new(budget.item_buffer_cache)));
     }
     let threshold = settings.eps * hierarchy.total_emission();
     let min_area = settings.min_area * hierarchy.total_area();
@@ -434,7 +437,7 @@ pub fn simulate_observed(
         };
         // Goniometric luminaires light the leaves by the deterministic first gather; the Monte Carlo
         // iterations shoot that light onward with the emitters' (solvers::stochastic).
-        let refine = deterministic_settings(settings, &hierarchy).refine;
+        let refine = deterministic_settings(settings, &hierarchy, &budget).refine;
         crate::solvers::direct::FirstGather::default().refine_and_gather(
             &mut hierarchy,
             visibility.as_ref(),
@@ -455,7 +458,7 @@ pub fn simulate_observed(
             visibility_seconds,
         });
     }
-    let solve_settings = deterministic_settings(settings, &hierarchy);
+    let solve_settings = deterministic_settings(settings, &hierarchy, &budget);
     crate::solvers::refine::check_initial_links(&hierarchy, solve_settings.refine.max_links)?;
     let solver = make_solver(settings.solver);
     let report = match &settings.multigrid {
@@ -481,10 +484,13 @@ pub fn simulate_observed(
     if report.refused_by_budget > 0 && !progress.quiet {
         crate::progress::stderr_line(format_args!(
             "warning: the element and link budget ({} elements, {} links, from --max-elements and \
-             --max-memory) stopped refinement: {} splits refused, the solution is coarser than the \
-             settings ask",
+             --max-memory {}, of which {} go to the scene, visibility, clusters, item-buffer cache and \
+             program) stopped refinement: {} splits refused, the solution is coarser than the settings \
+             ask",
             solve_settings.refine.max_elements,
             solve_settings.refine.max_links,
+            crate::memory::format_bytes(budget.total),
+            crate::memory::format_bytes(budget.fixed),
             report.refused_by_budget
         ));
     }

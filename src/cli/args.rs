@@ -178,7 +178,8 @@ pub struct SolveArgs {
     /// Most elements refinement may create.
     #[arg(long, default_value_t = 2_000_000, value_name = "N", value_parser = count(1, 1 << 31))]
     pub max_elements: usize,
-    /// Most memory for elements and links, e.g. 2G, 500M (default: half the machine's memory).
+    /// Most memory for the solve, e.g. 2G, 500M: scene, visibility structure, clusters, item-buffer
+    /// cache and program first, elements and links in the rest (default: half the machine's memory).
     #[arg(long, value_parser = parse_bytes, value_name = "BYTES")]
     pub max_memory: Option<usize>,
     /// Iterative solver for the linear system.

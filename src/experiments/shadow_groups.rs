@@ -91,7 +91,8 @@ impl Wall {
         let mut h = Hierarchy::new(&self.receivers, BasisKind::Constant);
         let tile_area = self.receivers.polygons[0].shape.area();
         // Elements of level `level - 1` are still splittable, those of `level` not.
-        let mut solve_settings = deterministic_settings(&settings, &h);
+        let budget = crate::memory::MemoryBudget::refinement_only(settings.max_memory);
+        let mut solve_settings = deterministic_settings(&settings, &h, &budget);
         solve_settings.refine.min_area = 0.5 * tile_area / 4f64.powi(level as i32 - 1);
         let oracle = make_oracle(&settings, &h);
         let solver = make_solver(settings.solver);

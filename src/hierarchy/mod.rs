@@ -54,7 +54,7 @@ pub struct Link {
 impl Link {
     /// Receiver-area-averaged form factor F_ij (visibility included): the constant–constant entry.
     pub fn form_factor(&self) -> f64 {
-        self.coupling.block[0]
+        self.coupling.form_factor()
     }
 }
 
@@ -62,17 +62,18 @@ impl Link {
 /// ρ_i (applied when gathering, so one block serves all three colour channels), and divided by A_i so
 /// that with the averaged-orthonormal bases of [`crate::bases`] the gathered irradiance coefficients are
 /// `H_α = Σ_β block[α·b + β] L_{j,β}` and the constant–constant entry is the form factor F_ij.
+///
+/// Storage: one `f32` allocation per link holds the block, the error coefficients and the node factors
+/// (`b² + n (b + 1)` values), because links are what a large solve is made of (BENCHMARKS.md, "Scale":
+/// 48 bytes of `Link` plus one heap block, instead of 80 bytes plus three). Single precision keeps a
+/// relative rounding of 6·10⁻⁸ per coefficient, far below the cubature error of the coupling itself
+/// (eq. (12) with a handful of nodes) and the sweeps' tolerance.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkCoupling {
-    /// `a × b` row-major coupling coefficients `K_{i,α;j,β} / (ρ_i A_i)` (eq. (3)).
-    pub block: Box<[f64]>,
-    /// `n × b` row-major link error coefficients `δ_{j,β}(x_k) / ρ_i` at the receiver's `n` cubature
-    /// nodes (Algorithm 4.1 step 4b); kept per β rather than in the reduced form of §4.3 because the
-    /// reduced form freezes the source radiance at link creation, when most sources are still dark.
-    pub errors: Box<[f32]>,
-    /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
-    /// which carry propagated error in eqs. (11) and (13).
-    pub node_factors: Box<[f32]>,
+    /// The block, then the error coefficients, then the node factors (see the accessors).
+    values: Box<[f32]>,
+    /// Basis size `b` of both ends.
+    size: u8,
     /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
     pub visibility: f32,
     /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
@@ -84,20 +85,92 @@ pub struct LinkCoupling {
 }
 
 impl LinkCoupling {
+    /// A coupling from its `b × b` block, `n × b` error coefficients and `n` node factors (see the
+    /// accessors), stored in single precision.
+    pub fn new(
+        block: &[f64],
+        errors: &[f32],
+        node_factors: &[f32],
+        visibility: f32,
+        visibility_error: f32,
+    ) -> Self {
+        let size = (block.len() as f64).sqrt().round() as usize;
+        assert!(
+            size * size == block.len() && errors.len() == node_factors.len() * size,
+            "a coupling block is b × b and there are b error coefficients per node"
+        );
+        let values = block
+            .iter()
+            .map(|&k| k as f32)
+            .chain(errors.iter().copied())
+            .chain(node_factors.iter().copied())
+            .collect();
+        LinkCoupling {
+            values,
+            size: u8::try_from(size).expect("basis sizes are at most MAX_BASIS_SIZE"),
+            visibility,
+            visibility_error,
+        }
+    }
+
+    fn block_len(&self) -> usize {
+        usize::from(self.size) * usize::from(self.size)
+    }
+
+    /// Number of receiver cubature nodes `n`.
+    pub fn node_count(&self) -> usize {
+        (self.values.len() - self.block_len()) / (usize::from(self.size) + 1)
+    }
+
+    /// `b × b` row-major coupling coefficients `K_{i,α;j,β} / (ρ_i A_i)` (eq. (3)).
+    pub fn block(&self) -> &[f32] {
+        &self.values[..self.block_len()]
+    }
+
+    /// `n × b` row-major link error coefficients `δ_{j,β}(x_k) / ρ_i` at the receiver's `n` cubature
+    /// nodes (Algorithm 4.1 step 4b); kept per β rather than in the reduced form of §4.3 because the
+    /// reduced form freezes the source radiance at link creation, when most sources are still dark.
+    pub fn errors(&self) -> &[f32] {
+        let start = self.block_len();
+        &self.values[start..start + self.node_count() * usize::from(self.size)]
+    }
+
+    /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
+    /// which carry propagated error in eqs. (11) and (13).
+    pub fn node_factors(&self) -> &[f32] {
+        &self.values[self.values.len() - self.node_count()..]
+    }
+
+    /// The constant–constant entry of the block: the form factor F_ij.
+    pub fn form_factor(&self) -> f64 {
+        f64::from(self.values[0])
+    }
+
     /// `δ_j(x_k) / ρ_i = Σ_β L_{j,β} δ_{j,β}(x_k)` at receiver node `k`, for the source's radiance
     /// coefficients `source` (Bekaert–Willems §4.2).
     pub fn node_error(&self, k: usize, source: &[Rgb]) -> Rgb {
         let size = source.len();
         source
             .iter()
-            .zip(&self.errors[k * size..(k + 1) * size])
+            .zip(&self.errors()[k * size..(k + 1) * size])
             .map(|(&l, &d)| l * f64::from(d))
             .sum()
     }
 
-    /// Heap bytes held by this coupling (for memory budgets and reports).
+    /// Heap bytes held by this coupling, as the allocator hands them out (for memory budgets and
+    /// reports).
     pub fn heap_bytes(&self) -> usize {
-        self.block.len() * 8 + (self.errors.len() + self.node_factors.len()) * 4
+        allocated_bytes(self.values.len() * std::mem::size_of::<f32>())
+    }
+}
+
+/// Bytes an allocation of `requested` bytes occupies: glibc's malloc adds an 8-byte header and rounds up
+/// to 16 bytes, with a 32-byte minimum.
+pub fn allocated_bytes(requested: usize) -> usize {
+    if requested == 0 {
+        0
+    } else {
+        (requested + 8).next_multiple_of(16).max(32)
     }
 }
 
@@ -638,26 +711,36 @@ impl Hierarchy {
             .unwrap_or(&[])
     }
 
+    /// Frees the growth slack of every element's link list: lists grow by doubling as links arrive,
+    /// and keep their capacity when a later pass takes the links out to judge them again.
+    pub fn shrink_link_lists(&mut self) {
+        for e in &mut self.elements {
+            e.links.shrink_to_fit();
+        }
+    }
+
     pub fn link_count(&self) -> usize {
         self.elements.iter().map(|e| e.links.len()).sum()
     }
 
-    /// Bytes held by elements, coefficients and links: what `--max-memory` budgets.
+    /// Bytes held by elements, coefficients and links, as the allocator hands them out (the part of
+    /// `--max-memory` that refinement fills, [`crate::memory`]).
     pub fn memory_bytes(&self) -> usize {
-        let coefficients = self.basis_size() * std::mem::size_of::<Rgb>();
-        self.elements
-            .iter()
-            .map(|e| {
-                std::mem::size_of::<Element>()
-                    + coefficients
-                    + e.children.len() * 4
-                    + e.links.capacity() * std::mem::size_of::<Link>()
-                    + e.links
-                        .iter()
-                        .map(|l| l.coupling.heap_bytes())
-                        .sum::<usize>()
-            })
-            .sum()
+        let coefficients = allocated_bytes(self.basis_size() * std::mem::size_of::<Rgb>());
+        self.elements.capacity() * std::mem::size_of::<Element>()
+            + self
+                .elements
+                .iter()
+                .map(|e| {
+                    coefficients
+                        + allocated_bytes(e.children.len() * 4)
+                        + e.links.capacity() * std::mem::size_of::<Link>()
+                        + e.links
+                            .iter()
+                            .map(|l| l.coupling.heap_bytes())
+                            .sum::<usize>()
+                })
+                .sum::<usize>()
     }
 
     /// Leaf surface elements (clusters always have children).

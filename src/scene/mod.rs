@@ -121,7 +121,9 @@ pub fn sanitise(text: &str, max: usize) -> String {
 pub const MAX_POLYGONS: usize = 1_000_000;
 
 /// Largest scene, material or include file read (bytes): bigger inputs are refused, not exhausted.
-pub const MAX_FILE_BYTES: u64 = 64 << 20;
+/// Room for [`MAX_POLYGONS`] as MGF: the million-polygon box hall (`radiosity scene box-hall
+/// --polygons 1000000`) is 100 MB.
+pub const MAX_FILE_BYTES: u64 = 256 << 20;
 
 /// Reads a regular file of at most [`MAX_FILE_BYTES`]; devices, pipes and directories are refused.
 pub fn read_bounded(path: &Path) -> Result<Vec<u8>, String> {

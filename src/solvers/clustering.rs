@@ -373,13 +373,13 @@ pub fn couple_cluster(
     };
     let v = visible_fraction(block[0], unoccluded);
     Coupling {
-        coupling: LinkCoupling {
-            block: block.into(),
-            errors: errors.into(),
-            node_factors: node_factors.into(),
-            visibility: v as f32,
-            visibility_error: (unoccluded * (v * (1.0 - v)).sqrt()) as f32,
-        },
+        coupling: LinkCoupling::new(
+            &block,
+            &errors,
+            &node_factors,
+            v as f32,
+            (unoccluded * (v * (1.0 - v)).sqrt()) as f32,
+        ),
         unoccluded,
         source_nodes: CLUSTER_VISIBILITY_SAMPLES,
         rays,
@@ -449,7 +449,7 @@ pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
             let mut even = Rgb::BLACK;
             for link in &e.links {
                 let gathered =
-                    radiance_toward(h, link.source, h.center_of(id)) * link.coupling.block[0];
+                    radiance_toward(h, link.source, h.center_of(id)) * link.coupling.form_factor();
                 if kind == ClusteringKind::Isotropic && h.item_buffers.is_none() {
                     even += gathered;
                     continue;

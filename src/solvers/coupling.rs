@@ -136,17 +136,17 @@ pub fn couple(
             errors[k * size + beta] = (projected - inner[k * size + beta]) as f32;
         }
     }
-    let node_factors = (0..n).map(|k| inner[k * size] as f32).collect();
+    let node_factors: Vec<f32> = (0..n).map(|k| inner[k * size] as f32).collect();
     let visible: f64 = (0..n).map(|k| x_nodes[k].weight * inner[k * size]).sum();
     let visibility = visible_fraction(visible, unoccluded);
     Coupling {
-        coupling: LinkCoupling {
-            block: block.into(),
-            errors: errors.into(),
-            node_factors,
-            visibility: visibility as f32,
-            visibility_error: visibility_error(unoccluded / r.area, visibility, y_nodes.len()),
-        },
+        coupling: LinkCoupling::new(
+            &block,
+            &errors,
+            &node_factors,
+            visibility as f32,
+            visibility_error(unoccluded / r.area, visibility, y_nodes.len()),
+        ),
         unoccluded: unoccluded / r.area,
         source_nodes: y_nodes.len(),
         rays,

@@ -65,7 +65,7 @@ fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
             let Some(first) = e.links.first() else {
                 return 0.0;
             };
-            let nodes = first.coupling.node_factors.len();
+            let nodes = first.coupling.node_count();
             let rho = h.reflectance_of(id as ElementId);
             // Visibility errors (see `LinkCoupling::visibility_error`) are sampling errors of independent
             // links: they add in quadrature.
@@ -90,7 +90,7 @@ fn level_errors(h: &Hierarchy, propagated: Option<&[f64]>) -> Vec<f64> {
                         .node_error(k, &h.element(link.source).radiance);
                     if let Some(bounds) = propagated {
                         spread +=
-                            bounds[link.source as usize] * link.coupling.node_factors[k] as f64;
+                            bounds[link.source as usize] * link.coupling.node_factors()[k] as f64;
                     }
                 }
                 for (rho_c, sum_c) in [(rho.r, sum.r), (rho.g, sum.g), (rho.b, sum.b)] {

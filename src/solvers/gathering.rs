@@ -37,14 +37,18 @@ pub fn gather(hierarchy: &Hierarchy, id: ElementId, out: &mut [Rgb]) {
             // comes from its visible patches (§6.1).
             let l = radiance_toward(hierarchy, link.source, hierarchy.center_of(id));
             for (alpha, h) in out.iter_mut().enumerate() {
-                *h += l * link.coupling.block[alpha * size];
+                *h += l * f64::from(link.coupling.block()[alpha * size]);
             }
             continue;
         }
         let source = &hierarchy.element(link.source).radiance;
         for (alpha, h) in out.iter_mut().enumerate() {
-            let row = &link.coupling.block[alpha * size..(alpha + 1) * size];
-            *h += row.iter().zip(source).map(|(&k, &l)| l * k).sum::<Rgb>();
+            let row = &link.coupling.block()[alpha * size..(alpha + 1) * size];
+            *h += row
+                .iter()
+                .zip(source)
+                .map(|(&k, &l)| l * f64::from(k))
+                .sum::<Rgb>();
         }
     }
 }

@@ -256,6 +256,7 @@ fn refine_pass(
         &mut |round, n| spinner.set_message(format!("{label}, round {round}: {n} candidate links")),
         schedule,
     );
+    hierarchy.shrink_link_lists();
     let direct = first_gather.refine_and_gather(
         hierarchy,
         visibility,

@@ -278,7 +278,8 @@ pub fn refine_scheduled(
             }
         }
         let mut next = Vec::new();
-        for (c, verdict) in candidates.into_iter().zip(decisions) {
+        let round_size = candidates.len();
+        for (k, (c, verdict)) in candidates.into_iter().zip(decisions).enumerate() {
             outcome.oracle_rays += verdict.rays;
             outcome.form_factor_rays += verdict.coupling_rays;
             let mut decision = verdict.decision;
@@ -287,7 +288,8 @@ pub fn refine_scheduled(
                 Decision::SubdivideReceiver => !hierarchy.is_cluster(c.receiver),
                 Decision::SubdivideSource => !hierarchy.is_cluster(c.source),
             };
-            let links = admissible.len() + next.len() + MAX_NEW_CANDIDATES;
+            // Every candidate of this round not judged yet becomes at least one link too.
+            let links = admissible.len() + next.len() + (round_size - k - 1) + MAX_NEW_CANDIDATES;
             if decision != Decision::Admissible
                 && ((splits_surface && hierarchy.elements.len() + 4 > settings.max_elements)
                     || links > settings.max_links)

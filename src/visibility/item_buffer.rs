@@ -29,9 +29,6 @@ pub const PIXELS_ACROSS_SMALLEST: f64 = 4.0;
 pub const MAX_SIDE: usize = 256;
 /// Direction cells per cube-map face side: 6 × 8² = 384 buckets, each under 13° across.
 pub const BUCKETS_PER_FACE: usize = 8;
-/// Most visible fractions the cache keeps (4 bytes each: 64 MiB); past it buffers are drawn again on
-/// every request, with the same answer.
-pub const MAX_CACHED_FRACTIONS: usize = 16 << 20;
 
 /// Whether a cluster's contents shadow each other (`--intra-cluster`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -193,20 +190,35 @@ fn pixels_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, usize)>
     out
 }
 
-/// Visible fractions by (cluster, direction bucket), and how many fractions they hold.
+/// Visible fractions by (cluster, direction bucket), and the bytes they hold.
 #[derive(Debug, Default)]
 struct Cache {
     buffers: HashMap<(u32, u16), Arc<[f32]>>,
-    fractions: usize,
+    bytes: usize,
 }
 
-/// Item buffers of clusters, cached per (cluster, direction bucket); shared between threads.
-#[derive(Debug, Default)]
+/// Item buffers of clusters, cached per (cluster, direction bucket) up to a number of bytes (a share of
+/// `--max-memory`, [`crate::memory::MemoryBudget`]); past it buffers are drawn again on every request,
+/// with the same answer. Shared between threads.
+#[derive(Debug)]
 pub struct ItemBuffers {
     cache: RwLock<Cache>,
+    max_bytes: usize,
 }
 
+/// Bytes one cached entry holds besides its fractions: the `Arc`'s counts, the map's key, pointer and
+/// control byte at its load factor, and the allocator's rounding.
+const ENTRY_OVERHEAD: usize = 80;
+
 impl ItemBuffers {
+    /// An empty cache that holds at most `max_bytes`.
+    pub fn new(max_bytes: usize) -> Self {
+        ItemBuffers {
+            cache: RwLock::default(),
+            max_bytes,
+        }
+    }
+
     /// Visible fractions of `cluster`'s contents (drawn by `contents` when not cached) seen along the
     /// bucket of `toward`.
     pub fn fractions(
@@ -228,10 +240,9 @@ impl ItemBuffers {
         }
         let fractions: Arc<[f32]> = visible_fractions(&contents(), direction).into();
         let mut cache = self.cache.write().expect("item buffer cache");
-        if cache.fractions + fractions.len() <= MAX_CACHED_FRACTIONS
-            && !cache.buffers.contains_key(&key)
-        {
-            cache.fractions += fractions.len();
+        let bytes = ENTRY_OVERHEAD + 4 * fractions.len();
+        if cache.bytes + bytes <= self.max_bytes && !cache.buffers.contains_key(&key) {
+            cache.bytes += bytes;
             cache.buffers.insert(key, fractions.clone());
         }
         fractions

@@ -1,0 +1,184 @@
+//! What `--max-memory` counts: the structures that stay for the whole solve (scene, visibility
+//! structure, patches and cluster tree, the item-buffer cache, a reserve for the program and its
+//! threads) are set aside first, and refinement shares the rest between elements and links at their
+//! peak cost: a link's bytes while it is stored at its receiver (with the growth slack of the
+//! receiver's list and the allocator's rounding) plus what it costs while a refinement pass judges and
+//! couples it (candidate lists). Peak resident memory then stays within the budget (BENCHMARKS.md,
+//! "Scale", measures it), and a budget too small for the fixed part is refused before any work.
+
+use crate::bases::BasisKind;
+use crate::geometry::{cubature, Domain};
+use crate::hierarchy::{allocated_bytes, Element, Hierarchy, Link, Patch};
+use crate::scene::{Polygon, Scene};
+use crate::solvers::refine::Candidate;
+use crate::visibility::Visibility;
+
+/// Bytes for the program itself and its threads, beyond the data counted here: code and libraries
+/// (about 20 MiB resident), rayon's worker stacks, and per-thread scratch (an item buffer's raster of
+/// 256² pixels, 768 KiB; coupling and oracle temporaries), for up to 16 threads.
+pub const RUNTIME_RESERVE: usize = 64 << 20;
+
+/// Share of the budget after the fixed part that the item-buffer cache may fill (its answers are
+/// redrawn, identically, when it is full).
+pub const ITEM_BUFFER_SHARE: usize = 8;
+
+/// Share of the refinement budget reserved for elements (links take the rest: a solve holds tens of
+/// links per element).
+pub const ELEMENT_SHARE: usize = 8;
+
+/// How `--max-memory` is divided.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MemoryBudget {
+    /// `--max-memory`.
+    pub total: usize,
+    /// Scene, visibility structure, patches with their roots and the cluster tree, program reserve.
+    pub fixed: usize,
+    /// Most bytes the item-buffer cache may hold (0 without item buffers).
+    pub item_buffer_cache: usize,
+}
+
+impl MemoryBudget {
+    /// The budget for solving `scene` with `visibility` and the initial `hierarchy` (patch roots and
+    /// clusters) within `max_memory` bytes; `item_buffers`: whether intra-cluster item buffers will be
+    /// cached. An error when the fixed part alone does not fit.
+    pub fn new(
+        max_memory: usize,
+        scene: &Scene,
+        visibility: &dyn Visibility,
+        hierarchy: &Hierarchy,
+        item_buffers: bool,
+    ) -> anyhow::Result<Self> {
+        let polygons = scene.polygons.len() * std::mem::size_of::<Polygon>();
+        // Back ends that do not report their size are counted as a BVH of two nodes per polygon.
+        let visibility_bytes = visibility.memory_bytes().unwrap_or(2 * polygons);
+        let fixed = RUNTIME_RESERVE
+            + polygons
+            + visibility_bytes
+            + hierarchy.memory_bytes()
+            + hierarchy.patches.len() * std::mem::size_of::<Patch>()
+            + hierarchy.cluster_surfaces.len() * 4
+            + hierarchy.polygon_patches.len() * 16;
+        anyhow::ensure!(
+            fixed < max_memory,
+            "--max-memory {} is too small for this scene: its polygons, visibility structure, patches \
+             and clusters, and the program's reserve need {} before refinement can start",
+            format_bytes(max_memory),
+            format_bytes(fixed)
+        );
+        let item_buffer_cache = if item_buffers {
+            (max_memory - fixed) / ITEM_BUFFER_SHARE
+        } else {
+            0
+        };
+        Ok(MemoryBudget {
+            total: max_memory,
+            fixed: fixed + item_buffer_cache,
+            item_buffer_cache,
+        })
+    }
+
+    /// A budget that only counts elements and links (for callers without a scene at hand): everything
+    /// is refinement's.
+    pub fn refinement_only(max_memory: usize) -> Self {
+        MemoryBudget {
+            total: max_memory,
+            fixed: 0,
+            item_buffer_cache: 0,
+        }
+    }
+
+    /// Bytes refinement may fill with elements and links.
+    pub fn refinement(&self) -> usize {
+        self.total.saturating_sub(self.fixed)
+    }
+
+    /// Most links refinement may create, at [`link_peak_bytes`] each.
+    pub fn max_links(&self, basis: BasisKind, cubature_degree: usize) -> usize {
+        let links = self.refinement() - self.refinement() / ELEMENT_SHARE;
+        links / link_peak_bytes(basis, cubature_degree)
+    }
+
+    /// Most elements refinement may create, at [`element_bytes`] each.
+    pub fn max_elements(&self, basis: BasisKind) -> usize {
+        self.refinement() / ELEMENT_SHARE / element_bytes(basis)
+    }
+}
+
+/// Bytes one stored link holds: the `Link` itself and its coupling's single heap block
+/// ([`crate::hierarchy::LinkCoupling`]) with the allocator's rounding, for the largest receiver rule
+/// (the square's).
+pub fn link_bytes(basis: BasisKind, cubature_degree: usize) -> usize {
+    let size = basis.size();
+    let nodes = cubature::rule(Domain::Square, cubature_degree).nodes.len();
+    std::mem::size_of::<Link>() + allocated_bytes(4 * (size * size + nodes * (size + 1)))
+}
+
+/// A link's peak cost: [`link_bytes`], one more `Link` for the growth slack of its receiver's list
+/// (which doubles), and while a refinement pass runs, the link as a candidate, its verdict (about a
+/// candidate's size) and its coupled copy on the way to its receiver.
+pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize) -> usize {
+    link_bytes(basis, cubature_degree)
+        + std::mem::size_of::<Link>()
+        + 2 * std::mem::size_of::<Candidate>()
+        + std::mem::size_of::<Link>()
+        + 16
+}
+
+/// Bytes of one element: the struct (twice, for the growth slack of the element list), its radiance
+/// coefficients and its list of four children.
+pub fn element_bytes(basis: BasisKind) -> usize {
+    2 * std::mem::size_of::<Element>()
+        + allocated_bytes(basis.size() * std::mem::size_of::<crate::color::Rgb>())
+        + allocated_bytes(4 * 4)
+}
+
+/// `1.5 GiB`, `640 MiB`, `12 KiB` (binary units, like `--max-memory`'s suffixes).
+pub fn format_bytes(bytes: usize) -> String {
+    let b = bytes as f64;
+    if bytes >= 1 << 30 {
+        format!("{:.1} GiB", b / f64::from(1u32 << 30))
+    } else if bytes >= 1 << 20 {
+        format!("{:.0} MiB", b / f64::from(1u32 << 20))
+    } else {
+        format!("{:.0} KiB", b / 1024.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::generators::BoxHall;
+    use crate::visibility::bvh::Bvh;
+
+    #[test]
+    fn a_link_costs_less_than_the_three_allocation_layout() {
+        // The layout before one heap block per coupling: an 80-byte link with three boxed slices.
+        let (size, nodes) = (3, 4);
+        let before = 80
+            + allocated_bytes(8 * size * size)
+            + allocated_bytes(4 * nodes * size)
+            + allocated_bytes(4 * nodes);
+        assert!(link_bytes(BasisKind::Linear, 2) < before);
+    }
+
+    #[test]
+    fn the_fixed_part_is_set_aside_and_a_budget_below_it_is_refused() {
+        let scene = BoxHall::with_polygons(300).scene();
+        let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+        let bvh = Bvh::new(&shapes);
+        let hierarchy = Hierarchy::new(&scene, BasisKind::Linear);
+        let budget = MemoryBudget::new(1 << 30, &scene, &bvh, &hierarchy, true).unwrap();
+        assert!(budget.fixed > RUNTIME_RESERVE + budget.item_buffer_cache);
+        assert_eq!(
+            budget.item_buffer_cache,
+            (budget.total - (budget.fixed - budget.item_buffer_cache)) / ITEM_BUFFER_SHARE
+        );
+        assert!(
+            budget.max_links(BasisKind::Linear, 2) * link_peak_bytes(BasisKind::Linear, 2)
+                + budget.max_elements(BasisKind::Linear) * element_bytes(BasisKind::Linear)
+                <= budget.refinement()
+        );
+        let refused = MemoryBudget::new(RUNTIME_RESERVE, &scene, &bvh, &hierarchy, true);
+        assert!(refused.unwrap_err().to_string().contains("too small"));
+    }
+}
