@@ -413,13 +413,13 @@ fn near_coupling(
         }
     }
     Coupling {
-        coupling: LinkCoupling {
-            block: vec![0.0; size * size].into(),
-            errors: errors.into(),
-            node_factors: vec![0.0f32; nodes].into(),
-            visibility: 1.0,
-            visibility_error: 0.0,
-        },
+        coupling: LinkCoupling::new(
+            &vec![0.0; size * size],
+            &errors,
+            &vec![0.0f32; nodes],
+            1.0,
+            0.0,
+        ),
         unoccluded: 0.0,
         source_nodes: CLUSTER_VISIBILITY_SAMPLES,
         rays: 0,
