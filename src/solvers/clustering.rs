@@ -344,6 +344,8 @@ pub fn couple_cluster(
         unoccluded,
         source_nodes: CLUSTER_VISIBILITY_SAMPLES,
         rays,
+        shaft: None,
+        rays_saved: 0,
     }
 }
 
