@@ -9,6 +9,8 @@ use radiosity::pipeline::{simulate, OracleKind, SimulationSettings, Solution};
 use radiosity::scene::{cornell::cornell_box, Scene};
 use radiosity::visibility::shaft::VisibilityReuse;
 
+// Shared with the clustering tests, which use more of it.
+#[allow(dead_code)]
 mod common;
 use common::{furnace_with_cubes, quiet};
 

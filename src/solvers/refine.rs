@@ -322,12 +322,7 @@ pub fn refine_scheduled(
                     }
                     for child in hierarchy.split(c.receiver) {
                         push_if_interacting(
-                            hierarchy,
-                            &mut next,
-                            child,
-                            c.source,
-                            partial,
-                            inherited,
+                            hierarchy, &mut next, child, c.source, partial, inherited,
                         );
                     }
                 }
@@ -338,12 +333,7 @@ pub fn refine_scheduled(
                     }
                     for child in hierarchy.split(c.source) {
                         push_if_interacting(
-                            hierarchy,
-                            &mut next,
-                            c.receiver,
-                            child,
-                            partial,
-                            inherited,
+                            hierarchy, &mut next, c.receiver, child, partial, inherited,
                         );
                     }
                 }
@@ -436,7 +426,12 @@ fn push_if_interacting(
         can_interact(h.element(receiver).shape(), h.element(source).shape())
     };
     if interacting {
-        out.push(Candidate::new(receiver, source, inherited_visibility, shaft));
+        out.push(Candidate::new(
+            receiver,
+            source,
+            inherited_visibility,
+            shaft,
+        ));
     }
 }
 

@@ -108,9 +108,9 @@ impl Shaft {
                     } else {
                         continue;
                     };
-                    let known = planes
-                        .iter()
-                        .any(|(m, d)| m.dot(plane.0) > 1.0 - 1e-12 && (d - plane.1).abs() <= support);
+                    let known = planes.iter().any(|(m, d)| {
+                        m.dot(plane.0) > 1.0 - 1e-12 && (d - plane.1).abs() <= support
+                    });
                     if !known {
                         planes.push(plane);
                     }
@@ -128,7 +128,8 @@ impl Shaft {
     /// Whether a box lies outside the shaft (at most touching it).
     fn excludes_box(&self, b: &Aabb) -> bool {
         let t = self.touch;
-        if (b.max - self.bounds.min).min_element() <= t || (self.bounds.max - b.min).min_element() <= t
+        if (b.max - self.bounds.min).min_element() <= t
+            || (self.bounds.max - b.min).min_element() <= t
         {
             return true;
         }
@@ -167,7 +168,10 @@ fn convex_pieces(shape: &Shape) -> impl Iterator<Item = [DVec3; 4]> + '_ {
     let pieces: [Option<[DVec3; 4]>; 2] = match v.len() {
         3 => [Some([v[0], v[1], v[2], v[2]]), None],
         _ if planar_quad => [Some([v[0], v[1], v[2], v[3]]), None],
-        _ => [Some([v[0], v[1], v[2], v[2]]), Some([v[0], v[2], v[3], v[3]])],
+        _ => [
+            Some([v[0], v[1], v[2], v[2]]),
+            Some([v[0], v[2], v[3], v[3]]),
+        ],
     };
     pieces.into_iter().flatten()
 }
@@ -192,7 +196,8 @@ fn blocks(occluder: &[DVec3], a: &[DVec3], b: &[DVec3], touch: f64) -> bool {
     }
     let offset = normal.dot(occluder[0]);
     let side = |p: &DVec3| normal.dot(*p) - offset;
-    let (sa, sb): (Vec<f64>, Vec<f64>) = (a.iter().map(side).collect(), b.iter().map(side).collect());
+    let (sa, sb): (Vec<f64>, Vec<f64>) =
+        (a.iter().map(side).collect(), b.iter().map(side).collect());
     let opposite = (sa.iter().all(|&s| s > touch) && sb.iter().all(|&s| s < -touch))
         || (sa.iter().all(|&s| s < -touch) && sb.iter().all(|&s| s > touch));
     if !opposite {
@@ -251,7 +256,13 @@ impl ShaftCuller {
     /// The verdict on every segment between `a` (on polygon `polygon_a`) and `b` (on `polygon_b`);
     /// the two polygons themselves are not occluders when planar (segments leave their planes at once,
     /// and the rays ignore hits in the plane of their origin).
-    pub fn classify(&self, a: &Shape, polygon_a: usize, b: &Shape, polygon_b: usize) -> ShaftVerdict {
+    pub fn classify(
+        &self,
+        a: &Shape,
+        polygon_a: usize,
+        b: &Shape,
+        polygon_b: usize,
+    ) -> ShaftVerdict {
         let Some(root) = self.tree.root() else {
             return ShaftVerdict::Clear;
         };
@@ -361,7 +372,11 @@ mod tests {
         let a = centre;
         let e1 = (u * rng.random_range(0.2..1.0) + w * rng.random_range(-0.5..0.5)) * size;
         let e2 = (w * rng.random_range(0.2..1.0) + u * rng.random_range(-0.5..0.5)) * size;
-        let (e1, e2) = if e1.cross(e2).dot(n) > 0.0 { (e1, e2) } else { (e2, e1) };
+        let (e1, e2) = if e1.cross(e2).dot(n) > 0.0 {
+            (e1, e2)
+        } else {
+            (e2, e1)
+        };
         if rng.random_bool(0.5) {
             Shape::Triangle([a, a + e1, a + e2])
         } else {
@@ -380,7 +395,11 @@ mod tests {
         let (mut clear, mut blocked, mut partial) = (0, 0, 0);
         for _ in 0..2000 {
             let a = polygon(&mut rng, DVec3::ZERO, 1.0, DVec3::Z, 0.4);
-            let top = point(&mut rng, DVec3::new(-1.0, -1.0, 1.5), DVec3::new(1.0, 1.0, 3.0));
+            let top = point(
+                &mut rng,
+                DVec3::new(-1.0, -1.0, 1.5),
+                DVec3::new(1.0, 1.0, 3.0),
+            );
             let b = polygon(&mut rng, top, 1.0, -DVec3::Z, 0.4);
             let mut shapes = vec![a, b];
             for _ in 0..rng.random_range(0..5) {
@@ -388,7 +407,11 @@ mod tests {
                 let (centre, size, up, tilt) = match kind {
                     // Small occluders in and around the space between the pair.
                     0 => (
-                        point(&mut rng, DVec3::new(-0.5, -0.5, 0.3), DVec3::new(1.0, 1.0, 1.4)),
+                        point(
+                            &mut rng,
+                            DVec3::new(-0.5, -0.5, 0.3),
+                            DVec3::new(1.0, 1.0, 1.4),
+                        ),
                         0.3,
                         DVec3::X,
                         1.0,
@@ -397,7 +420,11 @@ mod tests {
                     1 => (DVec3::ZERO, 0.0, DVec3::Z, 0.0),
                     // Boards beside them, likely outside the shaft.
                     2 => (
-                        point(&mut rng, DVec3::new(2.0, -2.0, 0.0), DVec3::new(4.0, 2.0, 3.0)),
+                        point(
+                            &mut rng,
+                            DVec3::new(2.0, -2.0, 0.0),
+                            DVec3::new(4.0, 2.0, 3.0),
+                        ),
                         1.0,
                         DVec3::Y,
                         0.5,
@@ -407,8 +434,16 @@ mod tests {
                 };
                 let mut occluder = polygon(&mut rng, centre, size, up, tilt);
                 if kind == 1 {
-                    let low = point(&mut rng, DVec3::new(-4.0, -4.0, 0.9), DVec3::new(-1.0, -1.0, 1.3));
-                    let high = point(&mut rng, DVec3::new(1.5, 1.5, 0.0), DVec3::new(4.5, 4.5, 0.0));
+                    let low = point(
+                        &mut rng,
+                        DVec3::new(-4.0, -4.0, 0.9),
+                        DVec3::new(-1.0, -1.0, 1.3),
+                    );
+                    let high = point(
+                        &mut rng,
+                        DVec3::new(1.5, 1.5, 0.0),
+                        DVec3::new(4.5, 4.5, 0.0),
+                    );
                     let slope = point(&mut rng, DVec3::splat(-0.05), DVec3::splat(0.05));
                     let at = |x: f64, y: f64| DVec3::new(x, y, low.z + slope.x * x + slope.y * y);
                     occluder = Shape::Quad([
@@ -421,8 +456,11 @@ mod tests {
                 if kind == 3 {
                     // Flatten it into the receiver's plane.
                     let (n, p) = (a.normal(), a.vertices()[0]);
-                    let v: Vec<DVec3> =
-                        occluder.vertices().iter().map(|&q| q - n * n.dot(q - p)).collect();
+                    let v: Vec<DVec3> = occluder
+                        .vertices()
+                        .iter()
+                        .map(|&q| q - n * n.dot(q - p))
+                        .collect();
                     occluder = Shape::Triangle([v[0], v[1], v[2]]);
                 }
                 shapes.push(occluder);
@@ -448,7 +486,10 @@ mod tests {
                 ShaftVerdict::Partial => partial += 1,
             }
         }
-        assert!(clear >= 100 && blocked >= 100 && partial >= 100, "{clear} {blocked} {partial}");
+        assert!(
+            clear >= 100 && blocked >= 100 && partial >= 100,
+            "{clear} {blocked} {partial}"
+        );
     }
 
     /// The shaft holds the two polygons' convex hull: points on segments between them are inside
