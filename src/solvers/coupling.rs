@@ -27,7 +27,7 @@ use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
-use crate::visibility::shaft::ShaftVerdict;
+use crate::visibility::shaft::{ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 
 /// How link couplings are computed.
@@ -78,7 +78,16 @@ pub fn couple(
     if hierarchy.is_cluster(receiver) || hierarchy.is_cluster(source) {
         return couple_cluster(hierarchy, visibility, receiver, source, settings);
     }
-    let shaft = known.or_else(|| shaft_verdict(hierarchy, visibility, receiver, source));
+    let tested = match known {
+        Some(_) => None,
+        None => shaft_test(hierarchy, visibility, receiver, source),
+    };
+    let shaft = known.or(tested.map(|t| t.verdict));
+    // A Partial shaft with few polygons in it: rays test only those.
+    let occluders = tested
+        .as_ref()
+        .and_then(ShaftTest::occluders)
+        .zip(visibility.shafts());
     let basis = &hierarchy.basis;
     let size = basis.size();
     let (r, s) = (hierarchy.element(receiver), hierarchy.element(source));
@@ -127,7 +136,16 @@ pub fn couple(
                 }
                 _ => {
                     rays += 1;
-                    visibility.transmittance(x.point, y.point)
+                    match occluders {
+                        Some((list, culler)) => {
+                            if culler.segment_occluded_among(list, x.point, y.point) {
+                                0.0
+                            } else {
+                                1.0
+                            }
+                        }
+                        None => visibility.transmittance(x.point, y.point),
+                    }
                 }
             };
             if t > 0.0 {
@@ -182,12 +200,12 @@ pub fn couple(
 }
 
 /// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one.
-pub fn shaft_verdict(
+pub fn shaft_test(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
-) -> Option<ShaftVerdict> {
+) -> Option<ShaftTest> {
     let culler = visibility.shafts()?;
     let (r, s) = (hierarchy.patch_of(receiver), hierarchy.patch_of(source));
     Some(culler.classify(

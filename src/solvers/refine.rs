@@ -6,7 +6,7 @@
 //! link sets therefore do not depend on the number of threads.
 
 use super::clustering::{cluster_can_interact, transport_bound};
-use super::coupling::{couple, shaft_verdict, visibility_error, CouplingSettings};
+use super::coupling::{couple, shaft_test, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
 use crate::hierarchy::clusters::ClusteringKind;
@@ -88,10 +88,34 @@ pub struct RefineOutcome {
 
 /// Whether two elements can exchange light at all: each has a vertex strictly in front of the other.
 pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
+    /// Largest distance between two vertices in the L¹ norm: at least the diameter, without roots.
+    fn l1_diameter(shape: &Shape) -> f64 {
+        let v = shape.vertices();
+        let mut d: f64 = 0.0;
+        for i in 0..v.len() {
+            for j in i + 1..v.len() {
+                d = d.max((v[i] - v[j]).abs().element_sum());
+            }
+        }
+        d
+    }
+    // The tolerance `1e-9 · max diameter` only matters for a vertex within it of the plane: the
+    // clear cases are decided with the L¹ bound (this test runs for every pair of patches when
+    // counting initial links, `initial_link_count`).
     fn in_front(plane: &Shape, other: &Shape) -> bool {
         let (n, p) = (plane.normal(), plane.vertices()[0]);
-        let tolerance = 1e-9 * plane.diameter().max(other.diameter());
-        other.vertices().iter().any(|v| n.dot(*v - p) > tolerance)
+        let highest = other
+            .vertices()
+            .iter()
+            .map(|v| n.dot(*v - p))
+            .fold(f64::NEG_INFINITY, f64::max);
+        if highest <= 0.0 {
+            return false;
+        }
+        if highest > 1e-9 * l1_diameter(plane).max(l1_diameter(other)) {
+            return true;
+        }
+        highest > 1e-9 * plane.diameter().max(other.diameter())
     }
     in_front(receiver, source) && in_front(source, receiver)
 }
@@ -567,7 +591,7 @@ fn decide(
     // A link about to be refined tests its shaft once, so that its children inherit a Clear or
     // Blocked verdict instead of each casting its own rays (or testing its own, smaller shaft).
     if verdict.decision != Decision::Admissible && c.shaft.is_none() && verdict.shaft.is_none() {
-        verdict.shaft = shaft_verdict(h, context.visibility, c.receiver, c.source);
+        verdict.shaft = shaft_test(h, context.visibility, c.receiver, c.source).map(|t| t.verdict);
         verdict.shaft_tests = u64::from(verdict.shaft.is_some());
     }
     verdict

@@ -14,7 +14,8 @@
 //! convexity the cross-section of the hull with the plane is the convex hull of those crossings, so
 //! every segment between the elements crosses inside too).
 
-use super::{Hit, Visibility};
+use super::brute_force::ray_polygon;
+use super::{Hit, Visibility, SEGMENT_EPSILON};
 use crate::geometry::{Aabb, DVec3, Ray, Shape};
 use crate::hierarchy::clusters::{Child, ClusterTree, ClusterTreeKind, Item};
 
@@ -256,18 +257,16 @@ impl ShaftCuller {
     /// The verdict on every segment between `a` (on polygon `polygon_a`) and `b` (on `polygon_b`);
     /// the two polygons themselves are not occluders when planar (segments leave their planes at once,
     /// and the rays ignore hits in the plane of their origin).
-    pub fn classify(
-        &self,
-        a: &Shape,
-        polygon_a: usize,
-        b: &Shape,
-        polygon_b: usize,
-    ) -> ShaftVerdict {
+    pub fn classify(&self, a: &Shape, polygon_a: usize, b: &Shape, polygon_b: usize) -> ShaftTest {
+        let mut test = ShaftTest {
+            verdict: ShaftVerdict::Clear,
+            occluders: [0; MAX_PARTIAL_OCCLUDERS],
+            count: 0,
+        };
         let Some(root) = self.tree.root() else {
-            return ShaftVerdict::Clear;
+            return test;
         };
         let shaft = Shaft::new(a, b);
-        let mut partial = 0;
         let mut stack = vec![Child::Node(root)];
         while let Some(child) = stack.pop() {
             match child {
@@ -295,21 +294,56 @@ impl ShaftCuller {
                             continue;
                         }
                         if blocks(occluder, a.vertices(), b.vertices(), shaft.touch) {
-                            return ShaftVerdict::Blocked;
+                            test.verdict = ShaftVerdict::Blocked;
+                            return test;
                         }
-                        partial += 1;
-                        if partial >= MAX_PARTIAL_OCCLUDERS {
-                            return ShaftVerdict::Partial;
+                        test.verdict = ShaftVerdict::Partial;
+                        let count = usize::from(test.count);
+                        if test.occluders[..count].last() != Some(&(i as u32)) {
+                            if count == MAX_PARTIAL_OCCLUDERS {
+                                test.count = u8::MAX;
+                                return test;
+                            }
+                            test.occluders[count] = i as u32;
+                            test.count += 1;
                         }
                     }
                 }
             }
         }
-        if partial == 0 {
-            ShaftVerdict::Clear
-        } else {
-            ShaftVerdict::Partial
+        test
+    }
+
+    /// Whether the open segment between two surface points is blocked by one of `occluders`, by the
+    /// same ray–polygon test on the same numbers as the exhaustive reference (and the BVH,
+    /// `visibility::bvh`), trimmed as [`Visibility::segment_occluded`] trims it.
+    pub fn segment_occluded_among(&self, occluders: &[u32], from: DVec3, to: DVec3) -> bool {
+        let ray = Ray::new(from, to - from);
+        occluders.iter().any(|&i| {
+            let v = self.shapes[i as usize].vertices();
+            ray_polygon(&ray, v, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON).is_some()
+        })
+    }
+}
+
+/// A shaft test's verdict and, for a Partial one, the polygons that reach into the shaft when there
+/// are few: segments between the two elements can only be blocked by them, so rays test just these
+/// instead of the whole scene (Haines–Wallace's candidate list).
+#[derive(Clone, Copy, Debug)]
+pub struct ShaftTest {
+    pub verdict: ShaftVerdict,
+    occluders: [u32; MAX_PARTIAL_OCCLUDERS],
+    /// Polygons in `occluders`; `u8::MAX` when there were more than fit.
+    count: u8,
+}
+
+impl ShaftTest {
+    /// Every polygon that can block a segment of a Partial shaft, where the list is complete.
+    pub fn occluders(&self) -> Option<&[u32]> {
+        if self.verdict != ShaftVerdict::Partial {
+            return None;
         }
+        self.occluders.get(..usize::from(self.count))
     }
 }
 
@@ -387,8 +421,9 @@ mod tests {
     /// Ground truth for the verdicts: random configurations of two facing polygons and random
     /// occluders (small and large, between them, beside them, and in the receiver's plane), with the
     /// brute-force ray test on random segments between the two. A Clear verdict must never see a
-    /// blocked segment, a Blocked one never an open one; both verdicts must occur often enough for the
-    /// test to mean something.
+    /// blocked segment, a Blocked one never an open one, and the occluder list of a Partial one must
+    /// block exactly the segments that the whole scene blocks; every verdict must occur often enough
+    /// for the test to mean something.
     #[test]
     fn verdicts_hold_for_every_segment() {
         let mut rng = Pcg64Mcg::seed_from_u64(7);
@@ -465,16 +500,21 @@ mod tests {
                 }
                 shapes.push(occluder);
             }
-            let verdict = ShaftCuller::new(&shapes).classify(&a, 0, &b, 1);
+            let culler = ShaftCuller::new(&shapes);
+            let test = culler.classify(&a, 0, &b, 1);
             let rays = BruteForce::new(shapes.clone());
             let open = (0..200)
                 .filter(|_| {
                     let x = a.sample_uniform(DVec2::new(rng.random(), rng.random()));
                     let y = b.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    !rays.segment_occluded(x, y)
+                    let blocked = rays.segment_occluded(x, y);
+                    if let Some(list) = test.occluders() {
+                        assert_eq!(culler.segment_occluded_among(list, x, y), blocked);
+                    }
+                    !blocked
                 })
                 .count();
-            match verdict {
+            match test.verdict {
                 ShaftVerdict::Clear => {
                     clear += 1;
                     assert_eq!(open, 200, "Clear verdict with blocked segments: {shapes:?}");
