@@ -23,6 +23,7 @@ use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
 use crate::visibility::item_buffer::{IntraClusterKind, ItemBuffers};
 use crate::visibility::multires::Multires;
+use crate::visibility::shaft::{ShaftCulled, ShaftCuller, VisibilityReuse};
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::sync::Arc;
 use std::time::Instant;
@@ -131,6 +132,9 @@ pub struct SimulationSettings {
     pub oracle: OracleKind,
     pub solver: SolverKind,
     pub visibility: VisibilityKind,
+    /// Shaft tests in link couplings, their verdicts inherited by refined links (exact visibility
+    /// back ends only; extinction and multires transmittances are not a matter of polygons alone).
+    pub visibility_reuse: VisibilityReuse,
     /// Cluster transfer model; `None` links every pair of patches at the start.
     pub clustering: ClusteringKind,
     /// How the cluster tree is built (clustering and extinction visibility).
@@ -214,6 +218,7 @@ impl Default for SimulationSettings {
             oracle: OracleKind::Power,
             solver: SolverKind::GaussSeidel,
             visibility: VisibilityKind::Bvh,
+            visibility_reuse: VisibilityReuse::Shaft,
             clustering: ClusteringKind::None,
             cluster_tree: ClusterTreeKind::Grid,
             feature_size: 0.0,
@@ -277,20 +282,33 @@ pub fn build_visibility_with(
     })
 }
 
-/// The visibility structure `settings` names, with its cluster tree and (multires) feature size.
+/// The visibility structure `settings` names, with its cluster tree and (multires) feature size, and
+/// shaft culling over the same polygons where `--visibility-reuse shaft` applies.
 pub fn build_visibility_for(
     scene: &Scene,
     settings: &SimulationSettings,
 ) -> anyhow::Result<Box<dyn Visibility>> {
-    if settings.visibility == VisibilityKind::Multires {
-        let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
-        return Ok(Box::new(Multires::new(
-            &shapes,
-            settings.cluster_tree,
-            settings.feature_size,
-        )));
-    }
-    build_visibility_with(scene, settings.visibility, settings.cluster_tree)
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    let rays = match settings.visibility {
+        VisibilityKind::Multires => {
+            return Ok(Box::new(Multires::new(
+                &shapes,
+                settings.cluster_tree,
+                settings.feature_size,
+            )))
+        }
+        VisibilityKind::Extinction => {
+            return build_visibility_with(scene, settings.visibility, settings.cluster_tree)
+        }
+        exact => build_visibility_with(scene, exact, settings.cluster_tree)?,
+    };
+    Ok(match settings.visibility_reuse {
+        VisibilityReuse::None => rays,
+        VisibilityReuse::Shaft => Box::new(ShaftCulled {
+            rays,
+            culler: ShaftCuller::new(&shapes),
+        }),
+    })
 }
 
 /// The oracle named in `settings` for refining `hierarchy` (eq. (2) takes its reference area from it).

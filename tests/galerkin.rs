@@ -59,11 +59,12 @@ fn solve_receiver(scene: &Scene, kind: BasisKind, level: u16, vis: &dyn Visibili
     let mut leaves = Vec::new();
     h.collect_leaves(h.patches[0].root, &mut leaves);
     for leaf in leaves {
-        let k = couple(&h, vis, leaf, emitter, &settings);
+        let k = couple(&h, vis, leaf, emitter, &settings, None);
         h.elements[leaf as usize].links.push(Link {
             source: emitter,
             coupling: k.coupling,
             oracle_factor: None,
+            shaft: k.shaft,
         });
     }
     for _ in 0..3 {

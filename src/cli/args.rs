@@ -11,6 +11,7 @@ use crate::scene::{self, LoadOptions, Scene};
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::multigrid::MultigridSettings;
 use crate::visibility::item_buffer::IntraClusterKind;
+use crate::visibility::shaft::VisibilityReuse;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -188,6 +189,11 @@ pub struct SolveArgs {
     /// Visibility: exact ray casting (bvh, alias exact), extinction through clusters, or multires.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
     pub visibility: VisibilityKind,
+    /// Visibility reuse in link couplings: a shaft test per link (Haines–Wallace shaft culling), whose
+    /// clear or blocked verdict its sub-links inherit without rays; none casts a ray per node pair.
+    /// Exact visibility only (bvh, embree, brute-force).
+    #[arg(long, value_enum, default_value_t = VisibilityReuse::Shaft)]
+    pub visibility_reuse: VisibilityReuse,
     /// Multires visibility: smallest shadow feature (world units on the receiver) computed exactly;
     /// 0 is exact visibility, inf extinction.
     #[arg(long, value_name = "S")]
@@ -277,6 +283,7 @@ impl SolveArgs {
             }),
             solver: self.solver,
             visibility: self.visibility,
+            visibility_reuse: self.visibility_reuse,
             clustering: self.clustering,
             cluster_tree: self.cluster_tree,
             feature_size,

@@ -202,13 +202,15 @@ impl RenderCommand {
         if !progress.quiet {
             let s = &stats.seconds;
             crate::progress::stderr_line(format_args!(
-                "{name}: {}; {} elements ({} leaves), {} links, {} rays, {} passes, {} sweeps; \
+                "{name}: {}; {} elements ({} leaves), {} links, {} rays ({} saved by shaft tests), \
+                 {} passes, {} sweeps; \
                  load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
                 error_summary(&solution.report.error, self.units),
                 stats.elements,
                 stats.leaf_elements,
                 stats.links,
                 stats.rays,
+                stats.rays_saved,
                 stats.passes,
                 stats.iterations,
                 s.load,

@@ -49,6 +49,9 @@ pub struct Link {
     /// ρ_i B_j), kept so that re-refinement after a solve needs no new kernel samples; `None` when the
     /// source was dark when the link was judged (or for the link error oracle, which reads `coupling`).
     pub oracle_factor: Option<f64>,
+    /// The shaft test's verdict on this link (`None`: not tested), which the links of its sub-elements
+    /// inherit when Clear or Blocked ([`crate::visibility::shaft`]).
+    pub shaft: Option<crate::visibility::shaft::ShaftVerdict>,
 }
 
 impl Link {

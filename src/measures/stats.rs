@@ -45,6 +45,9 @@ pub struct RunStats {
     /// All rays cast by the solver: form factors, oracle evaluations and Monte Carlo shooting lines.
     pub rays: u64,
     pub form_factor_rays: u64,
+    /// Shaft tests and the coupling rays they saved (`--visibility-reuse shaft`).
+    pub shaft_tests: u64,
+    pub rays_saved: u64,
     pub oracle_rays: u64,
     pub shooting_rays: u64,
     pub iterations: usize,
@@ -91,6 +94,8 @@ impl RunStats {
             links: h.link_count(),
             rays: r.form_factor_rays + r.oracle_rays + r.shooting_rays,
             form_factor_rays: r.form_factor_rays,
+            shaft_tests: r.shaft_tests,
+            rays_saved: r.rays_saved,
             oracle_rays: r.oracle_rays,
             shooting_rays: r.shooting_rays,
             iterations: r.iterations,

@@ -44,6 +44,7 @@ impl RefinementOracle for LinkErrorOracle {
             receiver,
             source,
             &self.coupling,
+            None,
         );
         let judgement = self
             .link_error(context, receiver, source, &k.coupling)

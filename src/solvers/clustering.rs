@@ -383,6 +383,8 @@ pub fn couple_cluster(
         unoccluded,
         source_nodes: CLUSTER_VISIBILITY_SAMPLES,
         rays,
+        shaft: None,
+        rays_saved: 0,
     }
 }
 
@@ -423,6 +425,8 @@ fn near_coupling(
         unoccluded: 0.0,
         source_nodes: CLUSTER_VISIBILITY_SAMPLES,
         rays: 0,
+        shaft: None,
+        rays_saved: 0,
     }
 }
 

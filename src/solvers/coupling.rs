@@ -16,11 +16,18 @@
 //! triangles and parallelograms, so the solve of step 4a is a division by `A_i` (on other convex quads
 //! the bilinear map's varying Jacobian makes `O` only approximately diagonal; we neglect that, as the
 //! error is second order in the quad's departure from a parallelogram).
+//!
+//! Visibility reuse: where the visibility back end offers shaft tests ([`Visibility::shafts`]), a
+//! surface link whose shaft is Clear takes transmittance 1 at every node pair and a Blocked one 0,
+//! without rays; the verdict is the one inherited from the parent link, or this link's own test. With
+//! exact ray casting the conservative verdicts are what the rays would find, so the coupling is the same
+//! to the bit ([`crate::visibility::shaft`]).
 
 use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
+use crate::visibility::shaft::{ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 
 /// How link couplings are computed.
@@ -51,9 +58,14 @@ pub struct Coupling {
     /// Nodes of the source rule (visibility samples per receiver node).
     pub source_nodes: usize,
     pub rays: u64,
+    /// The shaft verdict the coupling used (`None`: no shaft test, every pair cast a ray).
+    pub shaft: Option<ShaftVerdict>,
+    /// Rays a Clear or Blocked shaft made unnecessary.
+    pub rays_saved: u64,
 }
 
-/// Algorithm 4.1 for the link `source` → `receiver`; links with a cluster at either end are coupled by
+/// Algorithm 4.1 for the link `source` → `receiver`, with the shaft verdict `known` inherited from the
+/// parent link (or found earlier), if any; links with a cluster at either end are coupled by
 /// [`couple_cluster`].
 pub fn couple(
     hierarchy: &Hierarchy,
@@ -61,10 +73,21 @@ pub fn couple(
     receiver: ElementId,
     source: ElementId,
     settings: &CouplingSettings,
+    known: Option<ShaftVerdict>,
 ) -> Coupling {
     if hierarchy.is_cluster(receiver) || hierarchy.is_cluster(source) {
         return couple_cluster(hierarchy, visibility, receiver, source, settings);
     }
+    let tested = match known {
+        Some(_) => None,
+        None => shaft_test(hierarchy, visibility, receiver, source),
+    };
+    let shaft = known.or(tested.map(|t| t.verdict));
+    // A Partial shaft with few polygons in it: rays test only those.
+    let occluders = tested
+        .as_ref()
+        .and_then(ShaftTest::occluders)
+        .zip(visibility.shafts());
     let basis = &hierarchy.basis;
     let size = basis.size();
     let (r, s) = (hierarchy.element(receiver), hierarchy.element(source));
@@ -86,7 +109,7 @@ pub fn couple(
     let n = x_nodes.len();
     // Step 2: K_{j,β}(x_k), without ρ_i.
     let mut inner = vec![0.0; n * size];
-    let (mut unoccluded, mut rays) = (0.0, 0u64);
+    let (mut unoccluded, mut rays, mut rays_saved) = (0.0, 0u64, 0u64);
     for (k, x) in x_nodes.iter().enumerate() {
         let exact = point_to_polygon(x.point, n_r, s_shape);
         if exact <= 0.0 {
@@ -102,8 +125,29 @@ pub fn couple(
                 continue;
             }
             open_sum += g;
-            rays += 1;
-            let t = visibility.transmittance(x.point, y.point);
+            let t = match shaft {
+                Some(ShaftVerdict::Clear) => {
+                    rays_saved += 1;
+                    1.0
+                }
+                Some(ShaftVerdict::Blocked) => {
+                    rays_saved += 1;
+                    0.0
+                }
+                _ => {
+                    rays += 1;
+                    match occluders {
+                        Some((list, culler)) => {
+                            if culler.segment_occluded_among(list, x.point, y.point) {
+                                0.0
+                            } else {
+                                1.0
+                            }
+                        }
+                        None => visibility.transmittance(x.point, y.point),
+                    }
+                }
+            };
             if t > 0.0 {
                 for (beta, value) in row.iter_mut().enumerate() {
                     *value += g * t * phi_y[l * size + beta];
@@ -150,7 +194,26 @@ pub fn couple(
         unoccluded: unoccluded / r.area,
         source_nodes: y_nodes.len(),
         rays,
+        shaft,
+        rays_saved,
     }
+}
+
+/// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one.
+pub fn shaft_test(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+) -> Option<ShaftTest> {
+    let culler = visibility.shafts()?;
+    let (r, s) = (hierarchy.patch_of(receiver), hierarchy.patch_of(source));
+    Some(culler.classify(
+        hierarchy.element(receiver).shape(),
+        r.polygon,
+        hierarchy.element(source).shape(),
+        s.polygon,
+    ))
 }
 
 /// `v`: the visible part of a link's transfer over its unoccluded part (1 when nothing can arrive).

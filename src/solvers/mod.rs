@@ -90,6 +90,10 @@ pub struct SolveReport {
     pub iterations: usize,
     pub oracle_rays: u64,
     pub form_factor_rays: u64,
+    /// Shaft tests of surface links and the coupling rays their Clear or Blocked verdicts made
+    /// unnecessary (`--visibility-reuse shaft`).
+    pub shaft_tests: u64,
+    pub rays_saved: u64,
     /// Power-carrying lines of Monte Carlo radiosity ([`stochastic`]).
     pub shooting_rays: u64,
     pub emitted_power: Rgb,
@@ -267,6 +271,8 @@ fn refine_pass(
     report.refine_seconds += start.elapsed().as_secs_f64();
     report.oracle_rays += outcome.oracle_rays;
     report.form_factor_rays += outcome.form_factor_rays + direct.rays;
+    report.shaft_tests += outcome.shaft_tests;
+    report.rays_saved += outcome.rays_saved;
     report.refused_by_budget += outcome.refused_by_budget + direct.refused_by_budget;
     (outcome, direct)
 }

@@ -6,12 +6,13 @@
 //! link sets therefore do not depend on the number of threads.
 
 use super::clustering::{cluster_can_interact, transport_bound};
-use super::coupling::{couple, visibility_error, CouplingSettings};
+use super::coupling::{couple, shaft_test, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
+use crate::visibility::shaft::ShaftVerdict;
 use crate::visibility::Visibility;
 use rayon::prelude::*;
 
@@ -27,16 +28,25 @@ pub struct Candidate {
     /// sub-elements whose own node pairs all agree (all open or all blocked) may have sampled a
     /// partial occlusion too coarsely, so it keeps the parent's visibility error (one generation).
     pub inherited_visibility: Option<f32>,
+    /// The shaft verdict on this link: its own test's, or a Clear or Blocked one inherited from the
+    /// link it was refined from (whose shaft holds this one's).
+    pub shaft: Option<ShaftVerdict>,
 }
 
 impl Candidate {
-    fn new(receiver: ElementId, source: ElementId, inherited_visibility: Option<f32>) -> Self {
+    fn new(
+        receiver: ElementId,
+        source: ElementId,
+        inherited_visibility: Option<f32>,
+        shaft: Option<ShaftVerdict>,
+    ) -> Self {
         Candidate {
             receiver,
             source,
             coupling: None,
             oracle_factor: None,
             inherited_visibility,
+            shaft,
         }
     }
 }
@@ -70,14 +80,42 @@ pub struct RefineOutcome {
     pub form_factor_rays: u64,
     /// Splits refused because the element budget was reached.
     pub refused_by_budget: usize,
+    /// Shaft tests of surface links (`--visibility-reuse shaft`).
+    pub shaft_tests: u64,
+    /// Coupling rays that Clear or Blocked shafts made unnecessary.
+    pub rays_saved: u64,
 }
 
 /// Whether two elements can exchange light at all: each has a vertex strictly in front of the other.
 pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
+    /// Largest distance between two vertices in the L¹ norm: at least the diameter, without roots.
+    fn l1_diameter(shape: &Shape) -> f64 {
+        let v = shape.vertices();
+        let mut d: f64 = 0.0;
+        for i in 0..v.len() {
+            for j in i + 1..v.len() {
+                d = d.max((v[i] - v[j]).abs().element_sum());
+            }
+        }
+        d
+    }
+    // The tolerance `1e-9 · max diameter` only matters for a vertex within it of the plane: the
+    // clear cases are decided with the L¹ bound (this test runs for every pair of patches when
+    // counting initial links, `initial_link_count`).
     fn in_front(plane: &Shape, other: &Shape) -> bool {
         let (n, p) = (plane.normal(), plane.vertices()[0]);
-        let tolerance = 1e-9 * plane.diameter().max(other.diameter());
-        other.vertices().iter().any(|v| n.dot(*v - p) > tolerance)
+        let highest = other
+            .vertices()
+            .iter()
+            .map(|v| n.dot(*v - p))
+            .fold(f64::NEG_INFINITY, f64::max);
+        if highest <= 0.0 {
+            return false;
+        }
+        if highest > 1e-9 * l1_diameter(plane).max(l1_diameter(other)) {
+            return true;
+        }
+        highest > 1e-9 * plane.diameter().max(other.diameter())
     }
     in_front(receiver, source) && in_front(source, receiver)
 }
@@ -88,7 +126,7 @@ pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
 /// reflect nothing and sources that can never radiate are skipped.
 pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
     if let Some(root) = hierarchy.root_cluster {
-        return vec![Candidate::new(root, root, None)];
+        return vec![Candidate::new(root, root, None, None)];
     }
     let patches = &hierarchy.patches;
     (0..patches.len())
@@ -96,7 +134,7 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
         .flat_map_iter(|i| {
             (0..patches.len())
                 .filter(move |&j| initially_linked(hierarchy, i, j))
-                .map(move |j| Candidate::new(patches[i].root, patches[j].root, None))
+                .map(move |j| Candidate::new(patches[i].root, patches[j].root, None, None))
         })
         .collect()
 }
@@ -168,6 +206,7 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
                 coupling: Some(link.coupling),
                 oracle_factor: link.oracle_factor,
                 inherited_visibility: None,
+                shaft: link.shaft,
             });
         }
     }
@@ -282,6 +321,8 @@ pub fn refine_scheduled(
         for (k, (c, verdict)) in candidates.into_iter().zip(decisions).enumerate() {
             outcome.oracle_rays += verdict.rays;
             outcome.form_factor_rays += verdict.coupling_rays;
+            outcome.shaft_tests += verdict.shaft_tests;
+            outcome.rays_saved += verdict.rays_saved;
             let mut decision = verdict.decision;
             let splits_surface = match decision {
                 Decision::Admissible => false,
@@ -303,11 +344,14 @@ pub fn refine_scheduled(
                 .or(c.coupling.as_ref())
                 .map(|k| k.visibility)
                 .filter(|v| *v > 0.0 && *v < 1.0);
+            let shaft = verdict.shaft.or(c.shaft);
+            let inherited = shaft.and_then(ShaftVerdict::inherited);
             match decision {
                 Decision::Admissible if verdict.no_interaction => {}
                 Decision::Admissible => admissible.push(Candidate {
                     oracle_factor: verdict.oracle_factor,
                     coupling: verdict.coupling.or(c.coupling),
+                    shaft,
                     ..c
                 }),
                 Decision::SubdivideReceiver if c.receiver == c.source => {
@@ -317,7 +361,7 @@ pub fn refine_scheduled(
                     for &a in &children {
                         for &b in &children {
                             if a != b || hierarchy.is_cluster(a) {
-                                push_if_interacting(hierarchy, &mut next, a, b, None);
+                                push_if_interacting(hierarchy, &mut next, a, b, None, None);
                             }
                         }
                     }
@@ -328,7 +372,9 @@ pub fn refine_scheduled(
                         outcome.subdivisions += 1;
                     }
                     for child in hierarchy.split(c.receiver) {
-                        push_if_interacting(hierarchy, &mut next, child, c.source, partial);
+                        push_if_interacting(
+                            hierarchy, &mut next, child, c.source, partial, inherited,
+                        );
                     }
                 }
                 Decision::SubdivideSource => {
@@ -337,7 +383,9 @@ pub fn refine_scheduled(
                         outcome.subdivisions += 1;
                     }
                     for child in hierarchy.split(c.source) {
-                        push_if_interacting(hierarchy, &mut next, c.receiver, child, partial);
+                        push_if_interacting(
+                            hierarchy, &mut next, c.receiver, child, partial, inherited,
+                        );
                     }
                 }
             }
@@ -345,7 +393,7 @@ pub fn refine_scheduled(
         candidates = next;
     }
     let h = &*hierarchy;
-    let computed: Vec<(Option<(ElementId, Link)>, u64)> = admissible
+    let computed: Vec<(Option<(ElementId, Link)>, Coupled)> = admissible
         .into_par_iter()
         .map(|c| match c.coupling {
             Some(coupling) => (
@@ -355,12 +403,25 @@ pub fn refine_scheduled(
                         source: c.source,
                         coupling,
                         oracle_factor: c.oracle_factor,
+                        shaft: c.shaft,
                     },
                 )),
-                0,
+                Coupled::default(),
             ),
             None => {
-                let k = couple(h, visibility, c.receiver, c.source, &settings.coupling);
+                let k = couple(
+                    h,
+                    visibility,
+                    c.receiver,
+                    c.source,
+                    &settings.coupling,
+                    c.shaft,
+                );
+                let cost = Coupled {
+                    rays: k.rays,
+                    shaft_tests: u64::from(c.shaft.is_none() && k.shaft.is_some()),
+                    rays_saved: k.rays_saved,
+                };
                 // A cluster link that carries nothing now is kept all the same: its centre-to-centre
                 // cosines can be zero while parts of its ends face each other (`solvers::clustering`),
                 // and only a kept link is judged again, and split, in the next pass. Dropping them
@@ -370,18 +431,29 @@ pub fn refine_scheduled(
                     source: c.source,
                     coupling: k.coupling,
                     oracle_factor: c.oracle_factor,
+                    shaft: k.shaft,
                 });
-                (link.map(|l| (c.receiver, l)), k.rays)
+                (link.map(|l| (c.receiver, l)), cost)
             }
         })
         .collect();
-    for (link, rays) in computed {
-        outcome.form_factor_rays += rays;
+    for (link, cost) in computed {
+        outcome.form_factor_rays += cost.rays;
+        outcome.shaft_tests += cost.shaft_tests;
+        outcome.rays_saved += cost.rays_saved;
         if let Some((receiver, link)) = link {
             hierarchy.elements[receiver as usize].links.push(link);
         }
     }
     outcome
+}
+
+/// What one coupling cost: rays cast, shaft tests run, rays saved by their verdicts.
+#[derive(Clone, Copy, Debug, Default)]
+struct Coupled {
+    rays: u64,
+    shaft_tests: u64,
+    rays_saved: u64,
 }
 
 fn push_if_interacting(
@@ -390,6 +462,7 @@ fn push_if_interacting(
     receiver: ElementId,
     source: ElementId,
     inherited_visibility: Option<f32>,
+    shaft: Option<ShaftVerdict>,
 ) {
     let (reflectance, _) = h.optics_of(receiver);
     let (source_reflectance, source_emission) = h.optics_of(source);
@@ -404,7 +477,12 @@ fn push_if_interacting(
         can_interact(h.element(receiver).shape(), h.element(source).shape())
     };
     if interacting {
-        out.push(Candidate::new(receiver, source, inherited_visibility));
+        out.push(Candidate::new(
+            receiver,
+            source,
+            inherited_visibility,
+            shaft,
+        ));
     }
 }
 
@@ -420,6 +498,11 @@ struct Verdict {
     coupling_rays: u64,
     /// The elements cannot exchange light at all (drop the link).
     no_interaction: bool,
+    /// The shaft verdict found while judging (a coupling's, or the test of a link to be refined, which
+    /// its children inherit when Clear or Blocked).
+    shaft: Option<ShaftVerdict>,
+    shaft_tests: u64,
+    rays_saved: u64,
     /// The error estimate compared with the threshold (for a [`RefinementSchedule`]).
     error: f64,
 }
@@ -433,6 +516,9 @@ impl Verdict {
             coupling: None,
             coupling_rays: 0,
             no_interaction: false,
+            shaft: None,
+            shaft_tests: 0,
+            rays_saved: 0,
             error: 0.0,
         }
     }
@@ -472,7 +558,11 @@ fn decide(
                 c.receiver,
                 c.source,
                 &settings.coupling,
+                c.shaft,
             );
+            verdict.shaft = k.shaft;
+            verdict.shaft_tests = u64::from(c.shaft.is_none() && k.shaft.is_some());
+            verdict.rays_saved = k.rays_saved;
             if let Some(v) = c.inherited_visibility {
                 if k.coupling.visibility == 0.0 || k.coupling.visibility == 1.0 {
                     k.coupling.visibility_error =
@@ -525,6 +615,12 @@ fn decide(
             other => other,
         },
     };
+    // A link about to be refined tests its shaft once, so that its children inherit a Clear or
+    // Blocked verdict instead of each casting its own rays (or testing its own, smaller shaft).
+    if verdict.decision != Decision::Admissible && c.shaft.is_none() && verdict.shaft.is_none() {
+        verdict.shaft = shaft_test(h, context.visibility, c.receiver, c.source).map(|t| t.verdict);
+        verdict.shaft_tests = u64::from(verdict.shaft.is_some());
+    }
     verdict
 }
 

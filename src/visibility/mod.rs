@@ -11,6 +11,7 @@ pub mod embree;
 pub mod extinction;
 pub mod item_buffer;
 pub mod multires;
+pub mod shaft;
 
 use crate::geometry::{DVec2, DVec3, Ray};
 
@@ -62,6 +63,12 @@ pub trait Visibility: Sync + Send {
 
     /// Bytes of the acceleration structure, where the back end knows them (for benchmarks).
     fn memory_bytes(&self) -> Option<usize> {
+        None
+    }
+
+    /// Shaft tests over the same polygons, where the back end casts exact rays and the solve asked for
+    /// visibility reuse (`--visibility-reuse shaft`, [`shaft::ShaftCulled`]).
+    fn shafts(&self) -> Option<&shaft::ShaftCuller> {
         None
     }
 }
