@@ -220,3 +220,35 @@ fn clustered_solution_is_identical_for_any_thread_count() {
         assert_eq!(a.radiance, b.radiance);
     }
 }
+
+/// `--clustering auto` estimates the unclustered initial links from a sample of patch rows and counts
+/// exactly only near the budget: its choice must be the one the exact count gives, for budgets from far
+/// below to far above the count (a generated hall of 3k polygons, 6k patches).
+#[test]
+fn automatic_clustering_agrees_with_the_exact_count() {
+    use radiosity::scene::generators::BoxHall;
+    use radiosity::solvers::refine::{automatic_clustering, initial_link_count};
+    let scene = BoxHall::with_polygons(3000).scene();
+    let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
+    let total = initial_link_count(&h, usize::MAX);
+    assert!(total > 0);
+    for budget in [
+        total / 10,
+        total / 3,
+        total - 1,
+        total,
+        total * 3,
+        total * 10,
+    ] {
+        let exact = if total > budget {
+            ClusteringKind::Oriented
+        } else {
+            ClusteringKind::None
+        };
+        assert_eq!(
+            automatic_clustering(&h, budget),
+            exact,
+            "budget {budget}, count {total}"
+        );
+    }
+}
