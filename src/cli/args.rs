@@ -40,8 +40,10 @@ pub struct SceneArgs {
     pub luminaire: Vec<scene::luminaire::Placement>,
     /// Split surfaces along the outlines of objects that touch or nearly touch them (a lamp under a
     /// ceiling, blocks on a floor), so that no element straddles a contact and light cannot leak
-    /// through it.
-    #[arg(long, value_enum, default_value_t = Switch::On, value_name = "on|off")]
+    /// through it. Off by default: on real rooms it multiplies the polygons (classroom 5.8k → 15k,
+    /// office2 430 → 889) and the unclustered solve's time (BENCHMARKS.md, "Splitting surfaces along
+    /// contacts"); turn it on for lamps hung just under a ceiling, as in cube.mgf.
+    #[arg(long, value_enum, default_value_t = Switch::Off, value_name = "on|off")]
     pub split_contacts: Switch,
     /// Largest gap that still counts as a contact, relative to the smaller polygon's diameter.
     #[arg(long, default_value_t = scene::contacts::DEFAULT_CONTACT_GAP, value_name = "G",
