@@ -12,7 +12,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 mod common;
-use common::{furnace_with_cubes, mean_radiance_of, quiet};
+use common::{furnace_with_cubes, mean_radiance_of, quiet, with_threads};
 
 /// `n` equilateral triangles of side `side`, centres uniform in the unit cube, uniformly random
 /// orientations (independent placements: a Boolean model).
@@ -207,11 +207,9 @@ fn clustered_solution_is_identical_for_any_thread_count() {
         ..Default::default()
     };
     let run = |threads| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| simulate(&scene, &settings, &quiet()).expect("solve"))
+        with_threads(threads, || {
+            simulate(&scene, &settings, &quiet()).expect("solve")
+        })
     };
     let (one, two) = (run(1), run(3));
     assert_eq!(one.hierarchy.elements.len(), two.hierarchy.elements.len());

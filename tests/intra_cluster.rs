@@ -12,6 +12,7 @@ use radiosity::scene::{generators, Material, Polygon, Scene};
 use radiosity::visibility::item_buffer::IntraClusterKind;
 use std::f64::consts::SQRT_2;
 
+#[allow(dead_code)] // each test file uses part of the shared module
 mod common;
 use common::{furnace_with_cubes, mean_radiance_of, quiet};
 

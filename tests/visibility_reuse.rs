@@ -12,7 +12,7 @@ use radiosity::visibility::shaft::VisibilityReuse;
 // Shared with the clustering tests, which use more of it.
 #[allow(dead_code)]
 mod common;
-use common::{furnace_with_cubes, quiet};
+use common::{furnace_with_cubes, quiet, with_threads};
 
 fn solve(scene: &Scene, settings: &SimulationSettings, reuse: VisibilityReuse) -> Solution {
     let settings = SimulationSettings {
@@ -83,13 +83,7 @@ fn shaft_solution_is_identical_for_any_thread_count() {
         eps: 3e-4,
         ..Default::default()
     };
-    let run = |threads| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| solve(&scene, &settings, VisibilityReuse::Shaft))
-    };
+    let run = |threads| with_threads(threads, || solve(&scene, &settings, VisibilityReuse::Shaft));
     let (one, three) = (run(1), run(3));
     assert_identical(&one, &three);
     assert_eq!(one.report.rays_saved, three.report.rays_saved);

@@ -9,6 +9,15 @@ pub fn quiet() -> Progress {
     Progress::new(true)
 }
 
+/// Runs `work` on a pool of `threads` threads (results must not depend on the count).
+pub fn with_threads<T: Send>(threads: usize, work: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("thread pool")
+        .install(work)
+}
+
 /// A closed furnace (all surfaces reflect ρ and emit E) holding a grid of small cubes.
 pub fn furnace_with_cubes(per_axis: usize, rho: f64, e: f64) -> Scene {
     let size = DVec3::new(2.0, 1.5, 1.8);
