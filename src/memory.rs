@@ -8,7 +8,7 @@
 
 use crate::bases::BasisKind;
 use crate::geometry::{cubature, Domain};
-use crate::hierarchy::{allocated_bytes, Element, Hierarchy, Link, Patch};
+use crate::hierarchy::{allocated_bytes, Element, ErrorStorage, Hierarchy, Link, Patch};
 use crate::scene::{Polygon, Scene};
 use crate::solvers::refine::Candidate;
 use crate::visibility::Visibility;
@@ -93,9 +93,14 @@ impl MemoryBudget {
     }
 
     /// Most links refinement may create, at [`link_peak_bytes`] each.
-    pub fn max_links(&self, basis: BasisKind, cubature_degree: usize) -> usize {
+    pub fn max_links(
+        &self,
+        basis: BasisKind,
+        cubature_degree: usize,
+        storage: ErrorStorage,
+    ) -> usize {
         let links = self.refinement() - self.refinement() / ELEMENT_SHARE;
-        links / link_peak_bytes(basis, cubature_degree)
+        links / link_peak_bytes(basis, cubature_degree, storage)
     }
 
     /// Most elements refinement may create, at [`element_bytes`] each.
@@ -107,17 +112,18 @@ impl MemoryBudget {
 /// Bytes one stored link holds: the `Link` itself and its coupling's single heap block
 /// ([`crate::hierarchy::LinkCoupling`]) with the allocator's rounding, for the largest receiver rule
 /// (the square's).
-pub fn link_bytes(basis: BasisKind, cubature_degree: usize) -> usize {
+pub fn link_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorage) -> usize {
     let size = basis.size();
     let nodes = cubature::rule(Domain::Square, cubature_degree).nodes.len();
-    std::mem::size_of::<Link>() + allocated_bytes(4 * (size * size + nodes * (size + 1)))
+    std::mem::size_of::<Link>()
+        + allocated_bytes(4 * (size * size + storage.values_after_block(size, nodes)))
 }
 
 /// A link's peak cost: [`link_bytes`], one more `Link` for the growth slack of its receiver's list
 /// (which doubles), and while a refinement pass runs, the link as a candidate, its verdict (about a
 /// candidate's size) and its coupled copy on the way to its receiver.
-pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize) -> usize {
-    link_bytes(basis, cubature_degree)
+pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorage) -> usize {
+    link_bytes(basis, cubature_degree, storage)
         + std::mem::size_of::<Link>()
         + 2 * std::mem::size_of::<Candidate>()
         + std::mem::size_of::<Link>()
@@ -158,7 +164,7 @@ mod tests {
             + allocated_bytes(8 * size * size)
             + allocated_bytes(4 * nodes * size)
             + allocated_bytes(4 * nodes);
-        assert!(link_bytes(BasisKind::Linear, 2) < before);
+        assert!(link_bytes(BasisKind::Linear, 2, ErrorStorage::Full) < before);
     }
 
     #[test]
@@ -174,7 +180,8 @@ mod tests {
             (budget.total - (budget.fixed - budget.item_buffer_cache)) / ITEM_BUFFER_SHARE
         );
         assert!(
-            budget.max_links(BasisKind::Linear, 2) * link_peak_bytes(BasisKind::Linear, 2)
+            budget.max_links(BasisKind::Linear, 2, ErrorStorage::Full)
+                * link_peak_bytes(BasisKind::Linear, 2, ErrorStorage::Full)
                 + budget.max_elements(BasisKind::Linear) * element_bytes(BasisKind::Linear)
                 <= budget.refinement()
         );

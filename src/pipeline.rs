@@ -5,7 +5,7 @@
 
 use crate::bases::BasisKind;
 use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
-use crate::hierarchy::Hierarchy;
+use crate::hierarchy::{ErrorStorage, Hierarchy};
 use crate::memory::MemoryBudget;
 use crate::oracles::link_error::LinkErrorOracle;
 use crate::oracles::mutual_information::MutualInformationOracle;
@@ -152,6 +152,8 @@ pub struct SimulationSettings {
     pub basis: BasisKind,
     /// Degree of the cubature rules for couplings; `None`: the basis's default (§4.3).
     pub cubature_degree: Option<usize>,
+    /// How links store their error coefficients (Bekaert–Willems §4.3).
+    pub error_storage: ErrorStorage,
     /// Error control's target (with the link error oracle).
     pub accuracy: Accuracy,
     /// Algorithm 6.1's threshold factor.
@@ -227,6 +229,7 @@ impl Default for SimulationSettings {
             min_area: 1e-5,
             basis: BasisKind::Constant,
             cubature_degree: None,
+            error_storage: ErrorStorage::Full,
             accuracy: Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY),
             threshold_factor: 1.4,
             estimate: EstimateKind::Realistic,
@@ -325,6 +328,7 @@ pub fn make_oracle(
             coupling: CouplingSettings {
                 cubature_degree: settings.cubature_degree(),
                 seed: settings.seed,
+                error_storage: settings.error_storage,
             },
         }),
     }
@@ -354,10 +358,15 @@ pub fn deterministic_settings(
             max_elements: settings
                 .max_elements
                 .min(hierarchy.elements.len() + budget.max_elements(settings.basis)),
-            max_links: budget.max_links(settings.basis, settings.cubature_degree()),
+            max_links: budget.max_links(
+                settings.basis,
+                settings.cubature_degree(),
+                settings.error_storage,
+            ),
             coupling: CouplingSettings {
                 cubature_degree: settings.cubature_degree(),
                 seed: settings.seed,
+                error_storage: settings.error_storage,
             },
             seed: settings.seed,
         },

@@ -52,7 +52,7 @@ fn a_small_budget_stops_refinement_with_a_valid_solution_within_it() {
     let links = free.hierarchy.link_count();
     // Room for about a quarter of those links once the item-buffer cache has taken its share.
     let s = settings(0);
-    let peak = link_peak_bytes(s.basis, s.cubature_degree());
+    let peak = link_peak_bytes(s.basis, s.cubature_degree(), s.error_storage);
     let refinement = links / 4 * peak * 8 / 7;
     let max_memory = fixed_part(&scene) + refinement * ITEM_BUFFER_SHARE / (ITEM_BUFFER_SHARE - 1);
     let tight = simulate(&scene, &settings(max_memory), &Progress::new(true)).unwrap();

@@ -3,6 +3,7 @@
 use crate::bases::BasisKind;
 use crate::geometry::DVec3;
 use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
+use crate::hierarchy::ErrorStorage;
 use crate::pipeline::{
     default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
     VisibilityKind, DEFAULT_RELATIVE_ACCURACY,
@@ -167,6 +168,11 @@ pub struct SolveArgs {
     /// vanish by superconvergence or symmetry), 2·order + 2 otherwise. The source rule is coarser.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=12), value_name = "D")]
     pub cubature_degree: Option<u8>,
+    /// How links store their error coefficients: full (every δ_{j,β}(x_k), exact for any later source
+    /// radiance) or reduced (one ratio per receiver node for the source's radiance when the link is
+    /// made, Bekaert–Willems §4.3: less memory per link, estimates that miss later changes of shape).
+    #[arg(long, value_enum, default_value_t = ErrorStorage::Full)]
+    pub error_storage: ErrorStorage,
     /// Error control (Bekaert–Willems algorithm 6.1) to this largest radiance error per element: an
     /// absolute radiance in W/(m² sr) (e.g. 0.05), or a percentage of the scene's mean radiance (e.g.
     /// 10%). Implies --oracle error; with --oracle error alone it is 10%.
@@ -294,6 +300,7 @@ impl SolveArgs {
             min_area: self.min_area,
             basis: self.basis,
             cubature_degree: self.cubature_degree.map(usize::from),
+            error_storage: self.error_storage,
             accuracy: self
                 .accuracy
                 .unwrap_or(Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY)),

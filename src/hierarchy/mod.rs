@@ -71,12 +71,19 @@ impl Link {
 /// 48 bytes of `Link` plus one heap block, instead of 80 bytes plus three). Single precision keeps a
 /// relative rounding of 6·10⁻⁸ per coefficient, far below the cubature error of the coupling itself
 /// (eq. (12) with a handful of nodes) and the sweeps' tolerance.
+///
+/// With [`ErrorStorage::Reduced`] (Bekaert–Willems §4.3) the `n × b` error coefficients are replaced by
+/// `n` ratios `Σ_β L_{j,β} δ_{j,β}(x_k) / L_{j,1}` for the source radiance at coupling time, so that the
+/// block is followed by `2n` values instead of `n (b + 1)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkCoupling {
-    /// The block, then the error coefficients, then the node factors (see the accessors).
+    /// The block, then the error coefficients (or their reduced form), then the node factors (see the
+    /// accessors).
     values: Box<[f32]>,
     /// Basis size `b` of both ends.
     size: u8,
+    /// Whether the error coefficients are stored in §4.3's reduced form.
+    reduced: bool,
     /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
     pub visibility: f32,
     /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
@@ -111,8 +118,51 @@ impl LinkCoupling {
         LinkCoupling {
             values,
             size: u8::try_from(size).expect("basis sizes are at most MAX_BASIS_SIZE"),
+            reduced: false,
             visibility,
             visibility_error,
+        }
+    }
+
+    /// This coupling with its error coefficients in the reduced form of Bekaert–Willems §4.3: per
+    /// receiver node one ratio `r_k = Σ_β L_{j,β} δ_{j,β}(x_k) / L_{j,1}` for the source's radiance
+    /// coefficients `source` now, so that `δ_j(x_k) = r_k L_{j,1}` stays exact while the source keeps the
+    /// shape it has (§4.3: "When this coefficient is multiplied with `L_{j,1}` the exact `δ_j(x_k)` is
+    /// recovered"). Colour: the ratio is taken for the sum of the channels (one coefficient per node, as
+    /// in the paper), exact for a source whose channels share one shape. A dark source (`L_{j,1} = 0`)
+    /// gets the ratio of a constant one, `δ_{j,1}(x_k)`: most sources are still dark when their first
+    /// links are made, and a later change of shape is what this form cannot follow (BENCHMARKS.md
+    /// measures what that costs the estimate). For the constant basis both forms hold the same numbers.
+    pub fn reduced(self, source: &[Rgb]) -> Self {
+        if self.reduced {
+            return self;
+        }
+        let size = usize::from(self.size);
+        let grey: Vec<f64> = source.iter().map(|c| c.r + c.g + c.b).collect();
+        let ratios = (0..self.node_count()).map(|k| {
+            let deltas = &self.errors()[k * size..(k + 1) * size];
+            if grey[0] > 0.0 {
+                let sum: f64 = grey
+                    .iter()
+                    .zip(deltas)
+                    .map(|(&l, &d)| l * f64::from(d))
+                    .sum();
+                (sum / grey[0]) as f32
+            } else {
+                deltas[0]
+            }
+        });
+        let values = self
+            .block()
+            .iter()
+            .copied()
+            .chain(ratios)
+            .chain(self.node_factors().iter().copied())
+            .collect();
+        LinkCoupling {
+            values,
+            reduced: true,
+            ..self
         }
     }
 
@@ -120,9 +170,18 @@ impl LinkCoupling {
         usize::from(self.size) * usize::from(self.size)
     }
 
+    /// Error coefficients per receiver node: `b`, or 1 in the reduced form.
+    fn errors_per_node(&self) -> usize {
+        if self.reduced {
+            1
+        } else {
+            usize::from(self.size)
+        }
+    }
+
     /// Number of receiver cubature nodes `n`.
     pub fn node_count(&self) -> usize {
-        (self.values.len() - self.block_len()) / (usize::from(self.size) + 1)
+        (self.values.len() - self.block_len()) / (self.errors_per_node() + 1)
     }
 
     /// `b × b` row-major coupling coefficients `K_{i,α;j,β} / (ρ_i A_i)` (eq. (3)).
@@ -131,11 +190,10 @@ impl LinkCoupling {
     }
 
     /// `n × b` row-major link error coefficients `δ_{j,β}(x_k) / ρ_i` at the receiver's `n` cubature
-    /// nodes (Algorithm 4.1 step 4b); kept per β rather than in the reduced form of §4.3 because the
-    /// reduced form freezes the source radiance at link creation, when most sources are still dark.
-    pub fn errors(&self) -> &[f32] {
+    /// nodes (Algorithm 4.1 step 4b); in the reduced form ([`LinkCoupling::reduced`]), the `n` ratios.
+    fn errors(&self) -> &[f32] {
         let start = self.block_len();
-        &self.values[start..start + self.node_count() * usize::from(self.size)]
+        &self.values[start..start + self.node_count() * self.errors_per_node()]
     }
 
     /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
@@ -152,6 +210,9 @@ impl LinkCoupling {
     /// `δ_j(x_k) / ρ_i = Σ_β L_{j,β} δ_{j,β}(x_k)` at receiver node `k`, for the source's radiance
     /// coefficients `source` (Bekaert–Willems §4.2).
     pub fn node_error(&self, k: usize, source: &[Rgb]) -> Rgb {
+        if self.reduced {
+            return source[0] * f64::from(self.errors()[k]);
+        }
         let size = source.len();
         source
             .iter()
@@ -164,6 +225,28 @@ impl LinkCoupling {
     /// reports).
     pub fn heap_bytes(&self) -> usize {
         allocated_bytes(self.values.len() * std::mem::size_of::<f32>())
+    }
+}
+
+/// How links store their error coefficients (`--error-storage`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ErrorStorage {
+    /// All `n × b` coefficients `δ_{j,β}(x_k)` (Algorithm 4.1): exact for any later source radiance.
+    #[default]
+    Full,
+    /// One ratio per receiver node (Bekaert–Willems §4.3), for the source's radiance when the link is
+    /// made: `2n` values after the block instead of `n (b + 1)`.
+    Reduced,
+}
+
+impl ErrorStorage {
+    /// `f32` values a coupling holds after its `b × b` block, for `n` receiver nodes.
+    pub fn values_after_block(self, size: usize, nodes: usize) -> usize {
+        match self {
+            ErrorStorage::Full => nodes * (size + 1),
+            ErrorStorage::Reduced => 2 * nodes,
+        }
     }
 }
 
@@ -754,4 +837,62 @@ impl Hierarchy {
 
 fn max_rgb(a: Rgb, b: Rgb) -> Rgb {
     Rgb::new(a.r.max(b.r), a.g.max(b.g), a.b.max(b.b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A linear-basis coupling (b = 3) with `n` nodes and made-up coefficients.
+    fn linear_coupling(n: usize) -> LinkCoupling {
+        let block: Vec<f64> = (0..9).map(|i| 0.01 * (i as f64 + 1.0)).collect();
+        let errors: Vec<f32> = (0..3 * n)
+            .map(|i| ((i * 7 % 11) as f32 - 5.0) * 1e-3)
+            .collect();
+        let factors: Vec<f32> = (0..n).map(|k| 0.1 + 0.01 * k as f32).collect();
+        LinkCoupling::new(&block, &errors, &factors, 0.5, 0.01)
+    }
+
+    /// §4.3: "When this coefficient is multiplied with `L_{j,1}` the exact `δ_j(x_k)` is recovered",
+    /// for the source radiance the ratio was taken with (channels of one shape), to f32 rounding; the
+    /// block and node factors are untouched and the error storage shrinks from `n (b + 1)` to `2n`.
+    #[test]
+    fn reduced_errors_recover_delta_for_the_source_they_were_made_with() {
+        let n = 16;
+        let full = linear_coupling(n);
+        let source = [
+            Rgb::new(2.0, 1.0, 0.5),
+            Rgb::new(0.4, 0.2, 0.1),
+            Rgb::new(-0.6, -0.3, -0.15),
+        ];
+        let reduced = full.clone().reduced(&source);
+        assert_eq!(reduced.node_count(), n);
+        assert_eq!(reduced.block(), full.block());
+        assert_eq!(reduced.node_factors(), full.node_factors());
+        assert_eq!(reduced.values.len(), 9 + 2 * n);
+        for k in 0..n {
+            let (a, b) = (full.node_error(k, &source), reduced.node_error(k, &source));
+            for (x, y) in [(a.r, b.r), (a.g, b.g), (a.b, b.b)] {
+                assert!(
+                    (x - y).abs() <= 1e-6 * (1.0 + x.abs()),
+                    "node {k}: {x} vs {y}"
+                );
+            }
+        }
+        // A dark source gets the constant source's ratio, δ_{j,1}(x_k): exact once it lights up evenly.
+        let dark = full.clone().reduced(&[Rgb::BLACK; 3]);
+        let even = [Rgb::splat(1.5), Rgb::BLACK, Rgb::BLACK];
+        for k in 0..n {
+            let (a, b) = (full.node_error(k, &even), dark.node_error(k, &even));
+            assert!((a.g - b.g).abs() <= 1e-6 * (1.0 + a.g.abs()), "node {k}");
+        }
+    }
+
+    /// For the constant basis the reduced form holds the same numbers.
+    #[test]
+    fn constant_basis_couplings_are_already_reduced() {
+        let full = LinkCoupling::new(&[0.2], &[0.01, -0.02, 0.03, 0.0], &[0.1; 4], 1.0, 0.0);
+        let reduced = full.clone().reduced(&[Rgb::splat(0.7)]);
+        assert_eq!(reduced.values, full.values);
+    }
 }

@@ -26,7 +26,7 @@
 use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
-use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
+use crate::hierarchy::{ElementId, ErrorStorage, Hierarchy, LinkCoupling};
 use crate::visibility::shaft::{ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 
@@ -38,6 +38,8 @@ pub struct CouplingSettings {
     pub cubature_degree: usize,
     /// Seed of the visibility samples of cluster links.
     pub seed: u64,
+    /// How the link error coefficients are stored (`--error-storage`, Bekaert–Willems §4.3).
+    pub error_storage: ErrorStorage,
 }
 
 impl Default for CouplingSettings {
@@ -45,6 +47,7 @@ impl Default for CouplingSettings {
         CouplingSettings {
             cubature_degree: 4,
             seed: 1,
+            error_storage: ErrorStorage::Full,
         }
     }
 }
@@ -66,8 +69,29 @@ pub struct Coupling {
 
 /// Algorithm 4.1 for the link `source` → `receiver`, with the shaft verdict `known` inherited from the
 /// parent link (or found earlier), if any; links with a cluster at either end are coupled by
-/// [`couple_cluster`].
+/// [`couple_cluster`]. The error coefficients are stored as `settings.error_storage` says.
 pub fn couple(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    settings: &CouplingSettings,
+    known: Option<ShaftVerdict>,
+) -> Coupling {
+    let coupled = couple_in_full(hierarchy, visibility, receiver, source, settings, known);
+    match settings.error_storage {
+        ErrorStorage::Full => coupled,
+        ErrorStorage::Reduced => Coupling {
+            coupling: coupled
+                .coupling
+                .reduced(&hierarchy.element(source).radiance),
+            ..coupled
+        },
+    }
+}
+
+/// [`couple`] with every error coefficient `δ_{j,β}(x_k)`.
+fn couple_in_full(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
