@@ -333,6 +333,20 @@ fn the_white_furnace_is_solved_to_the_accuracy_with_every_solver() {
             solution.report.error
         );
         let r = &solution.report;
+        // One estimate per pass, the last one the solve's own; refinement only adds elements.
+        let passes = &r.error.passes;
+        assert_eq!(passes.len(), r.passes, "{basis:?}: one estimate per pass");
+        assert_eq!(passes.last().map(|p| p.summary), Some(r.error.summary));
+        for (k, pair) in passes.windows(2).enumerate() {
+            assert_eq!(pair[0].pass, k + 1);
+            assert!(
+                pair[1].summary.leaves >= pair[0].summary.leaves
+                    && pair[1].refine_seconds >= pair[0].refine_seconds,
+                "{basis:?}: pass {} after pass {}",
+                pair[1].pass,
+                pair[0].pass
+            );
+        }
         let (emitted, absorbed) = (r.emitted_power.g, r.absorbed_power.g);
         assert!(
             (emitted - absorbed).abs() / emitted < 0.01,

@@ -81,6 +81,22 @@ pub struct ErrorReport {
     pub summary: ErrorSummary,
     /// Why refinement stopped: "accuracy reached", "element budget", "pass limit", "stable".
     pub stopped_by: String,
+    /// The estimate after each refine/solve pass: how error control (or refinement) progressed, and
+    /// what each pass cost.
+    pub passes: Vec<PassEstimate>,
+}
+
+/// The a-posteriori estimate over the leaves after one pass, with the hierarchy's size and the time
+/// spent so far.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassEstimate {
+    pub pass: usize,
+    pub links: usize,
+    /// The estimate's summary against the accuracy (against ∞ without error control: no leaf above).
+    pub summary: ErrorSummary,
+    /// Refinement and sweep seconds of the solve up to the end of this pass.
+    pub refine_seconds: f64,
+    pub solve_seconds: f64,
 }
 
 /// What a solve did.
@@ -212,6 +228,16 @@ fn end_pass(
     swept_to_tolerance: bool,
 ) -> bool {
     estimate_errors(hierarchy, settings.estimate);
+    let accuracy = settings
+        .error_control
+        .map_or(f64::INFINITY, |control| control.accuracy);
+    report.error.passes.push(PassEstimate {
+        pass: report.passes,
+        links: hierarchy.link_count(),
+        summary: summarize(hierarchy, accuracy),
+        refine_seconds: report.refine_seconds,
+        solve_seconds: report.solve_seconds,
+    });
     if let Some(control) = &settings.error_control {
         report.error.summary = summarize(hierarchy, control.accuracy);
         if report.error.summary.leaves_above == 0 {
