@@ -8,7 +8,7 @@ use radiosity::geometry::{DVec2, DVec3, Shape};
 use radiosity::measures::image_metrics::compare;
 use radiosity::output::camera::Camera;
 use radiosity::output::render::{emitter_mask, render, RenderOptions, Shading};
-use radiosity::pipeline::{simulate, SimulationSettings};
+use radiosity::pipeline::{simulate, Accuracy, OracleKind, SimulationSettings};
 use radiosity::progress::Progress;
 use radiosity::reference::{render_reference, ReferenceSettings};
 use radiosity::scene::contacts::{contact_pieces, split_contacts, DEFAULT_CONTACT_GAP};
@@ -40,7 +40,8 @@ fn strictly_inside(corners: &[DVec2], p: DVec2, margin: f64) -> bool {
     })
 }
 
-/// The split tiles every polygon it cuts: piece areas sum to the polygon's to 1e-12 relative (the pieces
+/// The split tiles every polygon it cuts with triangles and parallelograms (shapes whose parametrisation
+/// is affine, see `scene::contacts::affine_pieces`): piece areas sum to the polygon's to 1e-12 relative (the pieces
 /// share their cut vertices bit for bit, so only rounding of the area sums remains), every piece is a
 /// convex shape in the polygon's plane facing the same way, and points spread over the polygon lie in
 /// exactly one piece (area sum + no overlap + cover = a partition).
@@ -59,6 +60,14 @@ fn check_tiling(scene: &Scene, name: &str) -> usize {
             .iter()
             .map(|p| (*p - origin).dot(normal).abs())
             .fold(0.0, f64::max);
+        for piece in &pieces.shapes {
+            if let Shape::Quad([a, b, c, d]) = piece {
+                assert!(
+                    (*a + *c - *b - *d).length() <= 1e-5 * size,
+                    "{name}: a piece is a quad but no parallelogram: {piece:?}"
+                );
+            }
+        }
         let sum: f64 = pieces.shapes.iter().map(Shape::area).sum();
         // Exact for a planar polygon; a quad warped by w (planar to polygonize's 1e-3 only) is not one
         // surface, and its pieces' areas may differ from its Newell area by O(w / size).
@@ -328,12 +337,44 @@ fn cube_mgf_with_its_two_sided_lamp_agrees_with_the_reference() {
         .luminance
         .relative_rmse
         .unwrap();
+    // Error control (linear basis, link error oracle, `--accuracy 10%`) on the same split scene: it
+    // refines the lamp's pieces deeply, so every inner element of the lamp sends light; a black emitter's
+    // radiance is its emission, constant, at every level of its tree (pulled up from constant leaves).
+    let controlled = SimulationSettings {
+        oracle: OracleKind::Error,
+        accuracy: Accuracy::Relative(0.1),
+        ..settings
+    };
+    let solution = simulate(&scene, &controlled, &quiet).unwrap();
+    let h = &solution.hierarchy;
+    for (id, element) in h.elements.iter().enumerate() {
+        let Some(surface) = element.surface() else {
+            continue;
+        };
+        let patch = &h.patches[surface.patch as usize];
+        if patch.emission.max_channel() > 0.0 && patch.reflectance.max_channel() == 0.0 {
+            let emission = patch.emission.max_channel();
+            for (beta, c) in element.radiance.iter().enumerate().skip(1) {
+                assert!(
+                    [c.r, c.g, c.b].iter().all(|x| x.abs() <= 1e-9 * emission),
+                    "emitter element {id} (level {}): coefficient {beta} is {c:?}, not 0",
+                    element.level
+                );
+            }
+        }
+    }
+    let controlled_image = render(h, solution.visibility.as_ref(), &camera, &options);
+    let controlled_ratio = mean(&controlled_image) / reference_mean;
     let (_, leaking, leaking_lamp) = solve(&unsplit);
     assert_eq!(leaking_lamp.bits, lamp.bits);
     let leak = mean(&leaking) / reference_mean;
     eprintln!(
-        "cube.mgf: mean ratio {ratio:.4} (unsplit {leak:.4}), reference mean noise {mean_noise:.4}, \
-         relative RMSE {rmse:.4}"
+        "cube.mgf: mean ratio {ratio:.4} (unsplit {leak:.4}, error control {controlled_ratio:.4}), \
+         reference mean noise {mean_noise:.4}, relative RMSE {rmse:.4}"
+    );
+    assert!(
+        (controlled_ratio - 1.0).abs() <= 0.03 + 2.0 * mean_noise,
+        "split, --accuracy 10%: mean radiance ratio {controlled_ratio:.4} (noise {mean_noise:.4})"
     );
     assert!(
         (ratio - 1.0).abs() <= 0.03 + 2.0 * mean_noise,

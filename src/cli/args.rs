@@ -42,7 +42,7 @@ pub struct SceneArgs {
     /// Split surfaces along the outlines of objects that touch or nearly touch them (a lamp under a
     /// ceiling, blocks on a floor), so that no element straddles a contact and light cannot leak
     /// through it. Off by default: on real rooms it multiplies the polygons (classroom 5.8k → 15k,
-    /// office2 430 → 889) and the unclustered solve's time (BENCHMARKS.md, "Splitting surfaces along
+    /// office2 430 → 1120) and the unclustered solve's time (BENCHMARKS.md, "Splitting surfaces along
     /// contacts"); turn it on for lamps hung just under a ceiling, as in cube.mgf.
     #[arg(long, value_enum, default_value_t = Switch::Off, value_name = "on|off")]
     pub split_contacts: Switch,
