@@ -373,7 +373,7 @@ impl Bvh {
         loop {
             let node = &self.nodes[current as usize];
             let (mask, enter) = K::slab(&trav, node);
-            // The leaves' records and the interior children are fetched first, so that the fetches
+            // The leaves' blocks and the interior children are fetched first, so that the fetches
             // overlap each other and the leaf tests.
             let leaves = mask & node.leaves as u32;
             let mut bits = leaves;
