@@ -104,7 +104,7 @@ fn report(name: &str, shapes: &[Shape], rays: usize) {
             for vis in &backends {
                 match rate(vis.as_ref(), &segments, threads) {
                     Ok(r) => println!(
-                        "{:>8} {mode:>8} {} thread(s): {:.2} M rays/s, {} of {} blocked/hit",
+                        "{:>8} {mode:>8} {} thread(s): {:.3} M rays/s, {} of {} blocked/hit",
                         vis.name(),
                         r.threads,
                         r.rays_per_second / 1e6,

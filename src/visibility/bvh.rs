@@ -2,17 +2,20 @@
 //! quads), collapsed into an 8-wide tree with quantised child boxes for fast occlusion and closest-hit
 //! traversal.
 //!
-//! The binary SAH tree is built first (binned, subtrees in parallel), then collapsed into 8-wide nodes of
-//! two cache lines each. A node stores its children's boxes as 8-bit coordinates on a per-node grid
+//! The binary SAH tree is built first (binned, subtrees in parallel, leaves of at most four triangles),
+//! then collapsed into 8-wide nodes of two cache lines each, the binary nodes to keep chosen by dynamic
+//! programming for the least total node area (see [`Cuts`]). A node stores its children's boxes as 8-bit coordinates on a per-node grid
 //! (`origin + q * scale`, `scale` a power of two, rounded outward), half the bytes per child of `f32`
 //! boxes: on large scenes traversal waits on node fetches from memory, so bytes per child and levels per
 //! ray are what count. One visit tests the eight boxes in one SIMD pass: AVX2 + FMA where the CPU has them
-//! (detected at run time), a portable lane loop elsewhere; both give the same answers. Leaf primitives
-//! are stored contiguously in leaf order with their edge vectors precomputed.
+//! (detected at run time), a portable lane loop elsewhere; both give the same answers. A leaf is one block
+//! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with their edge
+//! vectors precomputed, so that one AVX2 pass of `f64` lanes filters all four (see [`Block`]).
 //!
 //! Precision split: node boxes and traversal are `f32`, but every box is padded by a margin far above
 //! `f32` rounding, so culling is conservative; the primitive tests are the exact double precision test of
-//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers. Answers are
+//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers, behind a filter
+//! that computes the reference's own determinant and numerators (bit-identical in every lane). Answers are
 //! therefore the reference's answers (up to ties between polygons at the same `t`), including its
 //! robustness: a segment between two points on scene polygons is not blocked by those polygons, nor by
 //! polygons coplanar with its start.
@@ -23,14 +26,12 @@ use crate::geometry::{DVec2, DVec3, Ray, Shape};
 use glam::{Vec3A, Vec4};
 use std::mem::MaybeUninit;
 
-/// SAH cost of one ray–triangle test, relative to one ray–box test pair in a node.
-const TRIANGLE_COST: f32 = 1.0;
-/// A quad is two triangle tests sharing the ray–origin difference; usually the first already decides.
-const QUAD_COST: f32 = 1.5;
-/// Cost of visiting an interior node (two box tests).
-const NODE_COST: f32 = 1.0;
-/// Leaves hold at most this many primitives: larger sets are always split.
-const MAX_LEAF: usize = 8;
+/// Triangle lanes of a leaf block: one 256-bit register of `f64`. Every leaf is one block: a set of
+/// primitives that fits is always a leaf (its four lanes are filtered in one pass, about the cost of a
+/// node visit), a larger one is always split.
+const LANES: usize = 4;
+/// Polygon index of an unused lane (its edges are zero, so the filter rejects it).
+const EMPTY_LANE: u32 = u32::MAX;
 const BINS: usize = 16;
 /// Subtrees larger than this are built in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -41,12 +42,12 @@ const MAX_SAH_DEPTH: usize = 64;
 const STACK_SIZE: usize = (WIDTH - 1) * (MAX_SAH_DEPTH + 28) + 1;
 /// Box padding relative to the largest coordinate magnitude of the scene: 2^-18, far above the `f32`
 /// rounding of coordinates (2^-24) and of slab distances (a few 2^-24 of the scene's size, see
-/// [`Slab`]), and it also gives flat boxes a thickness.
+/// [`Simd::slab`]), and it also gives flat boxes a thickness.
 const RELATIVE_PAD: f64 = 1.0 / 262_144.0;
 /// High bit of a binary child reference marks a leaf; the low bits are then the first primitive.
 const LEAF_FLAG: u32 = 1 << 31;
-/// Most primitives a tree can hold (first-primitive indices must fit below [`LEAF_FLAG`] and vertex
-/// offsets below [`QUAD_FLAG`]).
+/// Most primitives a tree can hold (first-primitive indices must fit below [`LEAF_FLAG`], vertex
+/// offsets below [`QUAD_FLAG`], and polygon indices below [`EMPTY_LANE`]).
 const MAX_PRIMS: usize = 1 << 27;
 /// High bit of a primitive's vertex offset marks a quad.
 const QUAD_FLAG: u32 = 1 << 31;
@@ -67,10 +68,8 @@ struct Node {
     /// `[min x, max x, min y, max y, min z, max z]` on the grid, lane `k` for child `k`: minima rounded
     /// down, maxima up, so each box contains its child's (zero for unused slots).
     planes: [[u8; WIDTH]; 6],
-    /// Wide node index of an interior child, or the first primitive of a leaf child.
+    /// Wide node index of an interior child, or the block of a leaf child.
     child: [u32; WIDTH],
-    /// Primitive count of leaf children (0 for interior children and unused slots).
-    count: [u8; WIDTH],
     /// Bit `k` set when slot `k` holds a child.
     valid: u8,
     /// Bit `k` set when child `k` is a leaf.
@@ -79,45 +78,63 @@ struct Node {
 
 const _: () = assert!(std::mem::size_of::<Node>() == 128);
 
-/// The root: wide node 0, or a single leaf (first primitive 0, `count`) for tiny scenes.
+/// A leaf: up to [`LANES`] triangles, coordinate by coordinate (`a[axis][lane]`), with the reference
+/// test's inputs precomputed (`e1 = v1 - v0`, `e2 = v2 - v0`; a quad fills two adjacent lanes, `v0 v1 v2`
+/// then `v0 v2 v3`, as `brute_force::ray_polygon` splits it), so that the test runs on bit-identical
+/// numbers without gathering vertices, and four lanes load as one register per coordinate. 320 bytes:
+/// 72 per triangle lane, 8 for which polygon it belongs to.
 #[derive(Clone, Copy, Debug)]
-struct Root {
-    /// Primitive count when the root is a leaf, 0 when it is node 0 (or the tree is empty).
-    count: u32,
+#[repr(C, align(64))]
+struct Block {
+    a: [[f64; LANES]; 3],
+    e1: [[f64; LANES]; 3],
+    e2: [[f64; LANES]; 3],
+    /// Offset of the lane's polygon's first vertex in `Bvh::vertices`, with `QUAD_FLAG` for quads.
+    vertex: [u32; LANES],
+    /// The lane's polygon, or [`EMPTY_LANE`].
+    polygon: [u32; LANES],
 }
 
-/// One primitive in leaf order: the reference test's inputs, precomputed (`e1 = v1 - v0`, `e2 = v2 - v0`,
-/// and `e3 = v3 - v0` for quads), so the test runs on bit-identical numbers without gathering vertices.
-#[derive(Clone, Copy, Debug)]
-struct Prim {
-    a: DVec3,
-    e1: DVec3,
-    e2: DVec3,
-    e3: DVec3,
-    /// Offset of its first vertex in `Bvh::vertices`, with `QUAD_FLAG` for quads.
-    vertex: u32,
-    polygon: u32,
-}
+const _: () = assert!(std::mem::size_of::<Block>() == 320);
 
-impl Prim {
-    /// Ray parameter in `(t_min, t_max)`, with the triangle's barycentric (u, v). The same test, on the
-    /// same numbers, as `brute_force::ray_polygon`.
+impl Block {
+    const EMPTY: Block = Block {
+        a: [[0.0; LANES]; 3],
+        e1: [[0.0; LANES]; 3],
+        e2: [[0.0; LANES]; 3],
+        vertex: [0; LANES],
+        polygon: [EMPTY_LANE; LANES],
+    };
+
+    /// Lane `k`'s triangle `(a, e1, e2)`.
     #[inline(always)]
-    fn hit(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
-        let s = ray.origin - self.a;
-        let first = if may_hit(ray.direction, s, self.e1, self.e2) {
-            triangle(ray, s, self.e1, self.e2, t_min, t_max)
-        } else {
-            None
-        };
-        // A non-planar quad can be crossed twice: the nearer hit (see `brute_force::ray_polygon`).
-        if self.vertex & QUAD_FLAG != 0 && may_hit(ray.direction, s, self.e2, self.e3) {
-            let limit = first.map_or(t_max, |(t, _, _)| t);
-            if let Some(second) = triangle(ray, s, self.e2, self.e3, t_min, limit) {
-                return Some(second);
+    fn lane(&self, k: usize) -> (DVec3, DVec3, DVec3) {
+        let get = |v: &[[f64; LANES]; 3]| DVec3::new(v[0][k], v[1][k], v[2][k]);
+        (get(&self.a), get(&self.e1), get(&self.e2))
+    }
+
+    /// Ray parameter in `(t_min, t_max)` of lane `k`'s triangle, with its barycentric (u, v): the
+    /// reference test on the same numbers as `brute_force::ray_polygon`.
+    #[inline(always)]
+    fn hit(&self, k: usize, ray: &Ray, t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
+        let (a, e1, e2) = self.lane(k);
+        triangle(ray, ray.origin - a, e1, e2, t_min, t_max)
+    }
+
+    /// Whether any lane blocks the ray in `(t_min, t_max)`: the filter `K` first, the exact test for the
+    /// lanes it keeps. For occlusion a quad's two triangles are independent (the reference's quad hits
+    /// iff either does).
+    #[inline(always)]
+    fn occludes<K: Simd>(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
+        let mut lanes = K::filter(ray, self);
+        while lanes != 0 {
+            let k = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            if self.hit(k, ray, t_min, t_max).is_some() {
+                return true;
             }
         }
-        first
+        false
     }
 }
 
@@ -126,7 +143,7 @@ const TWO_POW_900: f64 = f64::from_bits((1023 + 900) << 52);
 
 /// Whether [`triangle`] (`ray_triangle(ray, s, e1, e2, ..)`, with direction `d`) can return a hit: the
 /// same determinant and barycentric numerators, compared against `det` without its division, so most
-/// misses skip the division's latency. It answers `false` only where the reference surely rejects:
+/// misses skip the division's latency (the portable filter, and the reference for the AVX2 one). It answers `false` only where the reference surely rejects:
 /// `u = U * (1 / det)` is negative when `U` and `det` have opposite signs and `U` is too large for the
 /// product to underflow to `-0`, and exceeds 1 when `|U| > |det| (1 + 1e-14)`, far beyond the two
 /// roundings (2^-52); likewise for `w` and `u + w`.
@@ -155,15 +172,16 @@ fn may_hit(d: DVec3, s: DVec3, e1: DVec3, e2: DVec3) -> bool {
 
 /// SAH bounding volume hierarchy over the scene's polygons.
 pub struct Bvh {
+    /// Wide nodes, the root first; none when the whole scene is one leaf (block 0).
     nodes: Vec<Node>,
-    root: Root,
     /// Root box in double precision (padded), used to clip rays before going to `f32`.
     root_min: DVec3,
     root_max: DVec3,
-    prims: Vec<Prim>,
+    /// The leaves, in the order traversal meets them.
+    blocks: Vec<Block>,
     /// The polygons' vertices in leaf order, for the parameters and side of the final closest hit.
     vertices: Vec<DVec3>,
-    /// The slab-test kernel this CPU runs.
+    /// The SIMD kernels this CPU runs.
     kernel: Kernel,
 }
 
@@ -172,6 +190,7 @@ struct BuildPrim {
     min: Vec3A,
     max: Vec3A,
     centroid: Vec3A,
+    /// Triangle lanes it fills (1, or 2 for a quad): its SAH cost and its share of a leaf block.
     cost: f32,
     index: u32,
 }
@@ -223,11 +242,7 @@ fn build_prims(shapes: &[Shape]) -> Vec<BuildPrim> {
                 min,
                 max,
                 centroid: (min + max) * 0.5,
-                cost: if shape.vertex_count() == 4 {
-                    QUAD_COST
-                } else {
-                    TRIANGLE_COST
-                },
+                cost: if shape.vertex_count() == 4 { 2.0 } else { 1.0 },
                 index: index as u32,
             }
         })
@@ -252,45 +267,28 @@ impl Bvh {
         );
         let mut prims = build_prims(shapes);
         let bounds = bounds_of(&prims);
-        let (nodes, root) = if prims.len() <= MAX_LEAF {
-            (
-                Vec::new(),
-                Root {
-                    count: prims.len() as u32,
-                },
-            )
+        let mut leaves = Leaves {
+            shapes,
+            blocks: Vec::new(),
+            vertices: Vec::new(),
+        };
+        let mut nodes = Vec::new();
+        if is_leaf(&prims) {
+            if !prims.is_empty() {
+                leaves.push(&prims);
+            }
         } else {
             let binary = build(&mut prims, 0, 0);
-            let mut nodes = Vec::with_capacity(binary.len() / 2 + 1);
-            collapse(&binary, 0, &mut nodes);
-            (nodes, Root { count: 0 })
-        };
-        let mut vertices = Vec::with_capacity(prims.len() * 3);
-        let prims = prims
-            .iter()
-            .map(|p| {
-                let shape = &shapes[p.index as usize];
-                let v = shape.vertices();
-                let offset = vertices.len() as u32;
-                vertices.extend_from_slice(v);
-                let quad = v.len() == 4;
-                Prim {
-                    a: v[0],
-                    e1: v[1] - v[0],
-                    e2: v[2] - v[0],
-                    e3: if quad { v[3] - v[0] } else { DVec3::ZERO },
-                    vertex: if quad { offset | QUAD_FLAG } else { offset },
-                    polygon: p.index,
-                }
-            })
-            .collect();
+            nodes.reserve(binary.len() / 2 + 1);
+            let cuts = Cuts::new(&binary);
+            collapse(&binary, &cuts, 0, &prims, &mut nodes, &mut leaves);
+        }
         Bvh {
             nodes,
-            root,
             root_min: bounds.min.as_dvec3(),
             root_max: bounds.max.as_dvec3(),
-            prims,
-            vertices,
+            blocks: leaves.blocks,
+            vertices: leaves.vertices,
             kernel: Kernel::detect(),
         }
     }
@@ -300,9 +298,9 @@ impl Bvh {
         self.nodes.len()
     }
 
-    /// The shape of primitive `k` (leaf order), rebuilt bit-exactly from the stored vertices.
-    fn shape(&self, k: usize) -> Shape {
-        let tagged = self.prims[k].vertex;
+    /// The shape of lane `k` of `block`, rebuilt bit-exactly from the stored vertices.
+    fn shape(&self, block: &Block, k: usize) -> Shape {
+        let tagged = block.vertex[k];
         let o = (tagged & !QUAD_FLAG) as usize;
         let v = &self.vertices;
         if tagged & QUAD_FLAG != 0 {
@@ -312,18 +310,11 @@ impl Bvh {
         }
     }
 
-    /// The primitives of a leaf.
-    #[inline(always)]
-    fn leaf(&self, first: u32, count: u32) -> &[Prim] {
-        let first = first as usize;
-        &self.prims[first..first + count as usize]
-    }
-
     /// Clips the ray to the root box in double precision and prepares the `f32` traversal ray. Traversal
     /// parameters are `t' = (t - t0) * scale`.
     #[inline(always)]
     fn setup(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<TravRay> {
-        if t_max.is_nan() || t_min.is_nan() || t_max <= t_min || self.prims.is_empty() {
+        if t_max.is_nan() || t_min.is_nan() || t_max <= t_min || self.blocks.is_empty() {
             return None;
         }
         let (mut lo, mut hi) = (t_min, t_max);
@@ -368,39 +359,28 @@ impl Bvh {
         Some(trav)
     }
 
-    /// Any-hit traversal with slab kernel `K`.
+    /// Any-hit traversal with kernels `K`.
     #[inline(always)]
-    fn occluded_with<K: Slab>(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
+    fn occluded_with<K: Simd>(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
         let Some(trav) = self.setup(ray, t_min, t_max) else {
             return false;
         };
-        // A function rather than a closure, so that it is inlined into (and compiled with the features
-        // of) each kernel's traversal.
-        #[inline(always)]
-        fn leaf_hit(bvh: &Bvh, ray: &Ray, first: u32, count: u32, t_min: f64, t_max: f64) -> bool {
-            for p in bvh.leaf(first, count) {
-                if p.hit(ray, t_min, t_max).is_some() {
-                    return true;
-                }
-            }
-            false
-        }
-        if self.root.count > 0 {
-            return leaf_hit(self, ray, 0, self.root.count, t_min, t_max);
+        if self.nodes.is_empty() {
+            return self.blocks[0].occludes::<K>(ray, t_min, t_max);
         }
         let mut stack = Stack::new();
         let mut current = 0u32;
         loop {
             let node = &self.nodes[current as usize];
             let (mask, enter) = K::slab(&trav, node);
-            // The leaves' records and the interior children are fetched first, so that the fetches
+            // The leaves' blocks and the interior children are fetched first, so that the fetches
             // overlap each other and the leaf tests.
             let leaves = mask & node.leaves as u32;
             let mut bits = leaves;
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                prefetch(self.leaf(node.child[k], node.count[k] as u32));
+                prefetch(std::slice::from_ref(&self.blocks[node.child[k] as usize]));
             }
             // The next node is the nearest interior child, the others pushed: rays from a surface find
             // nearby blockers soonest.
@@ -430,7 +410,7 @@ impl Bvh {
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                if leaf_hit(self, ray, node.child[k], node.count[k] as u32, t_min, t_max) {
+                if self.blocks[node.child[k] as usize].occludes::<K>(ray, t_min, t_max) {
                     return true;
                 }
             }
@@ -441,24 +421,30 @@ impl Bvh {
         }
     }
 
-    /// Closest-hit traversal with slab kernel `K`.
+    /// Closest-hit traversal with kernels `K`.
     #[inline(always)]
-    fn intersect_with<K: Slab>(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
+    fn intersect_with<K: Simd>(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
         let mut trav = self.setup(ray, t_min, t_max)?;
-        // Closest primitive so far: (t, primitive, barycentric u, v).
-        let mut best: Option<(f64, usize, f64, f64)> = None;
+        // Closest lane so far: (t, block, lane, barycentric u, v).
+        let mut best: Option<(f64, usize, usize, f64, f64)> = None;
         let mut limit = t_max;
-        let mut leaf = |first: u32, count: u32, trav: &mut TravRay| {
-            for (k, p) in self.leaf(first, count).iter().enumerate() {
-                if let Some((t, u, v)) = p.hit(ray, t_min, limit) {
-                    best = Some((t, first as usize + k, u, v));
+        // Lanes in order, each tested up to the nearest hit so far: a quad's second triangle replaces
+        // its first only when strictly nearer, as in the reference.
+        let mut leaf = |index: u32, trav: &mut TravRay| {
+            let block = &self.blocks[index as usize];
+            let mut lanes = K::filter(ray, block);
+            while lanes != 0 {
+                let k = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                if let Some((t, u, v)) = block.hit(k, ray, t_min, limit) {
+                    best = Some((t, index as usize, k, u, v));
                     limit = t;
                     trav.set_far(t);
                 }
             }
         };
-        if self.root.count > 0 {
-            leaf(0, self.root.count, &mut trav);
+        if self.nodes.is_empty() {
+            leaf(0, &mut trav);
         } else {
             let mut stack = Stack::new();
             let mut current = 0u32;
@@ -489,7 +475,7 @@ impl Bvh {
                 // Leaves first, nearer first, so that their hits cull the interior children.
                 for &(t, k) in &order[..n] {
                     if node.leaves & (1 << k) != 0 && t <= trav.t_far {
-                        leaf(node.child[k], node.count[k] as u32, &mut trav);
+                        leaf(node.child[k], &mut trav);
                     }
                 }
                 // Interior children: far ones pushed first, the nearest visited next.
@@ -522,17 +508,18 @@ impl Bvh {
         self.finish(ray, best)
     }
 
-    /// The hit record of the closest primitive found.
-    fn finish(&self, ray: &Ray, best: Option<(f64, usize, f64, f64)>) -> Option<Hit> {
-        let (t, k, u, v) = best?;
-        let shape = self.shape(k);
+    /// The hit record of the closest lane found.
+    fn finish(&self, ray: &Ray, best: Option<(f64, usize, usize, f64, f64)>) -> Option<Hit> {
+        let (t, index, k, u, v) = best?;
+        let block = &self.blocks[index];
+        let shape = self.shape(block, k);
         let uv = match shape {
             Shape::Triangle(_) => DVec2::new(u, v),
             Shape::Quad(_) => shape.parameters_of(ray.at(t)),
         };
         Some(Hit {
             t,
-            polygon: self.prims[k].polygon as usize,
+            polygon: block.polygon[k] as usize,
             uv,
             front: ray.direction.dot(shape.vector_area()) < 0.0,
         })
@@ -627,21 +614,27 @@ impl TravRay {
     }
 }
 
-/// Slab tests of a node's eight children against `[0, t_far]`: bit `k` of the mask is set when child
-/// `k` exists and is hit; lane `k` of the array is its entry parameter.
-///
-/// Error bound: a slab parameter is `(origin + q scale - o) inv`, computed as `q (scale inv) + (origin -
-/// o) inv` with at most four roundings of terms below `4 M |inv|` (`M` the scene's largest coordinate),
-/// so it is off by under `2^-20 M |inv|`, while the box padding ([`RELATIVE_PAD`]) moves every slab by
-/// `2^-18 M |inv|`: a box the exact ray meets is never culled.
-trait Slab {
+/// The SIMD kernels of a traversal: the slab tests of a node's children and the hit filter of a leaf's
+/// lanes.
+trait Simd {
+    /// Slab tests of a node's eight children against `[0, t_far]`: bit `k` of the mask is set when child
+    /// `k` exists and is hit; lane `k` of the array is its entry parameter.
+    ///
+    /// Error bound: a slab parameter is `(origin + q scale - o) inv`, computed as `q (scale inv) +
+    /// (origin - o) inv` with at most four roundings of terms below `4 M |inv|` (`M` the scene's largest
+    /// coordinate), so it is off by under `2^-20 M |inv|`, while the box padding ([`RELATIVE_PAD`]) moves
+    /// every slab by `2^-18 M |inv|`: a box the exact ray meets is never culled.
     fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]);
+
+    /// [`may_hit`] of each lane of `block` (bit `k` for lane `k`), computed with exactly its operations,
+    /// so bit-identical and conservative in every kernel.
+    fn filter(ray: &Ray, block: &Block) -> u32;
 }
 
 /// Lane loops in plain Rust (any CPU).
 struct Portable;
 
-impl Slab for Portable {
+impl Simd for Portable {
     #[inline(always)]
     fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
         let mut enter = [0f32; WIDTH];
@@ -660,6 +653,16 @@ impl Slab for Portable {
         }
         (mask & u32::from(node.valid), enter)
     }
+
+    #[inline(always)]
+    fn filter(ray: &Ray, block: &Block) -> u32 {
+        let mut lanes = 0;
+        for k in 0..LANES {
+            let (a, e1, e2) = block.lane(k);
+            lanes |= u32::from(may_hit(ray.direction, ray.origin - a, e1, e2)) << k;
+        }
+        lanes
+    }
 }
 
 /// AVX2 + FMA: the eight lanes in one 256-bit register.
@@ -667,13 +670,76 @@ impl Slab for Portable {
 struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
-impl Slab for Avx2 {
+impl Simd for Avx2 {
     #[inline(always)]
     fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
         // SAFETY: this kernel only runs inside `occluded_avx2` / `intersect_avx2`, which are only called
         // when the CPU has AVX2 and FMA (`Kernel::detect`).
         unsafe { slab_avx2(ray, node) }
     }
+
+    #[inline(always)]
+    fn filter(ray: &Ray, block: &Block) -> u32 {
+        // SAFETY: as above.
+        unsafe { filter_avx2(ray, block) }
+    }
+}
+
+/// [`may_hit`] on four lanes of `f64`: the same products, sums and comparisons in the same order (no
+/// fused multiply-add), so every lane's answer is bit for bit the scalar one.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn filter_avx2(ray: &Ray, block: &Block) -> u32 {
+    use std::arch::x86_64::*;
+    type V = [__m256d; 3];
+    // SAFETY: each row is four `f64` at a 32-byte aligned offset of the 64-byte aligned block.
+    let load = |rows: &[[f64; LANES]; 3]| rows.map(|r| unsafe { _mm256_load_pd(r.as_ptr()) });
+    let splat = |v: DVec3| v.to_array().map(|x| _mm256_set1_pd(x));
+    let (mul, add, sub) = (_mm256_mul_pd, _mm256_add_pd, _mm256_sub_pd);
+    // `glam`'s `DVec3::cross` and `DVec3::dot`, term for term.
+    let cross = |x: V, y: V| {
+        [
+            sub(mul(x[1], y[2]), mul(y[1], x[2])),
+            sub(mul(x[2], y[0]), mul(y[2], x[0])),
+            sub(mul(x[0], y[1]), mul(y[0], x[1])),
+        ]
+    };
+    let dot = |x: V, y: V| add(add(mul(x[0], y[0]), mul(x[1], y[1])), mul(x[2], y[2]));
+    let (d, o) = (splat(ray.direction), splat(ray.origin));
+    let a = load(&block.a);
+    let s = [0, 1, 2].map(|i| sub(o[i], a[i]));
+    let (e1, e2) = (load(&block.e1), load(&block.e2));
+    let p = cross(d, e2);
+    let det = dot(e1, p);
+    let sign_bit = _mm256_set1_pd(-0.0);
+    // `sign * x` with `sign = ±1` is `x` with the determinant's sign bit flipped in.
+    let sign = _mm256_and_pd(det, sign_bit);
+    let abs = _mm256_andnot_pd(sign_bit, det);
+    let zero = _mm256_setzero_pd();
+    let usable = _mm256_cmp_pd::<_CMP_GE_OQ>(abs, _mm256_set1_pd(1e-300));
+    let far = mul(abs, _mm256_set1_pd(1.0 + 1e-14));
+    let negative = |x: __m256d| {
+        let huge = mul(_mm256_andnot_pd(sign_bit, x), _mm256_set1_pd(TWO_POW_900));
+        _mm256_and_pd(
+            _mm256_cmp_pd::<_CMP_LT_OQ>(x, zero),
+            _mm256_cmp_pd::<_CMP_GT_OQ>(huge, abs),
+        )
+    };
+    let u = _mm256_xor_pd(dot(s, p), sign);
+    let w = _mm256_xor_pd(dot(d, cross(s, e1)), sign);
+    let both = _mm256_and_pd(
+        _mm256_cmp_pd::<_CMP_GE_OQ>(u, zero),
+        _mm256_cmp_pd::<_CMP_GE_OQ>(w, zero),
+    );
+    let reject = _mm256_or_pd(
+        _mm256_or_pd(negative(u), _mm256_cmp_pd::<_CMP_GT_OQ>(u, far)),
+        _mm256_or_pd(
+            negative(w),
+            _mm256_and_pd(both, _mm256_cmp_pd::<_CMP_GT_OQ>(add(u, w), far)),
+        ),
+    );
+    _mm256_movemask_pd(_mm256_andnot_pd(reject, usable)) as u32
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -704,7 +770,7 @@ fn slab_avx2(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
     (hit & u32::from(node.valid), lanes_out)
 }
 
-/// Which [`Slab`] kernel traversal runs, chosen once per tree from the CPU's features.
+/// Which [`Simd`] kernels traversal runs, chosen once per tree from the CPU's features.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kernel {
     Portable,
@@ -756,35 +822,148 @@ fn binary_children(node: &BinNode) -> [ChildRef; 2] {
     })
 }
 
-/// Collapses the binary subtree at `index` into 8-wide nodes appended to `out` (parent before children)
-/// and returns its wide index: starting from the binary node's two children, the interior child with the
-/// largest surface area is replaced by its own two children until there are eight or only leaves.
-fn collapse(binary: &[BinNode], index: u32, out: &mut Vec<Node>) -> u32 {
-    let [l, r] = binary_children(&binary[index as usize]);
-    let mut refs = [l; WIDTH];
-    refs[1] = r;
-    let mut n = 2;
-    while n < WIDTH {
-        let widest = (0..n)
-            .filter(|&k| refs[k].count == 0)
-            .max_by(|&a, &b| refs[a].bounds.area().total_cmp(&refs[b].bounds.area()));
-        let Some(k) = widest else { break };
-        let [cl, cr] = binary_children(&binary[refs[k].child as usize]);
-        refs.copy_within(k + 1..n, k + 2);
-        refs[k] = cl;
-        refs[k + 1] = cr;
-        n += 1;
+/// The leaf blocks and the vertices they point to, as the collapse writes them.
+struct Leaves<'a> {
+    shapes: &'a [Shape],
+    blocks: Vec<Block>,
+    vertices: Vec<DVec3>,
+}
+
+impl Leaves<'_> {
+    /// Appends the block of `prims` (at most [`LANES`] lanes) and returns its index.
+    fn push(&mut self, prims: &[BuildPrim]) -> u32 {
+        let mut block = Block::EMPTY;
+        let mut k = 0;
+        for p in prims {
+            let v = self.shapes[p.index as usize].vertices();
+            let offset = self.vertices.len() as u32;
+            self.vertices.extend_from_slice(v);
+            let tag = if v.len() == 4 {
+                offset | QUAD_FLAG
+            } else {
+                offset
+            };
+            // `v0 v1 v2`, and `v0 v2 v3` for a quad.
+            for i in 1..v.len() - 1 {
+                let (e1, e2) = (v[i] - v[0], v[i + 1] - v[0]);
+                for axis in 0..3 {
+                    block.a[axis][k] = v[0][axis];
+                    block.e1[axis][k] = e1[axis];
+                    block.e2[axis][k] = e2[axis];
+                }
+                block.vertex[k] = tag;
+                block.polygon[k] = p.index;
+                k += 1;
+            }
+        }
+        self.blocks.push(block);
+        (self.blocks.len() - 1) as u32
     }
-    let wide = out.len();
-    let mut node = quantised(&refs[..n]);
-    out.push(node);
-    for (k, r) in refs[..n].iter().enumerate() {
-        if r.count > 0 {
-            node.leaves |= 1 << k;
-            node.child[k] = r.child & !LEAF_FLAG;
-            node.count[k] = r.count as u8;
+}
+
+/// Which binary nodes become wide nodes, chosen by dynamic programming over the binary tree (Ylitie,
+/// Karras and Laine 2017, "Efficient incoherent ray traversal on GPUs through compressed wide BVHs",
+/// §3.1). The leaves are the binary tree's, so the part of the SAH cost that the choice changes is the
+/// sum of the wide nodes' surface areas (each visit costs about the same, full or not), minimised exactly;
+/// greedily expanding the widest child until eight left nodes half full.
+struct Cuts {
+    /// Per binary node, slot `i - 1`: the least area sum of its subtree cut into at most `i` roots
+    /// (wide nodes or leaves).
+    cost: Vec<[f32; WIDTH]>,
+    /// Per binary node, slot `i - 1` for `i >= 2`: how many of the `i` roots its left child's subtree
+    /// gives, or 0 when the node itself is best kept as one root (a wide node). Slot 0: the left child's
+    /// share of the node's eight children when it is a wide node.
+    left: Vec<[u8; WIDTH]>,
+}
+
+impl Cuts {
+    /// Bottom up: binary children come after their parents.
+    fn new(binary: &[BinNode]) -> Cuts {
+        let mut cuts = Cuts {
+            cost: vec![[0.0; WIDTH]; binary.len()],
+            left: vec![[0; WIDTH]; binary.len()],
+        };
+        for index in (0..binary.len()).rev() {
+            let [l, r] = binary_children(&binary[index]);
+            let child = |c: &ChildRef, i: usize| {
+                if c.count > 0 {
+                    0.0
+                } else {
+                    cuts.cost[c.child as usize][i - 1]
+                }
+            };
+            // Slot `j`: the best share of at most `j` roots between the two children.
+            let mut split = [(f32::INFINITY, 0u8); WIDTH + 1];
+            for (j, best) in split.iter_mut().enumerate().skip(2) {
+                for k in 1..j {
+                    let c = child(&l, k) + child(&r, j - k);
+                    if c < best.0 {
+                        *best = (c, k as u8);
+                    }
+                }
+            }
+            let mut union = l.bounds;
+            union.grow(r.bounds.min, r.bounds.max);
+            let node = union.area() + split[WIDTH].0;
+            let (cost, left) = (&mut cuts.cost[index], &mut cuts.left[index]);
+            (cost[0], left[0]) = (node, split[WIDTH].1);
+            for i in 2..=WIDTH {
+                (cost[i - 1], left[i - 1]) = if split[i].0 < node {
+                    split[i]
+                } else {
+                    (node, 0)
+                };
+            }
+        }
+        cuts
+    }
+
+    /// Appends the roots of `c`'s subtree cut into at most `i`.
+    fn roots(&self, binary: &[BinNode], c: ChildRef, i: usize, out: &mut Vec<ChildRef>) {
+        let k = if c.count > 0 || i == 1 {
+            0
         } else {
-            node.child[k] = collapse(binary, r.child, out);
+            usize::from(self.left[c.child as usize][i - 1])
+        };
+        if k == 0 {
+            out.push(c);
+        } else {
+            let [l, r] = binary_children(&binary[c.child as usize]);
+            self.roots(binary, l, k, out);
+            self.roots(binary, r, i - k, out);
+        }
+    }
+}
+
+/// Turns the binary subtree at `index` into 8-wide nodes appended to `out` (parent before children) as
+/// `cuts` says, and its leaves into blocks of `leaves` (a node's leaves next to each other), and returns
+/// its wide index.
+fn collapse(
+    binary: &[BinNode],
+    cuts: &Cuts,
+    index: u32,
+    prims: &[BuildPrim],
+    out: &mut Vec<Node>,
+    leaves: &mut Leaves,
+) -> u32 {
+    let [l, r] = binary_children(&binary[index as usize]);
+    let share = usize::from(cuts.left[index as usize][0]);
+    let mut refs = Vec::with_capacity(WIDTH);
+    cuts.roots(binary, l, share, &mut refs);
+    cuts.roots(binary, r, WIDTH - share, &mut refs);
+    let wide = out.len();
+    let mut node = quantised(&refs);
+    out.push(node);
+    for (k, r) in refs.iter().enumerate() {
+        if r.count > 0 {
+            let first = (r.child & !LEAF_FLAG) as usize;
+            node.leaves |= 1 << k;
+            node.child[k] = leaves.push(&prims[first..first + r.count as usize]);
+        }
+    }
+    for (k, r) in refs.iter().enumerate() {
+        if r.count == 0 {
+            node.child[k] = collapse(binary, cuts, r.child, prims, out, leaves);
         }
     }
     out[wide] = node;
@@ -805,7 +984,6 @@ fn quantised(refs: &[ChildRef]) -> Node {
         scale: [0.0; 3],
         planes: [[0; WIDTH]; 6],
         child: [0; WIDTH],
-        count: [0; WIDTH],
         valid: ((1u32 << refs.len()) - 1) as u8,
         leaves: 0,
     };
@@ -927,30 +1105,20 @@ fn child_subtree(prims: &mut [BuildPrim], base: usize, depth: usize) -> Subtree 
     }
 }
 
-/// Whether the primitives become one leaf: few enough that the SAH split would not pay for itself.
+/// Whether the primitives become one leaf: whether they fit one block.
 fn is_leaf(prims: &[BuildPrim]) -> bool {
-    if prims.len() <= 1 {
-        return true;
-    }
-    if prims.len() > MAX_LEAF {
-        return false;
-    }
-    let leaf_cost: f32 = prims.iter().map(|p| p.cost).sum();
-    match best_split(prims) {
-        Some((_, _, cost)) => leaf_cost <= cost,
-        None => true,
-    }
+    prims.iter().map(|p| p.cost).sum::<f32>() <= LANES as f32
 }
 
-/// Best binned SAH split: (axis, bin boundary, cost relative to the parent box).
-fn best_split(prims: &[BuildPrim]) -> Option<(usize, usize, f32)> {
+/// Best binned SAH split: (axis, bin boundary). The cost of a side is its box's area times its triangle
+/// lanes.
+fn best_split(prims: &[BuildPrim]) -> Option<(usize, usize)> {
     let mut cmin = Vec3A::splat(f32::INFINITY);
     let mut cmax = Vec3A::splat(f32::NEG_INFINITY);
     for p in prims {
         cmin = cmin.min(p.centroid);
         cmax = cmax.max(p.centroid);
     }
-    let parent_area = bounds_of(prims).area();
     let mut best: Option<(usize, usize, f32)> = None;
     for axis in 0..3 {
         let extent = cmax[axis] - cmin[axis];
@@ -985,13 +1153,13 @@ fn best_split(prims: &[BuildPrim]) -> Option<(usize, usize, f32)> {
             if acc_cost == 0.0 {
                 continue;
             }
-            let cost = NODE_COST + (acc.area() * acc_cost + right_cost[b]) / parent_area;
+            let cost = acc.area() * acc_cost + right_cost[b];
             if cost.is_finite() && best.is_none_or(|(_, _, c)| cost < c) {
                 best = Some((axis, b, cost));
             }
         }
     }
-    best
+    best.map(|(axis, b, _)| (axis, b))
 }
 
 #[inline(always)]
@@ -1003,7 +1171,7 @@ fn bin_of(c: f32, min: f32, k: f32) -> usize {
 fn split(prims: &mut [BuildPrim], depth: usize) -> usize {
     let n = prims.len();
     if depth < MAX_SAH_DEPTH {
-        if let Some((axis, boundary, _)) = best_split(prims) {
+        if let Some((axis, boundary)) = best_split(prims) {
             let (mut cmin, mut cmax) = (f32::INFINITY, f32::NEG_INFINITY);
             for p in prims.iter() {
                 cmin = cmin.min(p.centroid[axis]);
@@ -1072,12 +1240,12 @@ impl Visibility for Bvh {
         "bvh"
     }
 
-    /// Nodes, primitive records and vertices.
+    /// Nodes, leaf blocks and vertices.
     fn memory_bytes(&self) -> Option<usize> {
         use std::mem::size_of_val;
         Some(
             size_of_val(self.nodes.as_slice())
-                + size_of_val(self.prims.as_slice())
+                + size_of_val(self.blocks.as_slice())
                 + size_of_val(self.vertices.as_slice()),
         )
     }
@@ -1139,20 +1307,14 @@ mod tests {
             let (cmin, cmax) = child_box(node, k);
             let (cmin, cmax) = (cmin.max(min), cmax.min(max));
             if node.leaves & (1 << k) != 0 {
-                let count = node.count[k] as usize;
-                assert!((1..=MAX_LEAF).contains(&count));
-                let first = node.child[k] as usize;
-                for p in first..first + count {
-                    seen[bvh.prims[p].polygon as usize] += 1;
-                    for v in bvh.shape(p).vertices() {
-                        assert!(
-                            v.cmpge(cmin).all() && v.cmple(cmax).all(),
-                            "{v} outside box"
-                        );
-                    }
+                let block = &bvh.blocks[node.child[k] as usize];
+                for v in check_block(bvh, block, seen) {
+                    assert!(
+                        v.cmpge(cmin).all() && v.cmple(cmax).all(),
+                        "{v} outside box"
+                    );
                 }
             } else {
-                assert_eq!(node.count[k], 0);
                 assert!(node.child[k] > index, "children after their parent");
                 depth = depth.max(check(bvh, node.child[k], cmin, cmax, seen));
             }
@@ -1160,15 +1322,41 @@ mod tests {
         depth + 1
     }
 
+    /// Counts the polygons of a leaf block in `seen` (a quad fills two adjacent lanes), checks that its
+    /// lanes are the polygons' triangles, bit for bit, and that used lanes come first; returns the
+    /// polygons' vertices.
+    fn check_block(bvh: &Bvh, block: &Block, seen: &mut [u32]) -> Vec<DVec3> {
+        let mut vertices = Vec::new();
+        let used = block
+            .polygon
+            .iter()
+            .take_while(|&&p| p != EMPTY_LANE)
+            .count();
+        assert!(used > 0 && block.polygon[used..].iter().all(|&p| p == EMPTY_LANE));
+        let mut k = 0;
+        while k < used {
+            let shape = bvh.shape(block, k);
+            seen[block.polygon[k] as usize] += 1;
+            let v = shape.vertices();
+            for i in 1..v.len() - 1 {
+                assert_eq!(block.polygon[k], block.polygon[k + 1 - i]);
+                assert_eq!(block.lane(k), (v[0], v[i] - v[0], v[i + 1] - v[0]));
+                k += 1;
+            }
+            vertices.extend_from_slice(v);
+        }
+        vertices
+    }
+
     #[test]
     fn every_primitive_is_in_exactly_one_leaf_inside_its_boxes() {
-        for count in [1, 5, 9, 100, 5000] {
-            let shapes = random_triangles(count, count as u64);
+        for count in [1, 3, 5, 9, 100, 5000] {
+            let shapes = random_mixed(count, count as u64);
             let bvh = Bvh::new(&shapes);
             let mut seen = vec![0; count];
-            if bvh.root.count > 0 {
-                assert!(bvh.nodes.is_empty() && bvh.root.count as usize == count);
-                seen.iter_mut().for_each(|s| *s += 1);
+            if bvh.nodes.is_empty() {
+                assert_eq!(bvh.blocks.len(), 1);
+                check_block(&bvh, &bvh.blocks[0], &mut seen);
             } else {
                 let inf = DVec3::splat(f64::INFINITY);
                 let depth = check(&bvh, 0, -inf, inf, &mut seen);
@@ -1396,6 +1584,56 @@ mod tests {
             }
         }
         assert!(rejected > 1000, "the filter rejects misses: {rejected}");
+    }
+
+    /// The AVX2 filter gives, lane for lane, the scalar filter's answer, on triangles hit at their edges
+    /// and corners, nearly parallel rays, degenerate triangles and empty lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn filter_kernels_agree() {
+        if Kernel::detect() != Kernel::Avx2 {
+            return;
+        }
+        let mut rng = Pcg64Mcg::seed_from_u64(6);
+        let (mut kept, mut dropped) = (0, 0);
+        for i in 0..50_000 {
+            let mut v = || DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
+            let (o, target) = (v() * 3.0, v());
+            let mut block = Block::EMPTY;
+            for k in 0..LANES - usize::from(i % 3 == 0) {
+                let (a, mut e1, e2) = (v(), v(), v());
+                match (i + k) % 5 {
+                    // Through an edge or a corner.
+                    0 => e1 = (target - a) * 2.0,
+                    1 => e1 = target - a,
+                    // Degenerate.
+                    2 if i % 7 == 0 => e1 = e2 * 3.0,
+                    _ => {}
+                }
+                for axis in 0..3 {
+                    block.a[axis][k] = a[axis];
+                    block.e1[axis][k] = e1[axis];
+                    block.e2[axis][k] = e2[axis];
+                }
+                block.polygon[k] = k as u32;
+            }
+            let mut d = target - o;
+            if i % 4 == 0 {
+                // Nearly in the plane of lane 0.
+                let (_, e1, e2) = block.lane(0);
+                let n = e1.cross(e2).normalize();
+                d -= n * n.dot(d) * (1.0 - 1e-12);
+            }
+            let ray = Ray::new(o, d);
+            let want = Portable::filter(&ray, &block);
+            assert_eq!(Avx2::filter(&ray, &block), want, "case {i}");
+            kept += want.count_ones();
+            dropped += LANES as u32 - want.count_ones();
+        }
+        assert!(
+            kept > 10_000 && dropped > 10_000,
+            "{kept} kept, {dropped} dropped"
+        );
     }
 
     #[test]
