@@ -27,7 +27,7 @@ use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::hierarchy::{ElementId, Hierarchy, LinkCoupling};
-use crate::visibility::shaft::{ShaftTest, ShaftVerdict};
+use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 
 /// How link couplings are computed.
@@ -75,12 +75,33 @@ pub fn couple(
     settings: &CouplingSettings,
     known: Option<ShaftVerdict>,
 ) -> Coupling {
+    let prior = known.map_or(ShaftPrior::Unknown, ShaftPrior::Verdict);
+    couple_with_prior(hierarchy, visibility, receiver, source, settings, prior)
+}
+
+/// [`couple`], with what the parent link's shaft test left to this one: a verdict to take as is, or
+/// the occluder list its own test only needs to examine.
+pub fn couple_with_prior(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    settings: &CouplingSettings,
+    prior: ShaftPrior,
+) -> Coupling {
     if hierarchy.is_cluster(receiver) || hierarchy.is_cluster(source) {
         return couple_cluster(hierarchy, visibility, receiver, source, settings);
     }
-    let tested = match known {
-        Some(_) => None,
-        None => shaft_test(hierarchy, visibility, receiver, source),
+    let (known, tested) = match prior {
+        ShaftPrior::Verdict(verdict) => (Some(verdict), None),
+        ShaftPrior::Among(list) => (
+            None,
+            shaft_test(hierarchy, visibility, receiver, source, Some(list)),
+        ),
+        ShaftPrior::Unknown => (
+            None,
+            shaft_test(hierarchy, visibility, receiver, source, None),
+        ),
     };
     let shaft = known.or(tested.map(|t| t.verdict));
     // A Partial shaft with few polygons in it: rays test only those.
@@ -199,12 +220,14 @@ pub fn couple(
     }
 }
 
-/// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one.
+/// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one;
+/// `among`: the complete occluder list of a test of a shaft that holds this one, if known.
 pub fn shaft_test(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
+    among: Option<&[u32]>,
 ) -> Option<ShaftTest> {
     let culler = visibility.shafts()?;
     let (r, s) = (hierarchy.patch_of(receiver), hierarchy.patch_of(source));
@@ -213,6 +236,7 @@ pub fn shaft_test(
         r.polygon,
         hierarchy.element(source).shape(),
         s.polygon,
+        among,
     ))
 }
 
