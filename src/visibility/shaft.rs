@@ -680,8 +680,11 @@ mod tests {
             clear >= 100 && blocked >= 100 && partial >= 100,
             "{clear} {blocked} {partial}"
         );
+        // Sub-shafts of Partial ones are rarely blocked by a single polygon, so only Clear (the list
+        // deciding without rays) and Partial must both occur often enough to mean something.
         assert!(
-            sub_verdicts.iter().all(|&n| n >= 20),
+            sub_verdicts[ShaftVerdict::Clear as usize] >= 50
+                && sub_verdicts[ShaftVerdict::Partial as usize] >= 50,
             "sub-shaft verdicts (clear, blocked, partial): {sub_verdicts:?}"
         );
     }
