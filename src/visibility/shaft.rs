@@ -542,6 +542,29 @@ mod tests {
         }
     }
 
+    /// How many of `n` random segments between the pair are open to the brute-force rays, checking on
+    /// each that the occluder list of `test` (if any) blocks exactly what the rays block.
+    fn open_segments(
+        rng: &mut Pcg64Mcg,
+        culler: &ShaftCuller,
+        rays: &BruteForce,
+        test: &ShaftTest,
+        (a, b): (&Shape, &Shape),
+        n: usize,
+    ) -> usize {
+        (0..n)
+            .filter(|_| {
+                let x = a.sample_uniform(DVec2::new(rng.random(), rng.random()));
+                let y = b.sample_uniform(DVec2::new(rng.random(), rng.random()));
+                let blocked = rays.segment_occluded(x, y);
+                if let Some(list) = test.occluders() {
+                    assert_eq!(culler.segment_occluded_among(list, x, y), blocked);
+                }
+                !blocked
+            })
+            .count()
+    }
+
     /// Ground truth for the verdicts: random configurations of two facing polygons and random
     /// occluders (small and large, between them, beside them, and in the receiver's plane), with the
     /// brute-force ray test on random segments between the two. A Clear verdict must never see a
@@ -628,17 +651,7 @@ mod tests {
             let culler = ShaftCuller::new(&shapes);
             let test = culler.classify(&a, 0, &b, 1, None);
             let rays = BruteForce::new(shapes.clone());
-            let open = (0..200)
-                .filter(|_| {
-                    let x = a.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    let y = b.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    let blocked = rays.segment_occluded(x, y);
-                    if let Some(list) = test.occluders() {
-                        assert_eq!(culler.segment_occluded_among(list, x, y), blocked);
-                    }
-                    !blocked
-                })
-                .count();
+            let open = open_segments(&mut rng, &culler, &rays, &test, (&a, &b), 200);
             match test.verdict {
                 ShaftVerdict::Clear => {
                     clear += 1;
@@ -658,17 +671,7 @@ mod tests {
             let (ca, cb) = (a.subdivide(), b.subdivide());
             let (ca, cb) = (ca[rng.random_range(0..4)], cb[rng.random_range(0..4)]);
             let sub = culler.classify(&ca, 0, &cb, 1, Some(list));
-            let open = (0..50)
-                .filter(|_| {
-                    let x = ca.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    let y = cb.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    let blocked = rays.segment_occluded(x, y);
-                    if let Some(sub_list) = sub.occluders() {
-                        assert_eq!(culler.segment_occluded_among(sub_list, x, y), blocked);
-                    }
-                    !blocked
-                })
-                .count();
+            let open = open_segments(&mut rng, &culler, &rays, &sub, (&ca, &cb), 50);
             match sub.verdict {
                 ShaftVerdict::Clear => assert_eq!(open, 50, "Clear sub-shaft blocked: {shapes:?}"),
                 ShaftVerdict::Blocked => assert_eq!(open, 0, "Blocked sub-shaft open: {shapes:?}"),
