@@ -249,6 +249,27 @@ impl<'a> SampleEnd<'a> {
         }
     }
 
+    /// [`mean_cosine`] of this end (element `id`, toward `toward`); with item buffers, from the visible
+    /// projected areas its sampling weights already hold (their running sum, the same additions in the
+    /// same order), rather than drawing on the item buffer cache a second time.
+    fn mean_cosine(
+        &self,
+        h: &Hierarchy,
+        id: ElementId,
+        toward: DVec3,
+        kind: ClusteringKind,
+    ) -> f64 {
+        let area = h.element(id).area;
+        match self {
+            SampleEnd::Cluster {
+                orientation: None,
+                cumulative,
+                ..
+            } if area > 0.0 => cumulative.last().copied().unwrap_or(0.0) / area,
+            _ => mean_cosine(h, id, toward, kind),
+        }
+    }
+
     /// A sample point, or `None` when nothing at this end faces the other.
     fn sample(&self, h: &Hierarchy, rng: &mut Pcg64Mcg) -> Option<DVec3> {
         let uv = DVec2::new(rng.random(), rng.random());
@@ -313,12 +334,12 @@ pub fn couple_cluster(
         }
         total / samples as f64
     };
-    let c_source = mean_cosine(h, source, r_centre, kind);
+    let c_source = source_end.mean_cosine(h, source, r_centre, kind);
     let mut block = vec![0.0; size * size];
     // Per receiver node: δ_{j,β}(x_k) (only β = 1 is non-zero) and the point factor K_{j,1}(x_k).
     let (errors, node_factors, unoccluded) = match &r.kind {
         ElementKind::Cluster(_) => {
-            let c_receiver = mean_cosine(h, receiver, s_centre, kind);
+            let c_receiver = receiver_end.mean_cosine(h, receiver, s_centre, kind);
             let r2 = (s_centre - r_centre).length_squared().max(1e-300);
             // The source's factor is bounded by 1 before the receiver's mean cosine scales it, so that
             // no patch the cluster shares the irradiance with (by its projected area) gets a factor

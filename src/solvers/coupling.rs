@@ -27,7 +27,7 @@ use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::hierarchy::{ElementId, ErrorStorage, Hierarchy, LinkCoupling};
-use crate::visibility::shaft::{ShaftTest, ShaftVerdict};
+use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 
 /// How link couplings are computed.
@@ -69,7 +69,7 @@ pub struct Coupling {
 
 /// Algorithm 4.1 for the link `source` → `receiver`, with the shaft verdict `known` inherited from the
 /// parent link (or found earlier), if any; links with a cluster at either end are coupled by
-/// [`couple_cluster`]. The error coefficients are stored as `settings.error_storage` says.
+/// [`couple_cluster`].
 pub fn couple(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
@@ -78,7 +78,22 @@ pub fn couple(
     settings: &CouplingSettings,
     known: Option<ShaftVerdict>,
 ) -> Coupling {
-    let coupled = couple_in_full(hierarchy, visibility, receiver, source, settings, known);
+    let prior = known.map_or(ShaftPrior::Unknown, ShaftPrior::Verdict);
+    couple_with_prior(hierarchy, visibility, receiver, source, settings, prior)
+}
+
+/// [`couple`], with what the parent link's shaft test left to this one: a verdict to take as is, or
+/// the occluder list its own test only needs to examine. The error coefficients are stored as
+/// `settings.error_storage` says.
+pub fn couple_with_prior(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    settings: &CouplingSettings,
+    prior: ShaftPrior,
+) -> Coupling {
+    let coupled = couple_in_full(hierarchy, visibility, receiver, source, settings, prior);
     match settings.error_storage {
         ErrorStorage::Full => coupled,
         ErrorStorage::Reduced => Coupling {
@@ -90,21 +105,28 @@ pub fn couple(
     }
 }
 
-/// [`couple`] with every error coefficient `δ_{j,β}(x_k)`.
+/// [`couple_with_prior`] with every error coefficient `δ_{j,β}(x_k)`.
 fn couple_in_full(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
     settings: &CouplingSettings,
-    known: Option<ShaftVerdict>,
+    prior: ShaftPrior,
 ) -> Coupling {
     if hierarchy.is_cluster(receiver) || hierarchy.is_cluster(source) {
         return couple_cluster(hierarchy, visibility, receiver, source, settings);
     }
-    let tested = match known {
-        Some(_) => None,
-        None => shaft_test(hierarchy, visibility, receiver, source),
+    let (known, tested) = match prior {
+        ShaftPrior::Verdict(verdict) => (Some(verdict), None),
+        ShaftPrior::Among(list) => (
+            None,
+            shaft_test(hierarchy, visibility, receiver, source, Some(list)),
+        ),
+        ShaftPrior::Unknown => (
+            None,
+            shaft_test(hierarchy, visibility, receiver, source, None),
+        ),
     };
     let shaft = known.or(tested.map(|t| t.verdict));
     // A Partial shaft with few polygons in it: rays test only those.
@@ -223,12 +245,14 @@ fn couple_in_full(
     }
 }
 
-/// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one.
+/// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one;
+/// `among`: the complete occluder list of a test of a shaft that holds this one, if known.
 pub fn shaft_test(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
+    among: Option<&[u32]>,
 ) -> Option<ShaftTest> {
     let culler = visibility.shafts()?;
     let (r, s) = (hierarchy.patch_of(receiver), hierarchy.patch_of(source));
@@ -237,6 +261,7 @@ pub fn shaft_test(
         r.polygon,
         hierarchy.element(source).shape(),
         s.polygon,
+        among,
     ))
 }
 

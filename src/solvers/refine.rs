@@ -6,13 +6,13 @@
 //! link sets therefore do not depend on the number of threads.
 
 use super::clustering::{cluster_can_interact, transport_bound};
-use super::coupling::{couple, shaft_test, visibility_error, CouplingSettings};
+use super::coupling::{couple_with_prior, shaft_test, visibility_error, CouplingSettings};
 use super::link_rng;
 use crate::geometry::Shape;
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
-use crate::visibility::shaft::ShaftVerdict;
+use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 use rayon::prelude::*;
 
@@ -31,6 +31,10 @@ pub struct Candidate {
     /// The shaft verdict on this link: its own test's, or a Clear or Blocked one inherited from the
     /// link it was refined from (whose shaft holds this one's).
     pub shaft: Option<ShaftVerdict>,
+    /// Where the verdict is not known: the complete occluder list of a Partial test of an ancestor
+    /// link's shaft, as an index into the table of such tests that one [`refine`] call keeps, so
+    /// that this link's own test examines only those polygons ([`ShaftPrior::Among`]).
+    pub occluders: Option<u32>,
 }
 
 impl Candidate {
@@ -39,6 +43,7 @@ impl Candidate {
         source: ElementId,
         inherited_visibility: Option<f32>,
         shaft: Option<ShaftVerdict>,
+        occluders: Option<u32>,
     ) -> Self {
         Candidate {
             receiver,
@@ -47,6 +52,19 @@ impl Candidate {
             oracle_factor: None,
             inherited_visibility,
             shaft,
+            occluders,
+        }
+    }
+
+    /// What this link knows of its shaft before a test of its own; `tests` is the table its
+    /// `occluders` index.
+    fn shaft_prior<'a>(&self, tests: &'a [ShaftTest]) -> ShaftPrior<'a> {
+        match (self.shaft, self.occluders) {
+            (Some(verdict), _) => ShaftPrior::Verdict(verdict),
+            (None, Some(k)) => tests[k as usize]
+                .occluders()
+                .map_or(ShaftPrior::Unknown, ShaftPrior::Among),
+            (None, None) => ShaftPrior::Unknown,
         }
     }
 }
@@ -126,7 +144,7 @@ pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
 /// reflect nothing and sources that can never radiate are skipped.
 pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
     if let Some(root) = hierarchy.root_cluster {
-        return vec![Candidate::new(root, root, None, None)];
+        return vec![Candidate::new(root, root, None, None, None)];
     }
     let patches = &hierarchy.patches;
     (0..patches.len())
@@ -134,7 +152,7 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
         .flat_map_iter(|i| {
             (0..patches.len())
                 .filter(move |&j| initially_linked(hierarchy, i, j))
-                .map(move |j| Candidate::new(patches[i].root, patches[j].root, None, None))
+                .map(move |j| Candidate::new(patches[i].root, patches[j].root, None, None, None))
         })
         .collect()
 }
@@ -234,6 +252,7 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
                 oracle_factor: link.oracle_factor,
                 inherited_visibility: None,
                 shaft: link.shaft,
+                occluders: None,
             });
         }
     }
@@ -312,6 +331,8 @@ pub fn refine_scheduled(
 ) -> RefineOutcome {
     let mut outcome = RefineOutcome::default();
     let mut admissible: Vec<Candidate> = Vec::new();
+    // Partial shaft tests of refined links whose occluder lists their descendants' tests examine.
+    let mut partial_tests: Vec<ShaftTest> = Vec::new();
     let mut round = 0;
     while !candidates.is_empty() {
         round += 1;
@@ -323,7 +344,7 @@ pub fn refine_scheduled(
             };
             candidates
                 .par_iter()
-                .map(|c| decide(&context, oracle, settings, c))
+                .map(|c| decide(&context, oracle, settings, c, &partial_tests))
                 .collect()
         };
         if let Some(schedule) = schedule.as_deref_mut() {
@@ -373,6 +394,15 @@ pub fn refine_scheduled(
                 .filter(|v| *v > 0.0 && *v < 1.0);
             let shaft = verdict.shaft.or(c.shaft);
             let inherited = shaft.and_then(ShaftVerdict::inherited);
+            // Children test only the polygons this link's Partial shaft holds (or an ancestor's).
+            let occluders = match verdict.partial_test {
+                _ if inherited.is_some() || decision == Decision::Admissible => c.occluders,
+                Some(test) => {
+                    partial_tests.push(*test);
+                    Some(partial_tests.len() as u32 - 1)
+                }
+                None => c.occluders,
+            };
             match decision {
                 Decision::Admissible if verdict.no_interaction => {}
                 Decision::Admissible => admissible.push(Candidate {
@@ -388,7 +418,7 @@ pub fn refine_scheduled(
                     for &a in &children {
                         for &b in &children {
                             if a != b || hierarchy.is_cluster(a) {
-                                push_if_interacting(hierarchy, &mut next, a, b, None, None);
+                                push_if_interacting(hierarchy, &mut next, a, b, None, None, None);
                             }
                         }
                     }
@@ -400,7 +430,7 @@ pub fn refine_scheduled(
                     }
                     for child in hierarchy.split(c.receiver) {
                         push_if_interacting(
-                            hierarchy, &mut next, child, c.source, partial, inherited,
+                            hierarchy, &mut next, child, c.source, partial, inherited, occluders,
                         );
                     }
                 }
@@ -411,7 +441,7 @@ pub fn refine_scheduled(
                     }
                     for child in hierarchy.split(c.source) {
                         push_if_interacting(
-                            hierarchy, &mut next, c.receiver, child, partial, inherited,
+                            hierarchy, &mut next, c.receiver, child, partial, inherited, occluders,
                         );
                     }
                 }
@@ -436,13 +466,13 @@ pub fn refine_scheduled(
                 Coupled::default(),
             ),
             None => {
-                let k = couple(
+                let k = couple_with_prior(
                     h,
                     visibility,
                     c.receiver,
                     c.source,
                     &settings.coupling,
-                    c.shaft,
+                    c.shaft_prior(&partial_tests),
                 );
                 let cost = Coupled {
                     rays: k.rays,
@@ -490,6 +520,7 @@ fn push_if_interacting(
     source: ElementId,
     inherited_visibility: Option<f32>,
     shaft: Option<ShaftVerdict>,
+    occluders: Option<u32>,
 ) {
     let (reflectance, _) = h.optics_of(receiver);
     let (source_reflectance, source_emission) = h.optics_of(source);
@@ -509,6 +540,7 @@ fn push_if_interacting(
             source,
             inherited_visibility,
             shaft,
+            occluders,
         ));
     }
 }
@@ -528,6 +560,9 @@ struct Verdict {
     /// The shaft verdict found while judging (a coupling's, or the test of a link to be refined, which
     /// its children inherit when Clear or Blocked).
     shaft: Option<ShaftVerdict>,
+    /// The Partial test of a link to be refined, when its occluder list is complete (boxed: few
+    /// verdicts carry one).
+    partial_test: Option<Box<ShaftTest>>,
     shaft_tests: u64,
     rays_saved: u64,
     /// The error estimate compared with the threshold (for a [`RefinementSchedule`]).
@@ -544,6 +579,7 @@ impl Verdict {
             coupling_rays: 0,
             no_interaction: false,
             shaft: None,
+            partial_test: None,
             shaft_tests: 0,
             rays_saved: 0,
             error: 0.0,
@@ -560,6 +596,7 @@ fn decide(
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
     c: &Candidate,
+    partial_tests: &[ShaftTest],
 ) -> Verdict {
     let h = context.hierarchy;
     if c.receiver == c.source {
@@ -579,13 +616,13 @@ fn decide(
     let mut verdict = Verdict::admissible(None);
     let (error, threshold, split) = if oracle.judges_couplings() {
         if c.coupling.is_none() {
-            let mut k = couple(
+            let mut k = couple_with_prior(
                 h,
                 context.visibility,
                 c.receiver,
                 c.source,
                 &settings.coupling,
-                c.shaft,
+                c.shaft_prior(partial_tests),
             );
             verdict.shaft = k.shaft;
             verdict.shaft_tests = u64::from(c.shaft.is_none() && k.shaft.is_some());
@@ -644,9 +681,16 @@ fn decide(
     };
     // A link about to be refined tests its shaft once, so that its children inherit a Clear or
     // Blocked verdict instead of each casting its own rays (or testing its own, smaller shaft).
+    // Where its own test finds it Partial, they examine only the occluders it lists.
     if verdict.decision != Decision::Admissible && c.shaft.is_none() && verdict.shaft.is_none() {
-        verdict.shaft = shaft_test(h, context.visibility, c.receiver, c.source).map(|t| t.verdict);
-        verdict.shaft_tests = u64::from(verdict.shaft.is_some());
+        let among = match c.shaft_prior(partial_tests) {
+            ShaftPrior::Among(list) => Some(list),
+            _ => None,
+        };
+        let test = shaft_test(h, context.visibility, c.receiver, c.source, among);
+        verdict.shaft = test.map(|t| t.verdict);
+        verdict.shaft_tests = u64::from(test.is_some());
+        verdict.partial_test = test.filter(|t| t.occluders().is_some()).map(Box::new);
     }
     verdict
 }

@@ -5,7 +5,9 @@
 //! (Bekaert–Willems Algorithm 4.1 step 1): nothing in the way ([`ShaftVerdict::Clear`]), one polygon
 //! across all of it ([`ShaftVerdict::Blocked`]), or neither ([`ShaftVerdict::Partial`]). A refined
 //! link's shaft lies inside its parent's, so its children inherit a Clear or Blocked verdict with no
-//! test at all (Sillion–Drettakis issue item "visibility reuse"; `solvers::refine`).
+//! test at all (Sillion–Drettakis issue item "visibility reuse"; `solvers::refine`), and a Partial
+//! verdict's complete occluder list, so that their own tests examine only those polygons instead of
+//! walking the tree ([`ShaftPrior::Among`], Haines–Wallace's candidate list passed down).
 //!
 //! The verdicts are conservative, so that with exact ray casting a coupling computed from them is the
 //! one the rays would give: Clear only when no polygon but the two the elements lie on reaches into
@@ -18,6 +20,7 @@ use super::brute_force::ray_polygon;
 use super::{Hit, Visibility, SEGMENT_EPSILON};
 use crate::geometry::{Aabb, DVec3, Ray, Shape};
 use crate::hierarchy::clusters::{Child, ClusterTree, ClusterTreeKind, Item};
+use std::ops::ControlFlow;
 
 /// How link couplings find their visibility (`--visibility-reuse`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -49,6 +52,19 @@ impl ShaftVerdict {
     }
 }
 
+/// What a link knows of its shaft before any test of its own, from the link it was refined from (whose
+/// shaft holds its own).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum ShaftPrior<'a> {
+    /// Nothing: a test walks the whole cluster tree.
+    #[default]
+    Unknown,
+    /// A Clear or Blocked verdict, taken as is without a test.
+    Verdict(ShaftVerdict),
+    /// The complete occluder list of a Partial test of the parent's shaft: a test examines only these.
+    Among(&'a [u32]),
+}
+
 /// Relative distance (to the coordinates' magnitude) within which a polygon counts as touching a face
 /// of the shaft rather than reaching into it. A segment between interior points of the two elements
 /// stays far inside the hull except near its own ends, which lie on the elements (and whose first and
@@ -64,86 +80,128 @@ const BLOCK_T_MARGIN: f64 = 1e-3;
 /// stops and the verdict is Partial (bounds the cost of large shafts, which are rarely blocked).
 const MAX_PARTIAL_OCCLUDERS: usize = 16;
 
-/// The convex hull of two elements' vertices as outward planes `n · p ≤ d`, with its bounding box.
+/// Most vertices of a shaft: the corners of two quads.
+const MAX_SHAFT_POINTS: usize = 8;
+
+/// Candidate faces of a shaft: each element's own plane, and every plane through an edge of one element
+/// and a vertex of the other (2 + 2 · 4 · 4).
+const MAX_SHAFT_PLANES: usize = 34;
+
+/// The convex hull of two elements' vertices as outward planes `n · p ≤ d`, with its bounding box; kept
+/// in fixed arrays, since a shaft is built for every test.
 #[derive(Clone, Debug)]
 pub struct Shaft {
-    points: Vec<DVec3>,
-    planes: Vec<(DVec3, f64)>,
+    points: [DVec3; MAX_SHAFT_POINTS],
+    point_count: usize,
+    planes: [(DVec3, f64); MAX_SHAFT_PLANES],
+    plane_count: usize,
     bounds: Aabb,
     /// `TOUCH` times the coordinates' magnitude.
     touch: f64,
 }
 
 impl Shaft {
-    /// The hull of the vertices of `a` and `b`: every plane through three of the (at most eight) points
-    /// that has all the points on one side is a face. A plane is moved out to the farthest point, so
+    /// The hull of the vertices of `a` and `b`. A face of the hull of two convex planar polygons meets
+    /// each of them in a vertex, an edge or the whole polygon (it is a supporting plane), and holds at
+    /// least three points, so it is one polygon's plane or a plane through an edge of one and a vertex
+    /// of the other (Haines–Wallace's edge–vertex planes): only those candidates are tried, and one is a
+    /// face when all the points lie on one side of it. A plane is moved out to the farthest point, so
     /// the hull lies inside the shaft up to the rounding of one dot product; a face the rounding hides
     /// only makes the shaft larger (conservative).
     pub fn new(a: &Shape, b: &Shape) -> Shaft {
-        let points: Vec<DVec3> = a.vertices().iter().chain(b.vertices()).copied().collect();
-        let mut bounds = Aabb::EMPTY;
-        points.iter().for_each(|&p| bounds.grow(p));
+        let mut shaft = Shaft {
+            points: [DVec3::ZERO; MAX_SHAFT_POINTS],
+            point_count: 0,
+            planes: [(DVec3::ZERO, 0.0); MAX_SHAFT_PLANES],
+            plane_count: 0,
+            bounds: Aabb::EMPTY,
+            touch: 0.0,
+        };
+        for &p in a.vertices().iter().chain(b.vertices()) {
+            shaft.points[shaft.point_count] = p;
+            shaft.point_count += 1;
+            shaft.bounds.grow(p);
+        }
+        let bounds = shaft.bounds;
         let magnitude = bounds.min.abs().max(bounds.max.abs()).max_element() + bounds.diagonal();
+        shaft.touch = TOUCH * magnitude;
         let support = 1e-12 * magnitude;
-        let mut planes: Vec<(DVec3, f64)> = Vec::new();
-        let n = points.len();
-        for i in 0..n {
-            for j in i + 1..n {
-                for k in j + 1..n {
-                    let (e1, e2) = (points[j] - points[i], points[k] - points[i]);
-                    let normal = e1.cross(e2);
-                    let length = normal.length();
-                    if length <= 1e-9 * e1.length() * e2.length() {
-                        continue;
-                    }
-                    let normal = normal / length;
-                    let offset = normal.dot(points[i]);
-                    let (low, high) = points.iter().fold((0.0f64, 0.0f64), |(lo, hi), p| {
-                        let s = normal.dot(*p) - offset;
-                        (lo.min(s), hi.max(s))
-                    });
-                    let plane = if high <= support {
-                        (normal, offset + high)
-                    } else if low >= -support {
-                        (-normal, -(offset + low))
-                    } else {
-                        continue;
-                    };
-                    let known = planes.iter().any(|(m, d)| {
-                        m.dot(plane.0) > 1.0 - 1e-12 && (d - plane.1).abs() <= support
-                    });
-                    if !known {
-                        planes.push(plane);
-                    }
+        for (own, other) in [(a.vertices(), b.vertices()), (b.vertices(), a.vertices())] {
+            shaft.add_face(own[0], own[1], own[2], support);
+            for (e, &p) in own.iter().enumerate() {
+                let q = own[(e + 1) % own.len()];
+                for &r in other {
+                    shaft.add_face(p, q, r, support);
                 }
             }
         }
-        Shaft {
-            points,
-            planes,
-            bounds,
-            touch: TOUCH * magnitude,
+        shaft
+    }
+
+    /// The shaft's corners (the two elements' vertices).
+    fn points(&self) -> &[DVec3] {
+        &self.points[..self.point_count]
+    }
+
+    /// The outward planes `(n, d)` found so far.
+    fn planes(&self) -> &[(DVec3, f64)] {
+        &self.planes[..self.plane_count]
+    }
+
+    /// Adds the plane through `p`, `q`, `r` as a face, oriented outward and moved out to the farthest
+    /// point, when every point lies on one side of it (within `support`) and no face holds it already.
+    fn add_face(&mut self, p: DVec3, q: DVec3, r: DVec3, support: f64) {
+        let (e1, e2) = (q - p, r - p);
+        let normal = e1.cross(e2);
+        let length = normal.length();
+        if length <= 1e-9 * e1.length() * e2.length() {
+            return;
+        }
+        let normal = normal / length;
+        let offset = normal.dot(p);
+        let (low, high) = self.points().iter().fold((0.0f64, 0.0f64), |(lo, hi), x| {
+            let s = normal.dot(*x) - offset;
+            (lo.min(s), hi.max(s))
+        });
+        let plane = if high <= support {
+            (normal, offset + high)
+        } else if low >= -support {
+            (-normal, -(offset + low))
+        } else {
+            return;
+        };
+        let known = self
+            .planes()
+            .iter()
+            .any(|(m, d)| m.dot(plane.0) > 1.0 - 1e-12 && (d - plane.1).abs() <= support);
+        if !known {
+            self.planes[self.plane_count] = plane;
+            self.plane_count += 1;
         }
     }
 
     /// Whether a box lies outside the shaft (at most touching it).
     fn excludes_box(&self, b: &Aabb) -> bool {
         let t = self.touch;
-        if (b.max - self.bounds.min).min_element() <= t
-            || (self.bounds.max - b.min).min_element() <= t
-        {
+        if self.beside_bounds(b) {
             return true;
         }
-        self.planes.iter().any(|&(n, d)| {
+        self.planes().iter().any(|&(n, d)| {
             // The box corner deepest inside the plane.
             let corner = DVec3::select(n.cmpge(DVec3::ZERO), b.min, b.max);
             n.dot(corner) - d >= -t
         })
     }
 
+    /// Whether a box lies outside the shaft's bounding box (at most touching it).
+    fn beside_bounds(&self, b: &Aabb) -> bool {
+        let t = self.touch;
+        (b.max - self.bounds.min).min_element() <= t || (self.bounds.max - b.min).min_element() <= t
+    }
+
     /// Whether a point set lies outside the shaft (at most touching it) by one of its faces.
     fn excludes_points(&self, vertices: &[DVec3]) -> bool {
-        self.planes
+        self.planes()
             .iter()
             .any(|&(n, d)| vertices.iter().all(|v| n.dot(*v) - d >= -self.touch))
     }
@@ -153,7 +211,8 @@ impl Shaft {
     fn beside_plane(&self, normal: DVec3, offset: f64) -> bool {
         let signed = |p: &DVec3| normal.dot(*p) - offset;
         let t = self.touch;
-        self.points.iter().all(|p| signed(p) >= -t) || self.points.iter().all(|p| signed(p) <= t)
+        self.points().iter().all(|p| signed(p) >= -t)
+            || self.points().iter().all(|p| signed(p) <= t)
     }
 }
 
@@ -196,17 +255,23 @@ fn blocks(occluder: &[DVec3], a: &[DVec3], b: &[DVec3], touch: f64) -> bool {
         return false;
     }
     let offset = normal.dot(occluder[0]);
-    let side = |p: &DVec3| normal.dot(*p) - offset;
-    let (sa, sb): (Vec<f64>, Vec<f64>) =
-        (a.iter().map(side).collect(), b.iter().map(side).collect());
+    let side = |p: &[DVec3]| {
+        let mut s = [0.0; 4];
+        s.iter_mut()
+            .zip(p)
+            .for_each(|(s, p)| *s = normal.dot(*p) - offset);
+        s
+    };
+    let (sa, sb) = (side(a), side(b));
+    let (sa, sb) = (&sa[..a.len()], &sb[..b.len()]);
     let opposite = (sa.iter().all(|&s| s > touch) && sb.iter().all(|&s| s < -touch))
         || (sa.iter().all(|&s| s < -touch) && sb.iter().all(|&s| s > touch));
     if !opposite {
         return false;
     }
     let m = occluder.len();
-    a.iter().zip(&sa).all(|(pa, &da)| {
-        b.iter().zip(&sb).all(|(pb, &db)| {
+    a.iter().zip(sa).all(|(pa, &da)| {
+        b.iter().zip(sb).all(|(pb, &db)| {
             let t = da / (da - db);
             if !(BLOCK_T_MARGIN..=1.0 - BLOCK_T_MARGIN).contains(&t) {
                 return false;
@@ -218,6 +283,11 @@ fn blocks(occluder: &[DVec3], a: &[DVec3], b: &[DVec3], touch: f64) -> bool {
             })
         })
     })
+}
+
+thread_local! {
+    /// The tree walk's stack of [`ShaftCuller::classify`], reused by every test on a thread.
+    static STACK: std::cell::RefCell<Vec<Child>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// A cluster tree over the scene's polygons (the same polygons, in the same order, as the ray-casting
@@ -256,8 +326,18 @@ impl ShaftCuller {
 
     /// The verdict on every segment between `a` (on polygon `polygon_a`) and `b` (on `polygon_b`);
     /// the two polygons themselves are not occluders when planar (segments leave their planes at once,
-    /// and the rays ignore hits in the plane of their origin).
-    pub fn classify(&self, a: &Shape, polygon_a: usize, b: &Shape, polygon_b: usize) -> ShaftTest {
+    /// and the rays ignore hits in the plane of their origin). With `among`, the complete occluder list
+    /// of a Partial test of a shaft that holds this one (the parent link's, [`ShaftTest::occluders`]),
+    /// only those polygons are examined: nothing else can reach into this shaft (Haines–Wallace's
+    /// candidate list, passed down the link hierarchy), so no tree walk is needed.
+    pub fn classify(
+        &self,
+        a: &Shape,
+        polygon_a: usize,
+        b: &Shape,
+        polygon_b: usize,
+        among: Option<&[u32]>,
+    ) -> ShaftTest {
         let mut test = ShaftTest {
             verdict: ShaftVerdict::Clear,
             occluders: [0; MAX_PARTIAL_OCCLUDERS],
@@ -266,51 +346,42 @@ impl ShaftCuller {
         let Some(root) = self.tree.root() else {
             return test;
         };
-        let shaft = Shaft::new(a, b);
-        let mut stack = vec![Child::Node(root)];
-        while let Some(child) = stack.pop() {
-            match child {
-                Child::Node(n) => {
-                    let node = &self.tree.nodes[n as usize];
-                    if !shaft.excludes_box(&node.bounds) {
-                        stack.extend(node.children.iter().rev());
-                    }
+        let query = Query {
+            shaft: Shaft::new(a, b),
+            a,
+            polygon_a,
+            b,
+            polygon_b,
+        };
+        if let Some(list) = among {
+            for &i in list {
+                if query.examine(self, i as usize, &mut test).is_break() {
+                    break;
                 }
-                Child::Item(i) => {
-                    let i = i as usize;
-                    let shape = &self.shapes[i];
-                    if shaft.excludes_points(shape.vertices()) {
-                        continue;
+            }
+            return test;
+        }
+        // The walk's stack is kept per thread: a shaft test runs for every link, and allocating it
+        // each time showed in profiles.
+        STACK.with_borrow_mut(|stack| {
+            stack.clear();
+            stack.push(Child::Node(root));
+            while let Some(child) = stack.pop() {
+                match child {
+                    Child::Node(n) => {
+                        let node = &self.tree.nodes[n as usize];
+                        if !query.shaft.excludes_box(&node.bounds) {
+                            stack.extend(node.children.iter().rev());
+                        }
                     }
-                    for piece in convex_pieces(shape) {
-                        let occluder = corners(&piece);
-                        let normal = (occluder[1] - occluder[0])
-                            .cross(occluder[2] - occluder[0])
-                            .normalize_or_zero();
-                        let whole = occluder.len() == shape.vertices().len();
-                        let in_plane = normal != DVec3::ZERO
-                            && shaft.beside_plane(normal, normal.dot(occluder[0]));
-                        if in_plane || (whole && (i == polygon_a || i == polygon_b)) {
-                            continue;
-                        }
-                        if blocks(occluder, a.vertices(), b.vertices(), shaft.touch) {
-                            test.verdict = ShaftVerdict::Blocked;
-                            return test;
-                        }
-                        test.verdict = ShaftVerdict::Partial;
-                        let count = usize::from(test.count);
-                        if test.occluders[..count].last() != Some(&(i as u32)) {
-                            if count == MAX_PARTIAL_OCCLUDERS {
-                                test.count = u8::MAX;
-                                return test;
-                            }
-                            test.occluders[count] = i as u32;
-                            test.count += 1;
+                    Child::Item(i) => {
+                        if query.examine(self, i as usize, &mut test).is_break() {
+                            break;
                         }
                     }
                 }
             }
-        }
+        });
         test
     }
 
@@ -323,6 +394,59 @@ impl ShaftCuller {
             let v = self.shapes[i as usize].vertices();
             ray_polygon(&ray, v, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON).is_some()
         })
+    }
+}
+
+/// One shaft test in progress: the shaft and the two elements with the polygons they lie on.
+struct Query<'a> {
+    shaft: Shaft,
+    a: &'a Shape,
+    polygon_a: usize,
+    b: &'a Shape,
+    polygon_b: usize,
+}
+
+impl Query<'_> {
+    /// Examines scene polygon `i` against the shaft and records what it does in `test`; breaks when
+    /// the verdict is final (Blocked, or more occluders than a list holds).
+    fn examine(&self, culler: &ShaftCuller, i: usize, test: &mut ShaftTest) -> ControlFlow<()> {
+        let shape = &culler.shapes[i];
+        if self.shaft.beside_bounds(&shape.bounds()) || self.shaft.excludes_points(shape.vertices())
+        {
+            return ControlFlow::Continue(());
+        }
+        for piece in convex_pieces(shape) {
+            let occluder = corners(&piece);
+            let normal = (occluder[1] - occluder[0])
+                .cross(occluder[2] - occluder[0])
+                .normalize_or_zero();
+            let whole = occluder.len() == shape.vertices().len();
+            let in_plane =
+                normal != DVec3::ZERO && self.shaft.beside_plane(normal, normal.dot(occluder[0]));
+            if in_plane || (whole && (i == self.polygon_a || i == self.polygon_b)) {
+                continue;
+            }
+            if blocks(
+                occluder,
+                self.a.vertices(),
+                self.b.vertices(),
+                self.shaft.touch,
+            ) {
+                test.verdict = ShaftVerdict::Blocked;
+                return ControlFlow::Break(());
+            }
+            test.verdict = ShaftVerdict::Partial;
+            let count = usize::from(test.count);
+            if test.occluders[..count].last() != Some(&(i as u32)) {
+                if count == MAX_PARTIAL_OCCLUDERS {
+                    test.count = u8::MAX;
+                    return ControlFlow::Break(());
+                }
+                test.occluders[count] = i as u32;
+                test.count += 1;
+            }
+        }
+        ControlFlow::Continue(())
     }
 }
 
@@ -418,6 +542,29 @@ mod tests {
         }
     }
 
+    /// How many of `n` random segments between the pair are open to the brute-force rays, checking on
+    /// each that the occluder list of `test` (if any) blocks exactly what the rays block.
+    fn open_segments(
+        rng: &mut Pcg64Mcg,
+        culler: &ShaftCuller,
+        rays: &BruteForce,
+        test: &ShaftTest,
+        (a, b): (&Shape, &Shape),
+        n: usize,
+    ) -> usize {
+        (0..n)
+            .filter(|_| {
+                let x = a.sample_uniform(DVec2::new(rng.random(), rng.random()));
+                let y = b.sample_uniform(DVec2::new(rng.random(), rng.random()));
+                let blocked = rays.segment_occluded(x, y);
+                if let Some(list) = test.occluders() {
+                    assert_eq!(culler.segment_occluded_among(list, x, y), blocked);
+                }
+                !blocked
+            })
+            .count()
+    }
+
     /// Ground truth for the verdicts: random configurations of two facing polygons and random
     /// occluders (small and large, between them, beside them, and in the receiver's plane), with the
     /// brute-force ray test on random segments between the two. A Clear verdict must never see a
@@ -428,6 +575,7 @@ mod tests {
     fn verdicts_hold_for_every_segment() {
         let mut rng = Pcg64Mcg::seed_from_u64(7);
         let (mut clear, mut blocked, mut partial) = (0, 0, 0);
+        let mut sub_verdicts = [0; 3];
         for _ in 0..2000 {
             let a = polygon(&mut rng, DVec3::ZERO, 1.0, DVec3::Z, 0.4);
             let top = point(
@@ -501,19 +649,9 @@ mod tests {
                 shapes.push(occluder);
             }
             let culler = ShaftCuller::new(&shapes);
-            let test = culler.classify(&a, 0, &b, 1);
+            let test = culler.classify(&a, 0, &b, 1, None);
             let rays = BruteForce::new(shapes.clone());
-            let open = (0..200)
-                .filter(|_| {
-                    let x = a.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    let y = b.sample_uniform(DVec2::new(rng.random(), rng.random()));
-                    let blocked = rays.segment_occluded(x, y);
-                    if let Some(list) = test.occluders() {
-                        assert_eq!(culler.segment_occluded_among(list, x, y), blocked);
-                    }
-                    !blocked
-                })
-                .count();
+            let open = open_segments(&mut rng, &culler, &rays, &test, (&a, &b), 200);
             match test.verdict {
                 ShaftVerdict::Clear => {
                     clear += 1;
@@ -525,10 +663,32 @@ mod tests {
                 }
                 ShaftVerdict::Partial => partial += 1,
             }
+            // A sub-element pair's shaft lies inside this one: its test among this one's complete
+            // occluder list must hold for its own segments as well.
+            let Some(list) = test.occluders() else {
+                continue;
+            };
+            let (ca, cb) = (a.subdivide(), b.subdivide());
+            let (ca, cb) = (ca[rng.random_range(0..4)], cb[rng.random_range(0..4)]);
+            let sub = culler.classify(&ca, 0, &cb, 1, Some(list));
+            let open = open_segments(&mut rng, &culler, &rays, &sub, (&ca, &cb), 50);
+            match sub.verdict {
+                ShaftVerdict::Clear => assert_eq!(open, 50, "Clear sub-shaft blocked: {shapes:?}"),
+                ShaftVerdict::Blocked => assert_eq!(open, 0, "Blocked sub-shaft open: {shapes:?}"),
+                ShaftVerdict::Partial => {}
+            }
+            sub_verdicts[sub.verdict as usize] += 1;
         }
         assert!(
             clear >= 100 && blocked >= 100 && partial >= 100,
             "{clear} {blocked} {partial}"
+        );
+        // Sub-shafts of Partial ones are rarely blocked by a single polygon, so only Clear (the list
+        // deciding without rays) and Partial must both occur often enough to mean something.
+        assert!(
+            sub_verdicts[ShaftVerdict::Clear as usize] >= 50
+                && sub_verdicts[ShaftVerdict::Partial as usize] >= 50,
+            "sub-shaft verdicts (clear, blocked, partial): {sub_verdicts:?}"
         );
     }
 
@@ -545,7 +705,7 @@ mod tests {
             ])
         };
         let shaft = Shaft::new(&square(0.0, 1.0), &square(1.0, 1.0).flipped());
-        assert_eq!(shaft.planes.len(), 6);
+        assert_eq!(shaft.planes().len(), 6);
         let mut rng = Pcg64Mcg::seed_from_u64(3);
         for _ in 0..100 {
             let a = polygon(&mut rng, DVec3::ZERO, 1.0, DVec3::Z, 0.5);
@@ -555,7 +715,7 @@ mod tests {
                 let x = a.sample_uniform(DVec2::new(rng.random(), rng.random()));
                 let y = b.sample_uniform(DVec2::new(rng.random(), rng.random()));
                 let p = x.lerp(y, rng.random());
-                assert!(shaft.planes.iter().all(|&(n, d)| n.dot(p) - d <= 1e-12));
+                assert!(shaft.planes().iter().all(|&(n, d)| n.dot(p) - d <= 1e-12));
             }
         }
     }
