@@ -137,6 +137,18 @@ impl RunStats {
                     step.remove("cpu_seconds");
                 }
             }
+            for pass in map
+                .get_mut("error")
+                .and_then(|e| e.get_mut("passes"))
+                .and_then(|p| p.as_array_mut())
+                .into_iter()
+                .flatten()
+            {
+                if let Some(pass) = pass.as_object_mut() {
+                    pass.remove("refine_seconds");
+                    pass.remove("solve_seconds");
+                }
+            }
         }
         v
     }
