@@ -433,7 +433,7 @@ fn visible_areas_along(
 
 /// What the clusters exchange in one gathering sweep, computed once per sweep so that a cluster link
 /// costs O(1) however many patches its ends hold, plus O(cluster size) per (cluster, direction bucket)
-/// that links use:
+/// that links carrying light use ([`carries_light`]):
 /// * *sent*: with item buffers, the radiance a cluster sends along a bucket, the average of its
 ///   patches' radiances over their visible projected areas along the bucket's centre direction,
 ///   `Σ_k L_k w_k / Σ_k w_k` ([`visible_areas_along`]), so that the coupling (which holds the exact
@@ -481,7 +481,7 @@ impl ClusterSweep {
                     h.element(id)
                         .links
                         .iter()
-                        .filter(|l| h.is_cluster(l.source))
+                        .filter(|l| h.is_cluster(l.source) && carries_light(l))
                         .map(move |l| (l.source, bucket_toward(h, l.source, h.center_of(id)).0))
                 })
                 .collect();
@@ -544,6 +544,7 @@ impl ClusterSweep {
                         let mut by_bucket: Vec<(u16, ElementId, Rgb)> = e
                             .links
                             .iter()
+                            .filter(|l| carries_light(l))
                             .map(|l| {
                                 let target = h.center_of(l.source);
                                 (bucket_toward(h, id, target).0, l.source, gathered(l))
@@ -611,6 +612,13 @@ impl ClusterSweep {
         }
         out
     }
+}
+
+/// Whether a link's coupling carries any light: a near cluster link ([`near_coupling`]) or a fully
+/// occluded one has a zero block (its constant entry is a mean of non-negative node values, zero only
+/// when all are), and asking what its source sends would draw item buffers for nothing.
+pub fn carries_light(link: &crate::hierarchy::Link) -> bool {
+    link.form_factor() > 0.0
 }
 
 /// The direction bucket of the direction from cluster `id`'s centre toward the point `toward`, and the

@@ -4,7 +4,7 @@
 //! patches before it; sequential but converging about twice as fast) and Southwell (the patch with the
 //! largest unshot change first).
 
-use super::clustering::ClusterSweep;
+use super::clustering::{carries_light, ClusterSweep};
 use super::push_pull::{push_pull, PatchUpdate};
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -35,6 +35,9 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
     let size = out.len();
     for link in &hierarchy.element(id).links {
         if hierarchy.is_cluster(link.source) {
+            if !carries_light(link) {
+                continue;
+            }
             // A cluster's coupling is constant in the source (column 0 only); with item buffers what
             // it sends this way comes from its visible patches (§6.1).
             let l = clusters.radiance_toward(hierarchy, link.source, hierarchy.center_of(id));
