@@ -36,7 +36,7 @@
 //! gathering iteration's spectral radius passed 1 and the sweeps diverged (with the rule: at most 1.05,
 //! the surface couplings' own cubature error).
 //!
-//! Push-pull through clusters ([`irradiance_from_clusters`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
+//! Push-pull through clusters ([`ClusterSweep`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
 //! radiance is pulled up area-weighted; irradiance gathered at a cluster is pushed to the patches it
 //! contains, evenly (isotropic) or with each patch group's cosine toward the link's source, normalised so
 //! that the power the link delivered is what the patches receive (oriented).
@@ -45,9 +45,10 @@
 //! the cluster seen from the other end ([`crate::visibility::item_buffer`]) scales each patch's
 //! projected area by its visible fraction ([`projected_areas`]). Those visible projected areas are then
 //! the cluster's projected area in the kernel (`c = Σ_k w_k / A`, for either transfer kind: the
-//! isotropic 1/4 is only an estimate of it), the shares of received irradiance (hidden patches get
-//! none), the weights of the radiance it sends ([`radiance_toward`]: hidden patches send none) and of its
-//! visibility samples (so that `v` only counts occluders outside the cluster's own contents).
+//! isotropic 1/4 is only an estimate of it), the weights of its visibility samples (so that `v` only
+//! counts occluders outside the cluster's own contents), and, taken along the item buffer's direction
+//! bucket once per sweep ([`ClusterSweep`]), the shares of received irradiance (hidden patches get
+//! none) and the weights of the radiance it sends (hidden patches send none).
 //!
 //! Visibility error of a cluster link (Sillion–Drettakis Appendix A): spreading the average visibility
 //! `v` over the receiver deviates from the binary visibility by `2v(1−v)` in L¹ and `sqrt(v(1−v))` in L²
@@ -61,6 +62,7 @@ use crate::geometry::cubature::{nodes_on, rule};
 use crate::geometry::{DVec2, DVec3};
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
+use crate::visibility::item_buffer::{bucket_direction, direction_bucket, ItemBuffers};
 use crate::visibility::Visibility;
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
@@ -115,29 +117,6 @@ pub fn projected_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> 
             surface.area * h.patch_of(s).normal.dot(d).max(0.0) * visible
         })
         .collect()
-}
-
-/// The (average) radiance a link's source sends toward the point `toward`, to multiply its coupling
-/// with: for a cluster with item buffers the average of its patches' radiances over their visible
-/// projected areas `w_k`, `Σ_k L_k w_k / Σ_k w_k`, so that the coupling (which holds `Σ_k w_k`) carries
-/// the intensity of the patches the other end can see (§6.1, "the energy leaving a cluster"); otherwise
-/// the element's average radiance.
-pub fn radiance_toward(h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
-    let average = h.element(source).radiance[0];
-    if h.item_buffers.is_none() || !h.is_cluster(source) {
-        return average;
-    }
-    let areas = projected_areas(h, source, toward);
-    let total: f64 = areas.iter().sum();
-    if total <= 0.0 {
-        return average;
-    }
-    let contents = h.contents(h.cluster(source).expect("a cluster"));
-    contents
-        .iter()
-        .zip(&areas)
-        .map(|(&s, &w)| h.element(s).radiance[0] * (w / total))
-        .sum()
 }
 
 /// The transport `A_i F_ij` a link can carry (per unit source radiance, in the power oracle's units of
@@ -451,80 +430,259 @@ fn near_coupling(
     }
 }
 
-/// Irradiance (constant coefficient) pushed from the clusters to each patch root, indexed by the root's
-/// element id (patch roots are the first elements): the sum over its ancestor clusters of what their
-/// links gathered, spread evenly (isotropic) or by each patch group's cosine toward the link's source
-/// (oriented). Empty without clusters.
-pub fn irradiance_from_clusters(h: &Hierarchy) -> Vec<Rgb> {
-    let kind = h.clustering;
-    if h.root_cluster.is_none() {
-        return Vec::new();
+/// The visible projected area of each patch of cluster `id` seen along the unit direction `along`,
+/// `w_k = A_k max(0, n_k · d) f_k`, with `f_k` its visible fraction in the cluster's item buffer of
+/// that direction's bucket (Sillion–Drettakis §6.1). Sweeps take `along` to be a bucket's centre
+/// direction, the one its item buffer is drawn along, so that every link in the bucket shares one set
+/// of weights; [`projected_areas`] (couplings) takes each patch's own direction to a point instead.
+fn visible_areas_along(
+    h: &Hierarchy,
+    buffers: &ItemBuffers,
+    id: ElementId,
+    along: DVec3,
+) -> Vec<f64> {
+    let contents = h.contents(h.cluster(id).expect("a cluster"));
+    let fractions = buffers.fractions(id, along, || {
+        contents.iter().map(|&s| *h.element(s).shape()).collect()
+    });
+    contents
+        .iter()
+        .zip(fractions.iter())
+        .map(|(&s, &f)| h.element(s).area * h.patch_of(s).normal.dot(along).max(0.0) * f64::from(f))
+        .collect()
+}
+
+/// What the clusters exchange in one gathering sweep, computed once per sweep so that a cluster link
+/// costs O(1) however many patches its ends hold, plus O(cluster size) per (cluster, direction bucket)
+/// that links carrying light use ([`carries_light`]):
+/// * *sent*: with item buffers, the radiance a cluster sends along a bucket, the average of its
+///   patches' radiances over their visible projected areas along the bucket's centre direction,
+///   `Σ_k L_k w_k / Σ_k w_k` ([`visible_areas_along`]), so that the coupling (which holds the exact
+///   `Σ_k w_k` toward the receiver) carries the intensity of the patches the other end can see (§6.1,
+///   "the energy leaving a cluster"); without item buffers, the cluster's average radiance;
+/// * *pushed*: the irradiance every patch root receives from the links of the clusters above it
+///   (push-pull through clusters): per cluster, each link's gathered irradiance `H = F L_sent` is
+///   spread evenly (isotropic), by normal group (oriented, [`crate::hierarchy::clusters::Orientation`]:
+///   O(groups) per link), or, with item buffers, summed per bucket of the direction toward the link's
+///   source and shared once per bucket by the visible projected areas along its centre direction,
+///   `H_s = H A_cluster w_s / (A_s Σ_k w_k)`: the patches receive the power the links delivered.
+///
+/// Approximation (item buffers only): the per-patch direction toward the other end's centre is
+/// replaced by the bucket's centre direction, the one the item buffer already assumes; each cosine
+/// then changes by at most the angle between the two directions (the bucket's half-diagonal, under
+/// 0.2 rad, plus the parallax of the patch within the cluster seen from the other end). Shares still
+/// sum to one, so the power each link delivers is unchanged and energy is conserved exactly.
+///
+/// Every value is a pure function of the hierarchy's radiances (sorted keys, sums in link order), so
+/// the result does not depend on the thread count. Gauss–Seidel and Southwell read it as of the start
+/// of the sweep, as they already read a cluster's pulled-up average radiance.
+pub struct ClusterSweep {
+    /// (source cluster, direction bucket) in use by links, sorted, with the radiance sent along it;
+    /// empty without item buffers.
+    sent: Vec<((ElementId, u16), Rgb)>,
+    /// Irradiance pushed from the clusters to each patch root, by the root's element id (patch roots
+    /// are the first elements); empty without clusters.
+    pushed: Vec<Rgb>,
+}
+
+impl ClusterSweep {
+    /// The exchange for the hierarchy's current radiances and links.
+    pub fn new(h: &Hierarchy) -> Self {
+        let mut sweep = ClusterSweep {
+            sent: Vec::new(),
+            pushed: Vec::new(),
+        };
+        if h.root_cluster.is_none() {
+            return sweep;
+        }
+        if let Some(buffers) = &h.item_buffers {
+            let mut keys: Vec<(ElementId, u16)> = (0..h.elements.len() as ElementId)
+                .into_par_iter()
+                .flat_map_iter(|id| {
+                    h.element(id)
+                        .links
+                        .iter()
+                        .filter(|l| h.is_cluster(l.source) && carries_light(l))
+                        .map(move |l| (l.source, bucket_toward(h, l.source, h.center_of(id)).0))
+                })
+                .collect();
+            keys.par_sort_unstable();
+            keys.dedup();
+            sweep.sent = keys
+                .into_par_iter()
+                .map(|(cluster, bucket)| {
+                    let along = bucket_direction(bucket);
+                    ((cluster, bucket), sent_along(h, buffers, cluster, along))
+                })
+                .collect();
+        }
+        sweep.pushed = sweep.push_from_clusters(h);
+        sweep
     }
-    let with_links: Vec<ElementId> = (0..h.elements.len() as ElementId)
-        .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
-        .collect();
-    let shares: Vec<(ElementId, Vec<Rgb>)> = with_links
-        .par_iter()
-        .map(|&id| {
-            let cluster = h.cluster(id).expect("cluster");
-            let contents = h.contents(cluster);
-            let e = h.element(id);
-            let mut group_share = vec![Rgb::BLACK; cluster.orientation.groups.len()];
-            let mut patch_share = vec![Rgb::BLACK; contents.len()];
-            let mut even = Rgb::BLACK;
-            for link in &e.links {
-                let gathered =
-                    radiance_toward(h, link.source, h.center_of(id)) * link.coupling.form_factor();
-                if kind == ClusteringKind::Isotropic && h.item_buffers.is_none() {
-                    even += gathered;
-                    continue;
-                }
-                let target = h.center_of(link.source);
-                if h.item_buffers.is_some() {
-                    // H_s = H A_cluster w_s / (A_s Σ_k w_k): the patches receive the power the link
-                    // delivered, each by its visible projected area w_s.
-                    let areas = projected_areas(h, id, target);
-                    let total: f64 = areas.iter().sum();
-                    if total > 0.0 {
-                        for ((s, w), &p) in patch_share.iter_mut().zip(&areas).zip(contents) {
-                            let area = h.element(p).area;
-                            if area > 0.0 {
-                                *s += gathered * (e.area * w / (area * total));
+
+    /// The (average) radiance that `source` sends toward the point `toward`, to multiply a link's
+    /// coupling with (see the type's documentation).
+    pub fn radiance_toward(&self, h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
+        let average = h.element(source).radiance[0];
+        let Some(buffers) = h.item_buffers.as_deref().filter(|_| h.is_cluster(source)) else {
+            return average;
+        };
+        let (bucket, along) = bucket_toward(h, source, toward);
+        match self
+            .sent
+            .binary_search_by_key(&(source, bucket), |&(key, _)| key)
+        {
+            Ok(k) => self.sent[k].1,
+            // Not asked for by any link when the sweep began: computed on the spot, the same value.
+            Err(_) => sent_along(h, buffers, source, along),
+        }
+    }
+
+    /// The irradiance (constant coefficient) pushed from the clusters to element `id`: non-zero at
+    /// patch roots only.
+    pub fn pushed(&self, id: ElementId) -> Rgb {
+        self.pushed.get(id as usize).copied().unwrap_or(Rgb::BLACK)
+    }
+
+    fn push_from_clusters(&self, h: &Hierarchy) -> Vec<Rgb> {
+        let kind = h.clustering;
+        let with_links: Vec<ElementId> = (0..h.elements.len() as ElementId)
+            .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
+            .collect();
+        let shares: Vec<(ElementId, Vec<Rgb>)> = with_links
+            .par_iter()
+            .map(|&id| {
+                let cluster = h.cluster(id).expect("cluster");
+                let e = h.element(id);
+                let centre = h.center_of(id);
+                let gathered = |link: &crate::hierarchy::Link| {
+                    self.radiance_toward(h, link.source, centre) * link.coupling.form_factor()
+                };
+                let mut share = vec![Rgb::BLACK; h.contents(cluster).len()];
+                match (&h.item_buffers, kind) {
+                    (Some(buffers), _) => {
+                        let contents = h.contents(cluster);
+                        let mut by_bucket: Vec<(u16, ElementId, Rgb)> = e
+                            .links
+                            .iter()
+                            .filter(|l| carries_light(l))
+                            .map(|l| {
+                                let target = h.center_of(l.source);
+                                (bucket_toward(h, id, target).0, l.source, gathered(l))
+                            })
+                            .collect();
+                        // Stable: equal buckets keep link order, so the sums below do too.
+                        by_bucket.sort_by_key(|&(bucket, _, _)| bucket);
+                        for run in by_bucket.chunk_by(|a, b| a.0 == b.0) {
+                            let along = bucket_direction(run[0].0);
+                            let areas = visible_areas_along(h, buffers, id, along);
+                            if areas.iter().sum::<f64>() > 0.0 {
+                                let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
+                                share_by_areas(h, contents, e.area, total, &areas, &mut share);
+                                continue;
+                            }
+                            // Nothing visible faces the bucket's centre direction, yet the couplings
+                            // (exact directions) may have carried light: shared per link by exact
+                            // directions, so that no delivered power is lost.
+                            for &(_, source, g) in run {
+                                let areas = projected_areas(h, id, h.center_of(source));
+                                share_by_areas(h, contents, e.area, g, &areas, &mut share);
                             }
                         }
                     }
-                    continue;
-                }
-                // H_s = H A_cluster cos_s / Σ_k A_k cos_k: the patches receive the power the link
-                // delivered, each by its group's cosine.
-                let projected: Vec<f64> = cluster.orientation.projected_areas(target).collect();
-                let total: f64 = projected.iter().sum();
-                if total > 0.0 {
-                    for (g, p) in group_share.iter_mut().zip(&projected) {
-                        *g += gathered * (e.area * p / total);
+                    (None, ClusteringKind::Isotropic) => {
+                        let even: Rgb = e.links.iter().map(gathered).sum();
+                        share.iter_mut().for_each(|s| *s = even);
+                    }
+                    (None, _) => {
+                        // H_s = H A_cluster cos_s / Σ_k A_k cos_k by normal group.
+                        let orientation = &cluster.orientation;
+                        let mut group_share = vec![Rgb::BLACK; orientation.groups.len()];
+                        for link in &e.links {
+                            let g = gathered(link);
+                            let target = h.center_of(link.source);
+                            let projected: Vec<f64> = orientation.projected_areas(target).collect();
+                            let total: f64 = projected.iter().sum();
+                            if total > 0.0 {
+                                for (s, p) in group_share.iter_mut().zip(&projected) {
+                                    *s += g * (e.area * p / total);
+                                }
+                            }
+                        }
+                        for (g, s) in orientation.groups.iter().zip(&group_share) {
+                            if g.area <= 0.0 {
+                                continue;
+                            }
+                            let per_area = *s / g.area;
+                            let members = g.members.start as usize..g.members.end as usize;
+                            for &m in &orientation.members[members] {
+                                share[m as usize] += per_area;
+                            }
+                        }
                     }
                 }
+                (id, share)
+            })
+            .collect();
+        let mut out = vec![Rgb::BLACK; h.patches.len()];
+        for (id, share) in shares {
+            let cluster = h.cluster(id).expect("cluster");
+            for (&p, s) in h.contents(cluster).iter().zip(share) {
+                out[p as usize] += s;
             }
-            let mut share: Vec<Rgb> = patch_share.into_iter().map(|s| s + even).collect();
-            let orientation = &cluster.orientation;
-            for (g, s) in orientation.groups.iter().zip(&group_share) {
-                if g.area <= 0.0 {
-                    continue;
-                }
-                let per_area = *s / g.area;
-                for &m in &orientation.members[g.members.start as usize..g.members.end as usize] {
-                    share[m as usize] += per_area;
-                }
-            }
-            (id, share)
-        })
-        .collect();
-    let mut out = vec![Rgb::BLACK; h.patches.len()];
-    for (id, share) in shares {
-        let cluster = h.cluster(id).expect("cluster");
-        for (&p, s) in h.contents(cluster).iter().zip(share) {
-            out[p as usize] += s;
+        }
+        out
+    }
+}
+
+/// Whether a link's coupling carries any light: a near cluster link ([`near_coupling`]) or a fully
+/// occluded one has a zero block (its constant entry is a mean of non-negative node values, zero only
+/// when all are), and asking what its source sends would draw item buffers for nothing.
+pub fn carries_light(link: &crate::hierarchy::Link) -> bool {
+    link.form_factor() > 0.0
+}
+
+/// The direction bucket of the direction from cluster `id`'s centre toward the point `toward`, and the
+/// bucket's centre direction ([`direction_bucket`]).
+fn bucket_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> (u16, DVec3) {
+    direction_bucket(toward - h.center_of(id))
+}
+
+/// Radiance cluster `id` sends along the unit direction `along`: its patches' radiances averaged over
+/// their visible projected areas along it; its average radiance when nothing faces that way.
+fn sent_along(h: &Hierarchy, buffers: &ItemBuffers, id: ElementId, along: DVec3) -> Rgb {
+    let areas = visible_areas_along(h, buffers, id, along);
+    let total: f64 = areas.iter().sum();
+    if total <= 0.0 {
+        return h.element(id).radiance[0];
+    }
+    let contents = h.contents(h.cluster(id).expect("a cluster"));
+    contents
+        .iter()
+        .zip(&areas)
+        .map(|(&s, &w)| h.element(s).radiance[0] * (w / total))
+        .sum()
+}
+
+/// Adds irradiance `gathered` at a cluster of area `cluster_area` to its patches' `share`, each by its
+/// projected area `areas[k]`: `H_k = H A_cluster w_k / (A_k Σ w)`, so that the patches receive the
+/// power `π H A_cluster` the links delivered.
+fn share_by_areas(
+    h: &Hierarchy,
+    contents: &[ElementId],
+    cluster_area: f64,
+    gathered: Rgb,
+    areas: &[f64],
+    share: &mut [Rgb],
+) {
+    let total: f64 = areas.iter().sum();
+    if total <= 0.0 {
+        return;
+    }
+    for ((s, &w), &p) in share.iter_mut().zip(areas).zip(contents) {
+        let area = h.element(p).area;
+        if area > 0.0 {
+            *s += gathered * (cluster_area * w / (area * total));
         }
     }
-    out
 }

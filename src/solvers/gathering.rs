@@ -4,7 +4,7 @@
 //! patches before it; sequential but converging about twice as fast) and Southwell (the patch with the
 //! largest unshot change first).
 
-use super::clustering::{irradiance_from_clusters, radiance_toward};
+use super::clustering::{carries_light, ClusterSweep};
 use super::push_pull::{push_pull, PatchUpdate};
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -28,14 +28,19 @@ pub trait GatheringSolver: Sync + Send {
 }
 
 /// Adds the irradiance coefficients gathered over the links stored at `id` to `out`:
-/// `H_α += Σ_links Σ_β K_{αβ} L_{j,β}` (eq. (2) with the averaged-orthonormal basis, before ρ_i).
-pub fn gather(hierarchy: &Hierarchy, id: ElementId, out: &mut [Rgb]) {
+/// `H_α += Σ_links Σ_β K_{αβ} L_{j,β}` (eq. (2) with the averaged-orthonormal basis, before ρ_i), and at
+/// a patch root the irradiance pushed down from the clusters above it; what clusters send and push
+/// comes from `clusters`, computed once per sweep.
+pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out: &mut [Rgb]) {
     let size = out.len();
     for link in &hierarchy.element(id).links {
-        if hierarchy.item_buffers.is_some() && hierarchy.is_cluster(link.source) {
-            // A cluster's coupling is constant in the source (column 0 only); what it sends this way
-            // comes from its visible patches (§6.1).
-            let l = radiance_toward(hierarchy, link.source, hierarchy.center_of(id));
+        if hierarchy.is_cluster(link.source) {
+            if !carries_light(link) {
+                continue;
+            }
+            // A cluster's coupling is constant in the source (column 0 only); with item buffers what
+            // it sends this way comes from its visible patches (§6.1).
+            let l = clusters.radiance_toward(hierarchy, link.source, hierarchy.center_of(id));
             for (alpha, h) in out.iter_mut().enumerate() {
                 *h += l * f64::from(link.coupling.block()[alpha * size]);
             }
@@ -51,20 +56,7 @@ pub fn gather(hierarchy: &Hierarchy, id: ElementId, out: &mut [Rgb]) {
                 .sum::<Rgb>();
         }
     }
-}
-
-/// [`gather`] plus, at a patch root, the irradiance pushed down from the clusters above it
-/// (`from_clusters`, see [`irradiance_from_clusters`]).
-fn gather_with_clusters(
-    hierarchy: &Hierarchy,
-    from_clusters: &[Rgb],
-    id: ElementId,
-    out: &mut [Rgb],
-) {
-    gather(hierarchy, id, out);
-    if let Some(&h) = from_clusters.get(id as usize) {
-        out[0] += h;
-    }
+    out[0] += clusters.pushed(id);
 }
 
 fn apply(hierarchy: &mut Hierarchy, update: &PatchUpdate, totals: &mut Sweep) {
@@ -85,12 +77,12 @@ impl GatheringSolver for Jacobi {
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
         let h = &*hierarchy;
         let size = h.basis_size();
-        let from_clusters = irradiance_from_clusters(h);
+        let clusters = ClusterSweep::new(h);
         let mut gathered = vec![Rgb::BLACK; h.elements.len() * size];
         gathered
             .par_chunks_mut(size)
             .enumerate()
-            .for_each(|(id, out)| gather_with_clusters(h, &from_clusters, id as ElementId, out));
+            .for_each(|(id, out)| gather(h, &clusters, id as ElementId, out));
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
             .map(|p| {
@@ -120,14 +112,12 @@ impl GatheringSolver for GaussSeidel {
 
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
         // Links at clusters gather once per sweep (Jacobi-like); patches see each other's updates.
-        let from_clusters = irradiance_from_clusters(hierarchy);
+        let clusters = ClusterSweep::new(hierarchy);
         let mut totals = Sweep::default();
         for p in 0..hierarchy.patches.len() as u32 {
             let update = {
                 let h = &*hierarchy;
-                push_pull(h, p, &|id, out| {
-                    gather_with_clusters(h, &from_clusters, id, out)
-                })
+                push_pull(h, p, &|id, out| gather(h, &clusters, id, out))
             };
             apply(hierarchy, &update, &mut totals);
         }
@@ -159,14 +149,12 @@ impl GatheringSolver for Southwell {
         residuals.resize(patches, f64::INFINITY);
         let mut order: Vec<usize> = (0..patches).collect();
         order.sort_by(|&a, &b| residuals[b].total_cmp(&residuals[a]).then(a.cmp(&b)));
-        let from_clusters = irradiance_from_clusters(hierarchy);
+        let clusters = ClusterSweep::new(hierarchy);
         let mut totals = Sweep::default();
         for p in order {
             let update = {
                 let h = &*hierarchy;
-                push_pull(h, p as u32, &|id, out| {
-                    gather_with_clusters(h, &from_clusters, id, out)
-                })
+                push_pull(h, p as u32, &|id, out| gather(h, &clusters, id, out))
             };
             let root = hierarchy.patches[p].root;
             let before = hierarchy.element(root).radiance[0];

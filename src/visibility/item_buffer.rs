@@ -57,12 +57,27 @@ pub fn direction_bucket(d: DVec3) -> (u16, DVec3) {
     let n = BUCKETS_PER_FACE;
     let cell = |c: f64| (((c / major.abs() + 1.0) * 0.5 * n as f64) as usize).min(n - 1);
     let (i, j) = (cell(d[s]), cell(d[t]));
+    let bucket = ((face * n + i) * n + j) as u16;
+    (bucket, bucket_direction(bucket))
+}
+
+/// The centre direction (unit) of cube-map cell `bucket` ([`direction_bucket`]), along which its item
+/// buffers are drawn.
+pub fn bucket_direction(bucket: u16) -> DVec3 {
+    let n = BUCKETS_PER_FACE;
+    let (face, i, j) = (
+        bucket as usize / (n * n),
+        bucket as usize / n % n,
+        bucket as usize % n,
+    );
+    let axis = face / 2;
+    let (s, t) = ((axis + 1) % 3, (axis + 2) % 3);
     let centre = |k: usize| (k as f64 + 0.5) / n as f64 * 2.0 - 1.0;
     let mut c = DVec3::ZERO;
-    c[axis] = major.signum();
+    c[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
     c[s] = centre(i);
     c[t] = centre(j);
-    (((face * n + i) * n + j) as u16, c.normalize())
+    c.normalize()
 }
 
 /// The visible fraction of each shape seen from infinitely far along `toward` (unit), in [0, 1]: an
@@ -311,6 +326,7 @@ mod tests {
             let (b, c) = direction_bucket(d);
             assert!((b as usize) < 6 * BUCKETS_PER_FACE * BUCKETS_PER_FACE);
             assert!(d.angle_between(c) < 0.2, "{d} {c}");
+            assert_eq!(direction_bucket(c).0, b, "a bucket's centre lies in it");
             assert_ne!(direction_bucket(-d).0, b);
         }
     }
