@@ -126,30 +126,23 @@ impl RunStats {
         if let Some(map) = v.as_object_mut() {
             map.remove("seconds");
             map.remove("threads");
-            for step in map
-                .get_mut("steps")
-                .and_then(|s| s.as_array_mut())
-                .into_iter()
-                .flatten()
-            {
-                if let Some(step) = step.as_object_mut() {
-                    step.remove("seconds");
-                    step.remove("cpu_seconds");
-                }
-            }
-            for pass in map
-                .get_mut("error")
-                .and_then(|e| e.get_mut("passes"))
-                .and_then(|p| p.as_array_mut())
-                .into_iter()
-                .flatten()
-            {
-                if let Some(pass) = pass.as_object_mut() {
-                    pass.remove("refine_seconds");
-                    pass.remove("solve_seconds");
-                }
+        }
+        remove_from_each(v.get_mut("steps"), &["seconds", "cpu_seconds"]);
+        remove_from_each(
+            v.get_mut("error").and_then(|e| e.get_mut("passes")),
+            &["refine_seconds", "solve_seconds"],
+        );
+        v
+    }
+}
+
+/// Removes `keys` from every object of the array `list` (if it is one).
+fn remove_from_each(list: Option<&mut serde_json::Value>, keys: &[&str]) {
+    for entry in list.and_then(|l| l.as_array_mut()).into_iter().flatten() {
+        if let Some(entry) = entry.as_object_mut() {
+            for key in keys {
+                entry.remove(*key);
             }
         }
-        v
     }
 }
