@@ -21,6 +21,7 @@
 
 use crate::geometry::{DVec2, DVec3, Shape};
 use std::collections::HashMap;
+use std::ops::Range;
 use std::sync::{Arc, RwLock};
 
 /// Pixels across the smallest object of a buffer.
@@ -136,14 +137,16 @@ pub fn visible_fractions(shapes: &[Shape], toward: DVec3) -> Vec<f32> {
         let (cu, cw) = (lo.x * n.dot(u), lo.y * n.dot(w));
         // Depth toward the viewer of the plane at pixel coordinates (x, y).
         let depth_at = |x: f64, y: f64| (plane - cu - cw - x * nu - y * nw) / facing + offset;
-        for (x, y) in pixels_inside(&corners, nx, ny) {
-            let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
-            let z = depth_at(cx, cy);
-            covered[k] += 1;
-            let p = y * nx + x;
-            if z > depth[p] {
-                depth[p] = z;
-                owner[p] = k as u32;
+        for (y, xs) in spans_inside(&corners, nx, ny) {
+            let cy = y as f64 + 0.5;
+            covered[k] += xs.len() as u32;
+            for x in xs {
+                let z = depth_at(x as f64 + 0.5, cy);
+                let p = y * nx + x;
+                if z > depth[p] {
+                    depth[p] = z;
+                    owner[p] = k as u32;
+                }
             }
         }
     }
@@ -174,8 +177,9 @@ pub fn visible_fractions(shapes: &[Shape], toward: DVec3) -> Vec<f32> {
         .collect()
 }
 
-/// Pixels of an `nx × ny` buffer whose centres lie in the convex polygon `corners` (pixel units).
-fn pixels_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, usize)> {
+/// Pixels of an `nx × ny` buffer whose centres lie in the convex polygon `corners` (pixel units), as
+/// one span of columns per row.
+fn spans_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, Range<usize>)> {
     let signed_area: f64 = (0..corners.len())
         .map(|i| corners[i].perp_dot(corners[(i + 1) % corners.len()]))
         .sum();
@@ -237,7 +241,9 @@ fn pixels_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, usize)>
         while x1 > x0 && !inside(x1 - 1, y) {
             x1 -= 1;
         }
-        out.extend((x0..x1).map(|x| (x, y)));
+        if x0 < x1 {
+            out.push((y, x0..x1));
+        }
     }
     out
 }
@@ -342,7 +348,11 @@ mod tests {
                         })
                 })
                 .collect();
-            assert_eq!(pixels_inside(&corners, nx, ny), every, "case {case}");
+            let spans: Vec<(usize, usize)> = spans_inside(&corners, nx, ny)
+                .into_iter()
+                .flat_map(|(y, xs)| xs.map(move |x| (x, y)))
+                .collect();
+            assert_eq!(spans, every, "case {case}");
         }
     }
 
