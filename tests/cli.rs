@@ -200,6 +200,7 @@ fn outputs_never_overwrite_the_scene_and_failed_writes_fail() {
     );
     let before = std::fs::read(&scene).unwrap();
     let s = scene.to_str().unwrap();
+    let exr = dir.join("image.exr");
     let fast = ["--width", "8", "--height", "8", "--eps", "0.05", "-q"];
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["-o", s], "scene file"),
@@ -207,6 +208,7 @@ fn outputs_never_overwrite_the_scene_and_failed_writes_fail() {
         (vec!["--stats", s], "scene file"),
         (vec!["-o", "/nonexistent-dir/x.png"], "does not exist"),
         (vec!["-o", dir.to_str().unwrap()], "directory"),
+        (vec!["-o", exr.to_str().unwrap()], "PNG"),
     ];
     for (extra, reason) in cases {
         let mut args = vec!["render", s];

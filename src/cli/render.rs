@@ -276,7 +276,7 @@ impl RenderCommand {
     }
 
     /// Refuses outputs that would overwrite the scene, a file it reads, any scene file or each other,
-    /// or that go into a directory that does not exist.
+    /// that go into a directory that does not exist, and an image not named .png (it holds PNG data).
     fn check_outputs(&self, inputs: &[PathBuf]) -> Result<()> {
         let mut outputs: Vec<(&str, &Path)> = vec![("--output", self.output.as_path())];
         outputs.extend(self.hdr.iter().map(|p| ("--hdr", p.as_path())));
@@ -287,7 +287,19 @@ impl RenderCommand {
                 .iter()
                 .map(|p| ("--emitter-mask", p.as_path())),
         );
-        super::args::check_outputs(&outputs, inputs)
+        super::args::check_outputs(&outputs, inputs)?;
+        let is_png = self
+            .output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+        if !is_png {
+            anyhow::bail!(
+                "--output {}: the rendered image is written as PNG, so name it .png (for linear \
+                 radiance in OpenEXR add --hdr FILE.exr)",
+                self.output.display()
+            );
+        }
+        Ok(())
     }
 }
 
