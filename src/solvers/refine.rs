@@ -8,7 +8,7 @@
 use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{couple_with_prior, shaft_test, visibility_error, CouplingSettings};
 use super::link_rng;
-use crate::geometry::Shape;
+use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
@@ -106,36 +106,55 @@ pub struct RefineOutcome {
 
 /// Whether two elements can exchange light at all: each has a vertex strictly in front of the other.
 pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
+    let (r, s) = (Facing::of(receiver), Facing::of(source));
+    r.has_in_front(&s) && s.has_in_front(&r)
+}
+
+/// What [`can_interact`] needs of a shape, computed once per shape (the initial-link count tests every
+/// pair of patches).
+struct Facing<'a> {
+    shape: &'a Shape,
+    normal: DVec3,
+    origin: DVec3,
     /// Largest distance between two vertices in the L¹ norm: at least the diameter, without roots.
-    fn l1_diameter(shape: &Shape) -> f64 {
+    l1_diameter: f64,
+}
+
+impl<'a> Facing<'a> {
+    fn of(shape: &'a Shape) -> Self {
         let v = shape.vertices();
-        let mut d: f64 = 0.0;
+        let mut l1_diameter: f64 = 0.0;
         for i in 0..v.len() {
             for j in i + 1..v.len() {
-                d = d.max((v[i] - v[j]).abs().element_sum());
+                l1_diameter = l1_diameter.max((v[i] - v[j]).abs().element_sum());
             }
         }
-        d
+        Facing {
+            shape,
+            normal: shape.normal(),
+            origin: v[0],
+            l1_diameter,
+        }
     }
-    // The tolerance `1e-9 · max diameter` only matters for a vertex within it of the plane: the
-    // clear cases are decided with the L¹ bound (this test runs for every pair of patches when
-    // counting initial links, `initial_link_count`).
-    fn in_front(plane: &Shape, other: &Shape) -> bool {
-        let (n, p) = (plane.normal(), plane.vertices()[0]);
+
+    /// Whether `other` has a vertex strictly in front of this shape's plane. The tolerance `1e-9 · max
+    /// diameter` only matters for a vertex within it of the plane: the clear cases are decided with the
+    /// L¹ bound.
+    fn has_in_front(&self, other: &Facing) -> bool {
         let highest = other
+            .shape
             .vertices()
             .iter()
-            .map(|v| n.dot(*v - p))
+            .map(|v| self.normal.dot(*v - self.origin))
             .fold(f64::NEG_INFINITY, f64::max);
         if highest <= 0.0 {
             return false;
         }
-        if highest > 1e-9 * l1_diameter(plane).max(l1_diameter(other)) {
+        if highest > 1e-9 * self.l1_diameter.max(other.l1_diameter) {
             return true;
         }
-        highest > 1e-9 * plane.diameter().max(other.diameter())
+        highest > 1e-9 * self.shape.diameter().max(other.shape.diameter())
     }
-    in_front(receiver, source) && in_front(source, receiver)
 }
 
 /// The first candidates: with clusters, one self-link on the root cluster (Sillion–Drettakis §4, Smits
@@ -147,24 +166,36 @@ pub fn initial_candidates(hierarchy: &Hierarchy) -> Vec<Candidate> {
         return vec![Candidate::new(root, root, None, None, None)];
     }
     let patches = &hierarchy.patches;
+    let facings = patch_facings(hierarchy);
+    let facings = &facings;
     (0..patches.len())
         .into_par_iter()
         .flat_map_iter(|i| {
             (0..patches.len())
-                .filter(move |&j| initially_linked(hierarchy, i, j))
+                .filter(move |&j| initially_linked(hierarchy, facings, i, j))
                 .map(move |j| Candidate::new(patches[i].root, patches[j].root, None, None, None))
         })
         .collect()
 }
 
 /// Whether patch `j` starts linked to receiver patch `i` without clusters (see [`initial_candidates`]).
-fn initially_linked(hierarchy: &Hierarchy, i: usize, j: usize) -> bool {
+fn initially_linked(hierarchy: &Hierarchy, facings: &[Facing], i: usize, j: usize) -> bool {
     let (receiver, source) = (&hierarchy.patches[i], &hierarchy.patches[j]);
     i != j
         && !receiver.reflectance.is_black()
         && (!source.emission.is_black() || !source.reflectance.is_black())
         && receiver.polygon != source.polygon
-        && can_interact(&receiver.shape, &source.shape)
+        && facings[i].has_in_front(&facings[j])
+        && facings[j].has_in_front(&facings[i])
+}
+
+/// [`Facing`] of every patch.
+fn patch_facings(hierarchy: &Hierarchy) -> Vec<Facing<'_>> {
+    hierarchy
+        .patches
+        .iter()
+        .map(|p| Facing::of(&p.shape))
+        .collect()
 }
 
 /// The number of initial links without clusters ([`initial_candidates`]), counted without storing a
@@ -172,11 +203,12 @@ fn initially_linked(hierarchy: &Hierarchy, i: usize, j: usize) -> bool {
 pub fn initial_link_count(hierarchy: &Hierarchy, limit: usize) -> usize {
     use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
     let n = hierarchy.patches.len();
+    let facings = patch_facings(hierarchy);
     let counted = AtomicUsize::new(0);
     (0..n).into_par_iter().for_each(|i| {
         if counted.load(Relaxed) <= limit {
             let row = (0..n)
-                .filter(|&j| initially_linked(hierarchy, i, j))
+                .filter(|&j| initially_linked(hierarchy, &facings, i, j))
                 .count();
             counted.fetch_add(row, Relaxed);
         }
@@ -198,12 +230,13 @@ pub fn automatic_clustering(hierarchy: &Hierarchy, max_links: usize) -> Clusteri
     // cost 6·10⁸ pair tests (40% of its first 150 s) before refinement starts. Only estimates within a
     // factor 2 of the budget are settled by the exact count.
     let stride = n.div_ceil(AUTO_CLUSTERING_SAMPLE_ROWS);
+    let facings = patch_facings(hierarchy);
     let sampled: usize = (0..n)
         .into_par_iter()
         .step_by(stride)
         .map(|i| {
             (0..n)
-                .filter(|&j| initially_linked(hierarchy, i, j))
+                .filter(|&j| initially_linked(hierarchy, &facings, i, j))
                 .count()
         })
         .sum();
