@@ -2,7 +2,7 @@
 //! image, and the feature-based error metric of Sillion & Drettakis (§2.2) for chosen feature sizes.
 
 use crate::measures::fbem::{self, Fbem, Mask};
-use crate::measures::image_metrics::{self, ChannelErrors, ImageErrors};
+use crate::measures::image_metrics::{self, ChannelErrors, ImageErrors, ReferenceNoise};
 use crate::output::false_colour::{self, ErrorScale};
 use crate::output::image::Image;
 use anyhow::{ensure, Context, Result};
@@ -16,6 +16,10 @@ pub struct CompareCommand {
     pub a: PathBuf,
     /// Reference (linear OpenEXR); relative errors are relative to it.
     pub b: PathBuf,
+    /// The reference's standard-error image (`radiosity reference --stderr`): reports the reference's own
+    /// noise and the luminance error with that noise removed in quadrature.
+    #[arg(long, value_name = "EXR")]
+    pub reference_stderr: Option<PathBuf>,
     /// PNG of pixels to ignore (nonzero = ignore), the size of the images.
     #[arg(long, value_name = "PNG")]
     pub mask: Option<PathBuf>,
@@ -60,6 +64,8 @@ struct Report<'a> {
     b: &'a Path,
     errors: ImageErrors,
     #[serde(skip_serializing_if = "Option::is_none")]
+    reference_noise: Option<ReferenceNoise>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     diff: Option<DiffReport<'a>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     fbem_mask: Option<&'static str>,
@@ -87,6 +93,13 @@ impl CompareCommand {
         let ignore = self.ignore_mask(&b)?;
         let ignore = ignore.as_deref();
         let errors = image_metrics::compare(&a, &b, ignore)?;
+        let reference_noise = match &self.reference_stderr {
+            Some(path) => Some(
+                image_metrics::reference_noise(&errors, &Image::read_exr(path)?, ignore)
+                    .with_context(|| format!("reference noise from {}", path.display()))?,
+            ),
+            None => None,
+        };
 
         let diff = match &self.diff {
             Some(path) => {
@@ -118,6 +131,7 @@ impl CompareCommand {
             a: &self.a,
             b: &self.b,
             errors,
+            reference_noise,
             diff,
             fbem_mask,
             fbem: results,
@@ -183,7 +197,13 @@ impl CompareCommand {
     /// Refuses a --diff or --mask-out file that is one of the images read (or that is written twice).
     fn check_outputs(&self) -> Result<()> {
         let mut inputs = vec![self.a.clone(), self.b.clone()];
-        inputs.extend(self.mask.iter().chain(&self.unoccluded).cloned());
+        inputs.extend(
+            self.mask
+                .iter()
+                .chain(&self.unoccluded)
+                .chain(&self.reference_stderr)
+                .cloned(),
+        );
         let masks: Vec<PathBuf> = self
             .fbem
             .iter()
@@ -253,6 +273,17 @@ fn print_text(r: &Report) -> std::io::Result<()> {
     row("g", &e.g)?;
     row("b", &e.b)?;
     row("luminance", &e.luminance)?;
+    if let Some(n) = &r.reference_noise {
+        let pct =
+            |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{:.2}%", 100.0 * v));
+        outln!(
+            "reference noise (luminance standard error, RMS): {:.6e} ({}); error with it removed: {:.6e} ({})",
+            n.rms,
+            pct(n.relative_rms),
+            n.corrected_rmse,
+            pct(n.corrected_relative_rmse)
+        )?;
+    }
     if let Some(d) = &r.diff {
         outln!(
             "diff: {} ({} luminance error, colour scale {:.3e} .. {:.3e})",

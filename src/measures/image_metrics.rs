@@ -113,6 +113,67 @@ pub fn compare(a: &Image, b: &Image, mask: Option<&[bool]>) -> Result<ImageError
     })
 }
 
+/// What the reference's own Monte Carlo noise contributes to a measured luminance error.
+///
+/// With an unbiased reference b = t + n (n of zero mean and per-pixel standard error σ, independent of the
+/// approximation a), E[(a − b)²] = (a − t)² + σ², so the error against the truth t is estimated by
+/// √(RMSE² − mean σ²). The luminance standard error is bounded by the luminance of the channel standard
+/// errors (a positive combination of correlated estimates), so the noise is an upper bound and the
+/// corrected error a lower estimate; both are reported so that a reader sees how much of a measured error
+/// is the reference's.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ReferenceNoise {
+    /// Root mean square of the reference's luminance standard error over the compared pixels.
+    pub rms: f64,
+    /// `rms` over the reference's mean luminance.
+    pub relative_rms: Option<f64>,
+    /// √(max(0, RMSE² − rms²)) of luminance: the error against the noiseless truth.
+    pub corrected_rmse: f64,
+    /// `corrected_rmse` over the reference's mean luminance.
+    pub corrected_relative_rmse: Option<f64>,
+}
+
+/// The reference noise in `errors` (luminance) from the reference's standard-error image `stderr`
+/// (`radiosity reference --stderr`), over the pixels `mask` does not ignore.
+pub fn reference_noise(
+    errors: &ImageErrors,
+    stderr: &Image,
+    mask: Option<&[bool]>,
+) -> Result<ReferenceNoise> {
+    ensure!(
+        stderr.width == errors.width && stderr.height == errors.height,
+        "the standard-error image is {}×{} but the images are {}×{}",
+        stderr.width,
+        stderr.height,
+        errors.width,
+        errors.height
+    );
+    ensure_mask_len(mask, stderr)?;
+    let mut sum_sq = 0.0;
+    for (i, s) in stderr.pixels.iter().enumerate() {
+        if mask.is_some_and(|m| m[i]) {
+            continue;
+        }
+        let (x, y) = (i % stderr.width, i / stderr.width);
+        ensure!(
+            s.is_finite(),
+            "standard error at pixel ({x}, {y}) is not finite: {s:?}"
+        );
+        let sigma = Rgb::new(s.r.abs(), s.g.abs(), s.b.abs()).luminance();
+        sum_sq += sigma * sigma;
+    }
+    let l = &errors.luminance;
+    let rms = (sum_sq / errors.compared as f64).sqrt();
+    let corrected_rmse = (l.rmse * l.rmse - rms * rms).max(0.0).sqrt();
+    let relative = |v: f64| (l.reference_mean != 0.0).then(|| v / l.reference_mean.abs());
+    Ok(ReferenceNoise {
+        rms,
+        relative_rms: relative(rms),
+        corrected_rmse,
+        corrected_relative_rmse: relative(corrected_rmse),
+    })
+}
+
 /// Per-pixel luminance error |L(a) − L(b)|, or |L(a) − L(b)| / L(b) when `relative`; `None` where the mask
 /// ignores the pixel or where a relative error is undefined (black reference).
 pub fn luminance_error_map(
@@ -237,5 +298,37 @@ mod tests {
         let mut mask = vec![false; 4];
         mask[3] = true;
         assert!(compare(&a, &b, Some(&mask)).is_ok());
+    }
+
+    #[test]
+    fn reference_noise_is_removed_in_quadrature() {
+        // Truth t = 1 everywhere; the approximation is off by 0.3, the reference by ±0.4 (its noise, with
+        // standard error 0.4): the measured RMSE is 0.5 and the corrected one the true 0.3.
+        let (w, h) = (4, 2);
+        let truth = Image {
+            width: w,
+            height: h,
+            pixels: vec![Rgb::splat(1.0); w * h],
+        };
+        let mut a = truth.clone();
+        let mut b = truth.clone();
+        for (i, (pa, pb)) in a.pixels.iter_mut().zip(&mut b.pixels).enumerate() {
+            *pa = Rgb::splat(1.3);
+            *pb = Rgb::splat(if i % 2 == 0 { 1.4 } else { 0.6 });
+        }
+        // The approximation sits 0.3 above t; b is t ± 0.4, so (a − b)² averages 0.1² and 0.7² → 0.25.
+        let stderr = Image {
+            width: w,
+            height: h,
+            pixels: vec![Rgb::splat(0.4); w * h],
+        };
+        let e = compare(&a, &b, None).unwrap();
+        assert!((e.luminance.rmse - 0.5).abs() < 1e-12);
+        let n = reference_noise(&e, &stderr, None).unwrap();
+        assert!((n.rms - 0.4).abs() < 1e-12);
+        assert!((n.corrected_rmse - 0.3).abs() < 1e-12);
+        assert!(n.corrected_relative_rmse.is_some());
+        let wrong = Image::new(2, 2);
+        assert!(reference_noise(&e, &wrong, None).is_err());
     }
 }

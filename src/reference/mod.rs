@@ -27,9 +27,10 @@
 //! shifts make their means independent and unbiased, and the standard error of the mean is estimated from
 //! their spread (an unbiased variance estimate with `BATCHES - 1` degrees of freedom).
 //!
-//! Every sample of a pixel goes through the pixel *centre* (no antialiasing): a pixel's value is an
-//! estimate of the radiance leaving the surface point seen through that centre, directly comparable with
-//! the radiosity renderer, which shades the same centre ray. Each pixel's random numbers come from its own
+//! A pixel's value is the average radiance over the pixel (the default box filter, comparable with
+//! `render --spp 16` and above: each path starts at its own point of the pixel, see [`PixelFilter`]) or the
+//! radiance leaving the surface point seen through its centre (`--filter centre`, comparable with a
+//! one-sample render, which shades the same centre ray). Each pixel's random numbers come from its own
 //! generator seeded from (seed, pixel), so images are bit-identical for any thread count.
 
 pub mod probe;
@@ -66,9 +67,11 @@ pub struct ReferenceSettings {
 pub enum PixelFilter {
     /// The radiance at the pixel centre.
     Centre,
-    /// The average radiance over the pixel (box filter): each of the [`BATCHES`] batches starts at a
-    /// jittered point of its own cell of a 4 × 4 grid over the pixel, so the estimate is comparable with
-    /// `render --spp 16` (and above). Its standard error then includes the variation within the pixel.
+    /// The average radiance over the pixel (box filter), comparable with `render --spp 16` (and above):
+    /// every path starts at its own jittered point of one cell of a 4 × 4 grid over the pixel, path `i`
+    /// of batch `b` in cell `(i + b) mod 16`, so that every cell gets the same number of paths and each
+    /// batch covers the whole pixel. The estimate converges to the pixel's average as `--spp` grows
+    /// (edges included), and the standard error from the batches' spread is that of this average.
     #[default]
     Box,
 }
@@ -436,14 +439,10 @@ impl<'a> PathTracer<'a> {
     /// both are stratified over the batch while every pair is uniform in the 4-cube: the batch mean is
     /// unbiased, and batches with independent shifts are independent.
     fn batch(&self, start: Vertex, n: usize, rng: &mut Pcg64Mcg) -> Rgb {
-        let light_shift = [rng.next_u32(), rng.next_u32()];
-        let bounce_shift = [rng.next_u32(), rng.next_u32()];
+        let sequence = FirstVertexSequence::new(rng);
         let mut sum = Rgb::BLACK;
         for i in 0..n as u32 {
-            let (a, b) = (i.reverse_bits(), sobol_second(i));
-            let light = unit_square(a ^ light_shift[0], b ^ light_shift[1]);
-            let bounce = unit_square(b ^ bounce_shift[0], a ^ bounce_shift[1]);
-            sum += self.sample_reflected(start, [light, bounce], rng);
+            sum += self.sample_reflected(start, sequence.point(i), rng);
         }
         sum
     }
@@ -540,6 +539,21 @@ impl<'a> PathTracer<'a> {
         ReferenceImage { mean, stderr }
     }
 
+    /// One path's estimate of the radiance seen along a camera ray: the emission of the surface hit plus
+    /// one reflected-light sample with first-vertex points `first`, or a luminaire opening's radiance.
+    fn camera_sample(&self, ray: &Ray, first: [DVec2; 2], rng: &mut Pcg64Mcg) -> Rgb {
+        let Some(hit) = self.visibility.intersect(ray, 0.0, f64::INFINITY) else {
+            return Rgb::BLACK;
+        };
+        if let Some(k) = self.openings[hit.polygon] {
+            return self.luminaires[k as usize].luminance(-ray.direction);
+        }
+        match self.vertex(ray.at(hit.t), hit.polygon, hit.front) {
+            Some((start, emission)) => emission + self.sample_reflected(start, first, rng),
+            None => Rgb::BLACK,
+        }
+    }
+
     fn pixel(
         &self,
         camera: &Camera,
@@ -554,26 +568,21 @@ impl<'a> PathTracer<'a> {
         let side = (BATCHES as f64).sqrt() as usize;
         for (b, sum) in sums.iter_mut().enumerate().take(batches) {
             let mut rng = stream(seed, b as u64);
-            let (px, py) = match settings.filter {
-                PixelFilter::Centre => (0.5, 0.5),
-                PixelFilter::Box => (
-                    ((b % side) as f64 + rng.random::<f64>()) / side as f64,
-                    ((b / side) as f64 + rng.random::<f64>()) / side as f64,
-                ),
-            };
-            let ray = camera.ray(x as f64 + px, y as f64 + py);
-            let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
-                continue;
-            };
-            if let Some(k) = self.openings[hit.polygon] {
-                *sum = self.luminaires[k as usize].luminance(-ray.direction) * per_batch as f64;
-                continue;
+            let sequence = FirstVertexSequence::new(&mut rng);
+            for i in 0..per_batch {
+                let (px, py) = match settings.filter {
+                    PixelFilter::Centre => (0.5, 0.5),
+                    PixelFilter::Box => {
+                        let cell = (i + b) % BATCHES;
+                        (
+                            ((cell % side) as f64 + rng.random::<f64>()) / side as f64,
+                            ((cell / side) as f64 + rng.random::<f64>()) / side as f64,
+                        )
+                    }
+                };
+                let ray = camera.ray(x as f64 + px, y as f64 + py);
+                *sum += self.camera_sample(&ray, sequence.point(i as u32), &mut rng);
             }
-            let Some((start, emission)) = self.vertex(ray.at(hit.t), hit.polygon, hit.front) else {
-                continue;
-            };
-            // Emission is added per batch: each batch may see a different surface.
-            *sum = self.batch(start, per_batch, &mut rng) + emission * per_batch as f64;
         }
         Self::combine(Rgb::BLACK, &sums[..batches], per_batch)
     }
@@ -582,6 +591,32 @@ impl<'a> PathTracer<'a> {
 /// Independent batches per estimate: the standard error comes from the spread of the batch means (each
 /// batch is a randomised quasi-Monte Carlo estimate, so its samples are not independent).
 pub const BATCHES: usize = 16;
+
+/// The first path vertex's emitter points and bounce directions of one batch: a (0, 2)-sequence (van der
+/// Corput and Sobol's second dimension), randomly shifted by digital XOR per batch, so that each batch is
+/// an unbiased randomised quasi-Monte Carlo estimate and the batches are independent.
+struct FirstVertexSequence {
+    light_shift: [u32; 2],
+    bounce_shift: [u32; 2],
+}
+
+impl FirstVertexSequence {
+    fn new(rng: &mut Pcg64Mcg) -> Self {
+        FirstVertexSequence {
+            light_shift: [rng.next_u32(), rng.next_u32()],
+            bounce_shift: [rng.next_u32(), rng.next_u32()],
+        }
+    }
+
+    /// The `i`-th (light, bounce) pair of unit-square points.
+    fn point(&self, i: u32) -> [DVec2; 2] {
+        let (a, b) = (i.reverse_bits(), sobol_second(i));
+        [
+            unit_square(a ^ self.light_shift[0], b ^ self.light_shift[1]),
+            unit_square(b ^ self.bounce_shift[0], a ^ self.bounce_shift[1]),
+        ]
+    }
+}
 
 /// (batches, samples per batch) for `spp` samples: `BATCHES` batches (fewer, of one sample each, for
 /// smaller `spp`), so `spp` is rounded up to a multiple of `BATCHES`.
