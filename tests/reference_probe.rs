@@ -179,3 +179,30 @@ fn random_points_lie_on_non_emitting_surfaces_uniformly_by_area() {
         );
     }
 }
+
+/// Every random point of office3 is found again on its own polygon's plane: there a steep object
+/// standing within δ of a point used to take the locating ray and fail the probe ("the normal does not
+/// match"), so `probe --random` could not run on the scene.
+#[test]
+fn random_points_of_a_furnished_office_are_found_on_their_planes() {
+    use radiosity::reference::probe::{find_surface, random_points};
+    use radiosity::scene::{load, LoadOptions};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/scenes/renderpark/office3/office.mgf");
+    let scene = load(&path, &LoadOptions::default()).expect("office3 loads");
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape.clone()).collect();
+    let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
+    let tolerance = 1e-3 * scene.bounds().diagonal();
+    for probe in random_points(&scene, 500, 1) {
+        let found = find_surface(&scene, &visibility, &probe)
+            .unwrap_or_else(|e| panic!("point {}: {e}", probe.line));
+        assert!(found.normal.dot(probe.normal) >= 0.5);
+        let shape = &scene.polygons[found.polygon].shape;
+        let off_plane = shape.normal().dot(probe.point - shape.vertices()[0]).abs();
+        assert!(
+            off_plane <= tolerance,
+            "point {}: {off_plane} off its plane",
+            probe.line
+        );
+    }
+}

@@ -151,8 +151,9 @@ const SURFACE_TOLERANCE: f64 = 1e-3;
 const NORMAL_AGREEMENT: f64 = 0.5;
 
 /// Finds the polygon side a probe lies on: first by a ray from `point + δ normal` back along `-normal`
-/// (δ = 10⁻³ of the scene diagonal), then, for points on a crack between polygons, the nearest polygon
-/// whose plane is within δ, whose normal agrees and which contains the point's projection. Fails for points
+/// (δ = 10⁻³ of the scene diagonal), then, for points on a crack between polygons or where another
+/// surface crosses that ray with a normal that does not agree, the nearest polygon whose plane is within
+/// δ, whose normal agrees and which contains the point's projection. Fails for points
 /// on no surface and for the black back of one-sided polygons.
 pub fn find_surface(
     scene: &Scene,
@@ -162,9 +163,22 @@ pub fn find_surface(
     let delta = SURFACE_TOLERANCE * scene.bounds().diagonal().max(f64::MIN_POSITIVE);
     let n = probe.normal;
     let ray = Ray::new(probe.point + delta * n, -n);
-    let found = match visibility.intersect(&ray, 0.0, 2.0 * delta) {
-        Some(hit) => Some((hit.polygon, hit.front, ray.at(hit.t))),
-        None => nearest_containing(scene, probe, delta),
+    let side_normal = |polygon: usize, front: bool| {
+        let normal = scene.polygons[polygon].shape.normal();
+        if front {
+            normal
+        } else {
+            -normal
+        }
+    };
+    let hit = visibility
+        .intersect(&ray, 0.0, 2.0 * delta)
+        .map(|hit| (hit.polygon, hit.front, ray.at(hit.t)));
+    let found = match hit {
+        Some((polygon, front, _)) if side_normal(polygon, front).dot(n) >= NORMAL_AGREEMENT => hit,
+        // Nothing, or another surface crossing the short ray (a steep object standing on the surface
+        // within δ of the point): look for the probe's own plane, and report the hit only if there is none.
+        _ => nearest_containing(scene, probe, delta).or(hit),
     };
     let Some((polygon, front, point)) = found else {
         return Err(format!(
@@ -172,13 +186,8 @@ pub fn find_surface(
             probe.point.x, probe.point.y, probe.point.z, n.x, n.y, n.z
         ));
     };
-    let p = &scene.polygons[polygon];
-    let normal = if front {
-        p.shape.normal()
-    } else {
-        -p.shape.normal()
-    };
-    if !front && !p.two_sided {
+    let normal = side_normal(polygon, front);
+    if !front && !scene.polygons[polygon].two_sided {
         return Err(format!(
             "the point is on the back of one-sided polygon {polygon} (an opaque black side); \
              flip the normal to probe its front"
