@@ -175,14 +175,20 @@ fn straddles(shape: &Shape, outline: &[DVec2], origin: DVec3, normal: DVec3) -> 
     overlap > 1e-6 * area && overlap < (1.0 - 1e-6) * area
 }
 
-#[test]
-fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
+/// cube.mgf and the index of its ceiling's material.
+fn cube_and_its_ceiling() -> (Scene, usize) {
     let cube = renderpark("cube.mgf");
     let ceiling = cube
         .materials
         .iter()
         .position(|m| m.name == "plafondwit")
         .unwrap();
+    (cube, ceiling)
+}
+
+#[test]
+fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
+    let (cube, ceiling) = cube_and_its_ceiling();
     let before = cube.polygons.clone();
     // The lamp's outline, 1 cm under the ceiling: x, y in [4.4, 5.4].
     let lamp: Vec<DVec3> = [(4.4, 4.4), (5.4, 4.4), (5.4, 5.4), (4.4, 5.4)]
@@ -386,12 +392,7 @@ fn auto_splits_only_where_emitted_light_is_trapped() {
     let mut reflector = ceiling_and_panel(grey.clone(), true, false, grey);
     let report = split_contacts(&mut reflector, SplitContacts::On, DEFAULT_CONTACT_GAP);
     assert_eq!(report.polygons_split, 1, "on: {report}");
-    let mut cube = renderpark("cube.mgf");
-    let ceiling = cube
-        .materials
-        .iter()
-        .position(|m| m.name == "plafondwit")
-        .unwrap();
+    let (mut cube, ceiling) = cube_and_its_ceiling();
     let before = cube.polygons.clone();
     split_contacts(&mut cube, SplitContacts::Auto, DEFAULT_CONTACT_GAP);
     let changed: Vec<_> = before

@@ -412,12 +412,12 @@ fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Opt
 /// diagonal, same winding.
 ///
 /// Why: the bases are orthonormal for the parametric measure ([`crate::bases`]), which is the area
-/// measure only where the Jacobian is constant. On a trapezoid the pull of push-pull (children weighted
-/// by their areas) gives a parent whose children are all constant a spurious gradient toward the wide
-/// side, and a coupling that integrates it with the Jacobian emits more than the children do: cube.mgf's
-/// lamp, cut along the ceiling's diagonal into trapezoids, sent 8% more power into the room through its
-/// inner elements under `--accuracy 10%` with the linear basis (BENCHMARKS.md, "Splitting surfaces
-/// along contacts"). Cutting only ever makes such pieces here, so they are triangulated here.
+/// measure only where the Jacobian is constant. Before push-pull and couplings solved with the overlap
+/// matrix of a trapezoid ([`crate::bases::Overlap`]), a parent whose children were all constant got a
+/// spurious gradient: cube.mgf's lamp, cut along the ceiling's diagonal into trapezoids, sent 8% more
+/// power into the room under `--accuracy 10%` (BENCHMARKS.md, "Splitting surfaces along contacts").
+/// Trapezoids are handled exactly now; pieces stay affine because their overlap matrix is the identity
+/// (no solve per element and sweep) and the cube.mgf measurements were made with them.
 fn affine_pieces(shape: Shape, snap: f64) -> Vec<Shape> {
     match shape {
         Shape::Quad([a, b, c, d]) if (a + c - b - d).length() > snap => {
