@@ -113,7 +113,7 @@ fn render_writes_png_exr_models_and_stats() {
 fn info_prints_counts_of_a_renderpark_scene() {
     let scene =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark/cube.mgf");
-    let out = radiosity(&["info", scene.to_str().unwrap()]);
+    let out = radiosity(&["info", scene.to_str().unwrap(), "--split-contacts", "off"]);
     assert!(
         out.status.success(),
         "{}",
@@ -122,6 +122,10 @@ fn info_prints_counts_of_a_renderpark_scene() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("polygons:      66 "), "{stdout}");
     assert!(stdout.contains("not split"), "{stdout}");
+    // By default (auto) only the ceiling is cut, along the outline of the two-sided lamp under it.
+    let out = radiosity(&["info", scene.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("2 polygons split"), "{stdout}");
     // With the split on, the ceiling and the lamp 1 cm under it are cut along each other's outlines.
     let out = radiosity(&["info", scene.to_str().unwrap(), "--split-contacts", "on"]);
     let stdout = String::from_utf8_lossy(&out.stdout);

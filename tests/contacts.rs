@@ -4,6 +4,7 @@
 //! path-traced reference, which it did not while ceiling elements straddled the lamp's outline.
 
 use radiosity::bases::BasisKind;
+use radiosity::color::Rgb;
 use radiosity::geometry::{DVec2, DVec3, Shape};
 use radiosity::measures::image_metrics::compare;
 use radiosity::output::camera::Camera;
@@ -11,8 +12,12 @@ use radiosity::output::render::{emitter_mask, render, RenderOptions, Shading};
 use radiosity::pipeline::{simulate, Accuracy, OracleKind, SimulationSettings};
 use radiosity::progress::Progress;
 use radiosity::reference::{render_reference, ReferenceSettings};
-use radiosity::scene::contacts::{contact_pieces, split_contacts, DEFAULT_CONTACT_GAP};
-use radiosity::scene::{cornell::cornell_box, load, CameraSpec, LoadOptions, Scene};
+use radiosity::scene::contacts::{
+    contact_pieces, split_contacts, SplitContacts, DEFAULT_CONTACT_GAP,
+};
+use radiosity::scene::{
+    cornell::cornell_box, load, CameraSpec, LoadOptions, Material, Object, Polygon, Scene,
+};
 use std::path::Path;
 
 fn renderpark(name: &str) -> Scene {
@@ -46,7 +51,7 @@ fn strictly_inside(corners: &[DVec2], p: DVec2, margin: f64) -> bool {
 /// convex shape in the polygon's plane facing the same way, and points spread over the polygon lie in
 /// exactly one piece (area sum + no overlap + cover = a partition).
 fn check_tiling(scene: &Scene, name: &str) -> usize {
-    let cut = contact_pieces(scene, DEFAULT_CONTACT_GAP);
+    let cut = contact_pieces(scene, SplitContacts::On, DEFAULT_CONTACT_GAP);
     let mut split = 0;
     for (polygon, pieces) in scene.polygons.iter().zip(&cut) {
         let Some(pieces) = pieces else { continue };
@@ -170,14 +175,20 @@ fn straddles(shape: &Shape, outline: &[DVec2], origin: DVec3, normal: DVec3) -> 
     overlap > 1e-6 * area && overlap < (1.0 - 1e-6) * area
 }
 
-#[test]
-fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
-    let mut cube = renderpark("cube.mgf");
+/// cube.mgf and the index of its ceiling's material.
+fn cube_and_its_ceiling() -> (Scene, usize) {
+    let cube = renderpark("cube.mgf");
     let ceiling = cube
         .materials
         .iter()
         .position(|m| m.name == "plafondwit")
         .unwrap();
+    (cube, ceiling)
+}
+
+#[test]
+fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
+    let (cube, ceiling) = cube_and_its_ceiling();
     let before = cube.polygons.clone();
     // The lamp's outline, 1 cm under the ceiling: x, y in [4.4, 5.4].
     let lamp: Vec<DVec3> = [(4.4, 4.4), (5.4, 4.4), (5.4, 5.4), (4.4, 5.4)]
@@ -200,23 +211,27 @@ fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
             .any(|p| p.material == ceiling && square(&p.shape)),
         "the unsplit ceiling straddles the lamp (else this test tests nothing)"
     );
-    let report = split_contacts(&mut cube, DEFAULT_CONTACT_GAP);
-    assert_eq!(report.polygons_split, 4, "{report}");
-    let pieces: Vec<_> = cube
-        .polygons
-        .iter()
-        .filter(|p| p.material == ceiling)
-        .collect();
-    assert!(pieces.len() > 2);
-    for p in pieces {
-        assert!(
-            !square(&p.shape),
-            "ceiling piece {:?} straddles the lamp",
-            p.shape
-        );
+    // `on` also cuts the lamp along the ceiling's diagonal; `auto` only the ceiling along the lamp.
+    for (mode, split) in [(SplitContacts::On, 4), (SplitContacts::Auto, 2)] {
+        let mut cube = cube.clone();
+        let report = split_contacts(&mut cube, mode, DEFAULT_CONTACT_GAP);
+        assert_eq!(report.polygons_split, split, "{mode:?}: {report}");
+        let pieces: Vec<_> = cube
+            .polygons
+            .iter()
+            .filter(|p| p.material == ceiling)
+            .collect();
+        assert!(pieces.len() > 2);
+        for p in pieces {
+            assert!(
+                !square(&p.shape),
+                "{mode:?}: ceiling piece {:?} straddles the lamp",
+                p.shape
+            );
+        }
+        // Every piece keeps its polygon's place in the file.
+        assert!(cube.origins.get(cube.polygons.len() - 1).1 > 0);
     }
-    // Every piece keeps its polygon's place in the file.
-    assert!(cube.origins.get(cube.polygons.len() - 1).1 > 0);
 
     let mut cornell = cornell_box();
     let floor = cornell
@@ -224,7 +239,7 @@ fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
         .iter()
         .position(|o| o.name == "floor")
         .unwrap();
-    split_contacts(&mut cornell, DEFAULT_CONTACT_GAP);
+    split_contacts(&mut cornell, SplitContacts::On, DEFAULT_CONTACT_GAP);
     for block in ["short_block", "tall_block"] {
         let object = cornell
             .objects
@@ -252,6 +267,147 @@ fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
                 "floor piece straddles {block}"
             );
         }
+    }
+}
+
+/// A unit ceiling (two-sided, reflecting or not) with a 0.4 × 0.4 panel 5 mm below it, facing down
+/// (`-z`) or up: the scene of one contact.
+fn ceiling_and_panel(
+    panel: Material,
+    two_sided: bool,
+    facing_up: bool,
+    ceiling: Material,
+) -> Scene {
+    ceiling_and_strip(panel, two_sided, facing_up, ceiling, 0.4, 0.005)
+}
+
+/// [`ceiling_and_panel`] with a `width` × 0.4 panel `gap` below the ceiling.
+fn ceiling_and_strip(
+    panel: Material,
+    two_sided: bool,
+    facing_up: bool,
+    ceiling: Material,
+    width: f64,
+    gap: f64,
+) -> Scene {
+    let z = 1.0;
+    let rectangle = |x: (f64, f64), y: (f64, f64), z: f64, up: bool| {
+        let (a, b, c, d) = (
+            DVec3::new(x.0, y.0, z),
+            DVec3::new(x.1, y.0, z),
+            DVec3::new(x.1, y.1, z),
+            DVec3::new(x.0, y.1, z),
+        );
+        if up {
+            Shape::Quad([a, b, c, d])
+        } else {
+            Shape::Quad([d, c, b, a])
+        }
+    };
+    Scene {
+        polygons: vec![
+            Polygon {
+                shape: rectangle((0.0, 1.0), (0.0, 1.0), z, false),
+                material: 0,
+                object: 0,
+                two_sided: true,
+            },
+            Polygon {
+                shape: rectangle(
+                    (0.5 - width / 2.0, 0.5 + width / 2.0),
+                    (0.3, 0.7),
+                    z - gap,
+                    facing_up,
+                ),
+                material: 1,
+                object: 1,
+                two_sided,
+            },
+        ],
+        materials: vec![ceiling, panel],
+        objects: vec![
+            Object {
+                name: "ceiling".into(),
+            },
+            Object {
+                name: "panel".into(),
+            },
+        ],
+        ..Default::default()
+    }
+}
+
+/// `auto` cuts exactly where emitted light is trapped in a gap: along an emitter's outline when its
+/// emitting side faces the reflecting surface above it across a gap whose side openings are a small
+/// part of the cavity (the 0.4 m panel 5 mm under the ceiling: 2.4%); not along a one-sided lamp that
+/// faces away (the Cornell box's), a reflector, over a black ceiling, or a 1 cm strip 6 mm under the
+/// ceiling (openings 38% of the cavity: open, like the classroom's tubes in their housings); and, on
+/// the real scenes, the cube's ceiling only (not the lamp, nor the floor under the blocks), nothing in
+/// the Cornell box, office2 or the classroom.
+#[test]
+fn auto_splits_only_where_emitted_light_is_trapped() {
+    let grey = Material::diffuse("grey", Rgb::splat(0.5));
+    let lamp = Material::emitter("lamp", Rgb::BLACK, Rgb::splat(10.0));
+    let cases = [
+        ("two-sided lamp", lamp.clone(), true, false, grey.clone(), 1),
+        (
+            "one-sided uplight",
+            lamp.clone(),
+            false,
+            true,
+            grey.clone(),
+            1,
+        ),
+        (
+            "one-sided downlight",
+            lamp.clone(),
+            false,
+            false,
+            grey.clone(),
+            0,
+        ),
+        ("reflector", grey.clone(), true, false, grey.clone(), 0),
+        (
+            "black ceiling",
+            lamp.clone(),
+            true,
+            false,
+            Material::diffuse("black", Rgb::BLACK),
+            0,
+        ),
+    ];
+    for (name, panel, two_sided, facing_up, ceiling, split) in cases {
+        let mut scene = ceiling_and_panel(panel, two_sided, facing_up, ceiling);
+        let report = split_contacts(&mut scene, SplitContacts::Auto, DEFAULT_CONTACT_GAP);
+        assert_eq!(report.polygons_split, split, "{name}: {report}");
+    }
+    // The strip lies within the contact gap (6 mm ≤ 2% of its 0.4 m length), so only the trap test
+    // leaves it whole; `on` cuts along it.
+    let strip = || ceiling_and_strip(lamp.clone(), true, false, grey.clone(), 0.01, 0.006);
+    let report = split_contacts(&mut strip(), SplitContacts::Auto, DEFAULT_CONTACT_GAP);
+    assert_eq!(report.polygons_split, 0, "open strip: {report}");
+    let report = split_contacts(&mut strip(), SplitContacts::On, DEFAULT_CONTACT_GAP);
+    assert_eq!(report.polygons_split, 1, "open strip, on: {report}");
+    // `on` cuts along every lying contact, emitter or not.
+    let mut reflector = ceiling_and_panel(grey.clone(), true, false, grey);
+    let report = split_contacts(&mut reflector, SplitContacts::On, DEFAULT_CONTACT_GAP);
+    assert_eq!(report.polygons_split, 1, "on: {report}");
+    let (mut cube, ceiling) = cube_and_its_ceiling();
+    let before = cube.polygons.clone();
+    split_contacts(&mut cube, SplitContacts::Auto, DEFAULT_CONTACT_GAP);
+    let changed: Vec<_> = before
+        .iter()
+        .filter(|p| !cube.polygons.contains(p))
+        .collect();
+    assert_eq!(changed.len(), 2);
+    assert!(changed.iter().all(|p| p.material == ceiling));
+    for mut scene in [
+        cornell_box(),
+        renderpark("office2/office2.mgf"),
+        renderpark("salon/classroom.mgf"),
+    ] {
+        let report = split_contacts(&mut scene, SplitContacts::Auto, DEFAULT_CONTACT_GAP);
+        assert_eq!(report.polygons_split, 0, "{report}");
     }
 }
 
@@ -290,7 +446,8 @@ fn cube_mgf_with_its_two_sided_lamp_agrees_with_the_reference() {
     };
     let unsplit = renderpark("cube.mgf");
     let mut scene = unsplit.clone();
-    split_contacts(&mut scene, DEFAULT_CONTACT_GAP);
+    // The CLI's default.
+    split_contacts(&mut scene, SplitContacts::Auto, DEFAULT_CONTACT_GAP);
     let solve = |scene: &Scene| {
         let solution = simulate(scene, &settings, &quiet).unwrap();
         let image = render(
@@ -392,7 +549,7 @@ fn cube_mgf_with_its_two_sided_lamp_agrees_with_the_reference() {
 #[test]
 fn smooth_shading_has_no_seams_across_the_pieces() {
     let mut scene = cornell_box();
-    let report = split_contacts(&mut scene, DEFAULT_CONTACT_GAP);
+    let report = split_contacts(&mut scene, SplitContacts::On, DEFAULT_CONTACT_GAP);
     assert!(report.pieces > report.polygons_split);
     let settings = SimulationSettings {
         basis: BasisKind::Linear,

@@ -387,3 +387,121 @@ fn the_conservative_estimate_bounds_the_realistic_one() {
         "propagation adds error almost everywhere"
     );
 }
+
+/// Push-pull on trapezoids (quads whose Jacobian varies): with every basis, a patch whose leaves all
+/// carry the same radiance (a constant emitter, or a reflector under uniform irradiance) is that
+/// constant at every level, with no false gradient; and the pull keeps power: each parent's ∫ B dA
+/// (integrated here with the Jacobian by an exact rule, independently of the overlap matrices) equals
+/// the sum over its children, whatever their functions. Before the overlap solve (eq. (4)), the pull
+/// by area weights gave a constant-emission trapezoid's inner elements a false gradient.
+#[test]
+fn push_pull_on_trapezoids_keeps_constants_constant_and_power_unchanged() {
+    use radiosity::geometry::cubature::rule;
+    use radiosity::hierarchy::ElementId;
+    use radiosity::solvers::push_pull::push_pull;
+    let trapezoid = |z: f64, up: bool| {
+        let v = [
+            DVec3::new(0.0, 0.0, z),
+            DVec3::new(3.0, 0.0, z),
+            DVec3::new(2.2, 1.0, z),
+            DVec3::new(0.5, 1.3, z),
+        ];
+        Shape::Quad(if up { v } else { [v[3], v[2], v[1], v[0]] })
+    };
+    let scene = Scene {
+        polygons: vec![
+            Polygon {
+                shape: trapezoid(0.0, true),
+                material: 0,
+                object: 0,
+                two_sided: false,
+            },
+            Polygon {
+                shape: trapezoid(1.0, false),
+                material: 1,
+                object: 0,
+                two_sided: false,
+            },
+        ],
+        materials: vec![
+            Material::diffuse("grey", Rgb::splat(RHO)),
+            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(EMISSION)),
+        ],
+        objects: vec![radiosity::scene::Object {
+            name: "plates".into(),
+        }],
+        ..Default::default()
+    };
+    for kind in radiosity::bases::BasisKind::ALL {
+        let mut h = Hierarchy::new(&scene, kind);
+        subdivide_uniformly(&mut h, 0, 3);
+        subdivide_uniformly(&mut h, 1, 3);
+        let n = h.basis_size();
+        // ∫ B dA of an element's expansion.
+        let power = |h: &Hierarchy, id: ElementId| -> f64 {
+            let e = h.element(id);
+            rule(e.shape().domain(), 12)
+                .nodes
+                .iter()
+                .map(|&(uv, w)| w * e.shape().jacobian(uv) * h.radiance_at_parameters(id, uv).g)
+                .sum()
+        };
+        let constant_everywhere = |h: &Hierarchy, patch: usize, value: f64, what: &str| {
+            let mut stack = vec![h.patches[patch].root];
+            while let Some(id) = stack.pop() {
+                let e = h.element(id);
+                for (a, c) in e.radiance.iter().enumerate() {
+                    let expected = if a == 0 { value } else { 0.0 };
+                    assert!(
+                        (c.g - expected).abs() <= 1e-12 * value,
+                        "{kind:?} {what}: level {} coefficient {a} = {}",
+                        e.level,
+                        c.g
+                    );
+                }
+                stack.extend(e.children.iter().copied());
+            }
+        };
+        // The emitter: constant emission at its leaves.
+        let update = push_pull(&h, 1, &|_, _| {});
+        update.apply(&mut h);
+        constant_everywhere(&h, 1, EMISSION, "constant emitter");
+        let area = h.element(h.patches[1].root).area;
+        let exitant = std::f64::consts::PI * EMISSION * area;
+        assert!((update.exitant.g - exitant).abs() <= 1e-12 * exitant);
+        // The reflector under uniform irradiance H = 1, gathered at its root.
+        let root = h.patches[0].root;
+        let update = push_pull(&h, 0, &|id, out: &mut [Rgb]| {
+            if id == root {
+                out[0] += Rgb::splat(1.0);
+            }
+        });
+        update.apply(&mut h);
+        constant_everywhere(&h, 0, RHO, "uniformly lit reflector");
+        // Non-uniform irradiance, a different function at every leaf: power kept by every pull.
+        let update = push_pull(&h, 0, &|id, out: &mut [Rgb]| {
+            if h.element(id).is_leaf() {
+                for (a, o) in out.iter_mut().enumerate().take(n) {
+                    *o += Rgb::splat(1.0 + 0.1 * ((id as usize * 7 + a * 3) % 11) as f64);
+                }
+            }
+        });
+        update.apply(&mut h);
+        let mut stack = vec![root];
+        while let Some(id) = stack.pop() {
+            let e = h.element(id);
+            if !e.is_leaf() {
+                let children: f64 = e.children.iter().map(|&c| power(&h, c)).sum();
+                let parent = power(&h, id);
+                assert!(
+                    (parent - children).abs() <= 1e-11 * children.abs(),
+                    "{kind:?}: level {} pulls power {parent} from children's {children}",
+                    e.level
+                );
+            }
+            stack.extend(e.children.iter().copied());
+        }
+        let total = std::f64::consts::PI * power(&h, root);
+        assert!((update.exitant.g - total).abs() <= 1e-11 * total);
+    }
+}

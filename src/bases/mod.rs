@@ -9,15 +9,18 @@
 //! Normalisation: orthonormal for the *averaged* parametric measure,
 //! `(1/|D|) ∫_D φ_α φ_β du dv = δ_αβ`, with `φ_0 ≡ 1`, so coefficient 0 of a function is its parametric
 //! average (its area average on triangles and parallelograms, where the Jacobian is constant). On a
-//! general quad the Jacobian varies and the mapped functions are not orthogonal for the area measure:
-//! the overlap matrix of Bekaert–Willems eq. (4) is then not diagonal.
+//! general quad (a trapezoid) the Jacobian varies and the mapped functions are not orthogonal for the
+//! area measure: the overlap matrix of Bekaert–Willems eq. (4) is then not diagonal, and [`Overlap`]
+//! turns area moments `(1/A) ∫ f φ_α dA` (what couplings and pulls compute) into coefficients by solving
+//! with it. Without that solve a uniformly lit trapezoid got a false gradient (its moments of `φ_1`,
+//! `φ_2` are those of the Jacobian), and so did a parent of constant trapezoid children.
 //!
 //! [`Shape::point_at`]: crate::geometry::Shape::point_at
 //! [`Shape::subdivide`]: crate::geometry::Shape::subdivide
 
 use crate::color::Rgb;
 use crate::geometry::cubature::rule;
-use crate::geometry::{DVec2, Domain};
+use crate::geometry::{DVec2, Domain, Shape};
 
 /// The spanning monomials `u^p v^q` as `(p, q)`, in Bekaert–Willems' order {1, u, v, uv, u², v², u³, u²v,
 /// uv², v³}. Every prefix used by a [`BasisKind`] is closed under lowering an exponent, so its span is
@@ -401,6 +404,144 @@ fn gram_schmidt(domain: Domain, size: usize) -> Vec<f64> {
 /// Most basis functions of any kind (cubic).
 pub const MAX_BASIS_SIZE: usize = 10;
 
+/// The overlap matrix of Bekaert–Willems eq. (4) of one element over its area,
+/// `G_{αα'} = (1/A) ∫_A φ_α φ_α' dA`, as its Cholesky factor. It is the identity where the element's
+/// Jacobian is constant (triangles, parallelograms: [`Basis::overlap`] returns `None` there), so only
+/// trapezoid-like quads carry one. Area moments `μ_α = (1/A) ∫ f φ_α dA` are `G c` for the
+/// coefficients `c` of f's area-L2 projection: [`Overlap::solve`] gives `c = G⁻¹ μ`, exact (a
+/// constant f gives `c = f e_0`, no gradient), and power is `π A (G c)_0` ([`Overlap::mean`]).
+#[derive(Clone, Debug)]
+pub struct Overlap {
+    size: usize,
+    /// Row 0 of G: the area averages of the basis functions.
+    means: [f64; MAX_BASIS_SIZE],
+    /// Lower Cholesky factor L (G = L Lᵀ), row-major `size × size`.
+    factor: [f64; MAX_BASIS_SIZE * MAX_BASIS_SIZE],
+}
+
+/// Relative departure of a quad from a parallelogram, `|a + c − b − d| / (|a − c| + |b − d|)`, below
+/// which its Jacobian is constant to rounding and its overlap matrix the identity.
+const AFFINE_TOLERANCE: f64 = 1e-9;
+
+impl Overlap {
+    /// `G⁻¹ x` in place: the coefficients of the function whose area moments are `x`.
+    pub fn solve(&self, x: &mut [f64]) {
+        let (n, l) = (self.size, &self.factor);
+        for a in 0..n {
+            let s: f64 = (0..a).map(|b| l[a * n + b] * x[b]).sum();
+            x[a] = (x[a] - s) / l[a * n + a];
+        }
+        for a in (0..n).rev() {
+            let s: f64 = (a + 1..n).map(|b| l[b * n + a] * x[b]).sum();
+            x[a] = (x[a] - s) / l[a * n + a];
+        }
+    }
+
+    /// [`Overlap::solve`] per colour channel.
+    pub fn solve_rgb(&self, x: &mut [Rgb]) {
+        let n = self.size;
+        let mut channels = [[0.0; MAX_BASIS_SIZE]; 3];
+        for (a, v) in x[..n].iter().enumerate() {
+            [channels[0][a], channels[1][a], channels[2][a]] = [v.r, v.g, v.b];
+        }
+        for channel in &mut channels {
+            self.solve(&mut channel[..n]);
+        }
+        for (a, v) in x[..n].iter_mut().enumerate() {
+            *v = Rgb::new(channels[0][a], channels[1][a], channels[2][a]);
+        }
+    }
+
+    /// Solves every column of the row-major `size × columns` matrix `block` (rows are basis
+    /// functions): the coupling block of moments becomes one of coefficients (Algorithm 4.1 step 4a).
+    pub fn solve_columns(&self, block: &mut [f64], columns: usize) {
+        let mut column = [0.0; MAX_BASIS_SIZE];
+        for b in 0..columns {
+            for (a, v) in column[..self.size].iter_mut().enumerate() {
+                *v = block[a * columns + b];
+            }
+            self.solve(&mut column[..self.size]);
+            for (a, v) in column[..self.size].iter().enumerate() {
+                block[a * columns + b] = *v;
+            }
+        }
+    }
+
+    /// The area moments `G c` of the function with coefficients `c`.
+    pub fn moments_rgb(&self, c: &[Rgb]) -> Vec<Rgb> {
+        let (n, l) = (self.size, &self.factor);
+        // G c = L (Lᵀ c).
+        let lt: Vec<Rgb> = (0..n)
+            .map(|a| (a..n).map(|b| c[b] * l[b * n + a]).sum())
+            .collect();
+        (0..n)
+            .map(|a| (0..=a).map(|b| lt[b] * l[a * n + b]).sum())
+            .collect()
+    }
+
+    /// Area average of the function with coefficients `c`: `(G c)_0 = Σ_α c_α (1/A) ∫ φ_α dA`.
+    pub fn mean(&self, c: &[Rgb]) -> Rgb {
+        c.iter().zip(&self.means).map(|(&c, &m)| c * m).sum()
+    }
+}
+
+impl Basis {
+    /// The overlap matrix of `shape` (see [`Overlap`]) with an exact cubature rule: `None` where it is
+    /// the identity (a triangle, a parallelogram to [`AFFINE_TOLERANCE`], or the constant basis, whose
+    /// one moment is the area average). `area` is the element's, so that `G_00 = 1`.
+    pub fn overlap(&self, shape: &Shape, area: f64) -> Option<Overlap> {
+        let Shape::Quad([a, b, c, d]) = *shape else {
+            return None;
+        };
+        let skew = (a + c - b - d).length();
+        if self.size == 1 || skew <= AFFINE_TOLERANCE * (a.distance(c) + b.distance(d)) {
+            return None;
+        }
+        let n = self.size;
+        let mut g = [0.0; MAX_BASIS_SIZE * MAX_BASIS_SIZE];
+        let mut phi = [0.0; MAX_BASIS_SIZE];
+        // φ_α φ_α' J has degree 2 d + 1 (J is affine in u, v on a planar quad), 2 d + 2 on a warped one.
+        let degree = 2 * self.kind.polynomial_degree() + 2;
+        for &(uv, w) in &rule(Domain::Square, degree).nodes {
+            self.eval(Domain::Square, uv, &mut phi);
+            let wj = w * shape.jacobian(uv) / area;
+            for i in 0..n {
+                for j in 0..=i {
+                    g[i * n + j] += wj * phi[i] * phi[j];
+                }
+            }
+        }
+        let mut means = [0.0; MAX_BASIS_SIZE];
+        for (i, m) in means[..n].iter_mut().enumerate() {
+            *m = g[i * n];
+        }
+        // Cholesky, in place on the lower triangle.
+        for j in 0..n {
+            let s: f64 = (0..j).map(|k| g[j * n + k] * g[j * n + k]).sum();
+            let pivot = g[j * n + j] - s;
+            if pivot <= 0.0 {
+                // A degenerate quad (zero area): no solve rather than a division by zero.
+                return None;
+            }
+            g[j * n + j] = pivot.sqrt();
+            for i in j + 1..n {
+                let s: f64 = (0..j).map(|k| g[i * n + k] * g[j * n + k]).sum();
+                g[i * n + j] = (g[i * n + j] - s) / g[j * n + j];
+            }
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                g[i * n + j] = 0.0;
+            }
+        }
+        Some(Overlap {
+            size: n,
+            means,
+            factor: g,
+        })
+    }
+}
+
 impl Basis {
     /// Child `child`'s coefficients of the parent function with RGB `coefficients` (push, exact where
     /// the span is closed under the child map): `P_k · c`.
@@ -418,8 +559,9 @@ impl Basis {
             .collect()
     }
 
-    /// Adds `weight · P_kᵀ · child` to `parent`: the projection onto the parent's basis of a function
-    /// given on child `child`, for children covering the fraction `weight` of the parent's area (pull).
+    /// Adds `weight · P_kᵀ · m` to `parent`: the area moments `m` of a function given on child `child`
+    /// (its coefficients where the child's [`Overlap`] is the identity), as moments of the parent's
+    /// basis, for a child covering the fraction `weight` of the parent's area (pull).
     pub fn pull_add_rgb(
         &self,
         domain: Domain,
@@ -634,6 +776,92 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A trapezoid (no parallelogram: its Jacobian varies by a factor 3 across it).
+    fn trapezoid() -> Shape {
+        Shape::Quad([
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(3.0, 0.0, 0.0),
+            DVec3::new(2.0, 1.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+        ])
+    }
+
+    /// Area moments `(1/A) ∫ f φ_α dA` by an exact rule with the Jacobian (eq. (12)), as couplings
+    /// compute them.
+    fn area_moments(basis: &Basis, shape: &Shape, f: &dyn Fn(DVec2) -> f64) -> Vec<f64> {
+        let n = basis.size();
+        let mut out = vec![0.0; n];
+        let mut phi = [0.0; 10];
+        for &(uv, w) in &rule(shape.domain(), 12).nodes {
+            basis.eval(shape.domain(), uv, &mut phi);
+            for a in 0..n {
+                out[a] += w * shape.jacobian(uv) / shape.area() * f(uv) * phi[a];
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_overlap_solve_turns_trapezoid_moments_into_exact_coefficients() {
+        let shape = trapezoid();
+        for kind in [
+            BasisKind::Linear,
+            BasisKind::Bilinear,
+            BasisKind::Quadratic,
+            BasisKind::Cubic,
+        ] {
+            let basis = Basis::new(kind);
+            let n = basis.size();
+            // A constant's moment of φ_2 (v runs from the wide side to the narrow one) is the
+            // Jacobian's, not zero: read as a coefficient, it was a false gradient.
+            let mut constant = area_moments(&basis, &shape, &|_| 2.0);
+            assert!(
+                constant[2].abs() > 0.1,
+                "{kind:?}: the trapezoid shows no gradient"
+            );
+            let overlap = basis.overlap(&shape, shape.area()).expect("a trapezoid");
+            overlap.solve(&mut constant);
+            for (a, c) in constant.iter().enumerate() {
+                let expected = if a == 0 { 2.0 } else { 0.0 };
+                assert!((c - expected).abs() < 1e-12, "{kind:?} c{a} = {c}");
+            }
+            // Any function of the span is recovered, and its area average is (G c)_0.
+            let coefficients: Vec<f64> = (0..n).map(|a| 1.0 - 0.3 * a as f64).collect();
+            let f = |uv: DVec2| basis.value(Domain::Square, uv, &coefficients);
+            let mut moments = area_moments(&basis, &shape, &f);
+            let mean = moments[0];
+            overlap.solve(&mut moments);
+            for a in 0..n {
+                assert!(
+                    (moments[a] - coefficients[a]).abs() < 1e-12,
+                    "{kind:?} c{a}"
+                );
+            }
+            let rgb: Vec<Rgb> = coefficients.iter().map(|&c| Rgb::splat(c)).collect();
+            assert!((overlap.mean(&rgb).r - mean).abs() < 1e-12, "{kind:?} mean");
+            let back = overlap.moments_rgb(&rgb);
+            let mut solved = back.clone();
+            overlap.solve_rgb(&mut solved);
+            for a in 0..n {
+                assert!((solved[a].g - coefficients[a]).abs() < 1e-12);
+            }
+        }
+        // Identity cases: triangles, parallelograms, the constant basis.
+        let linear = Basis::new(BasisKind::Linear);
+        let parallelogram = Shape::Quad([
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(3.0, 1.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+        ]);
+        let triangle = Shape::Triangle([DVec3::ZERO, DVec3::X, DVec3::Y]);
+        for shape in [parallelogram, triangle] {
+            assert!(linear.overlap(&shape, shape.area()).is_none());
+        }
+        let constant = Basis::new(BasisKind::Constant);
+        assert!(constant.overlap(&shape, shape.area()).is_none());
     }
 
     #[test]

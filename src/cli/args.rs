@@ -39,24 +39,18 @@ pub struct SceneArgs {
     /// z-up scene) and spun SPIN degrees about that direction; repeatable.
     #[arg(long, value_name = "FILE.ies@X,Y,Z[@DX,DY,DZ[@SPIN]]")]
     pub luminaire: Vec<scene::luminaire::Placement>,
-    /// Split surfaces along the outlines of objects that touch or nearly touch them (a lamp under a
-    /// ceiling, blocks on a floor), so that no element straddles a contact and light cannot leak
-    /// through it. Off by default: on real rooms it multiplies the polygons (classroom 5.8k → 15k,
-    /// office2 430 → 1120) and the unclustered solve's time (BENCHMARKS.md, "Splitting surfaces along
-    /// contacts"); turn it on for lamps hung just under a ceiling, as in cube.mgf.
-    #[arg(long, value_enum, default_value_t = Switch::Off, value_name = "on|off")]
-    pub split_contacts: Switch,
+    /// Split surfaces along the outlines of objects that touch or nearly touch them, so that no
+    /// element straddles a contact and light cannot leak through it. auto (the default): only along
+    /// emitters that shine into the gap between them and a surface (a two-sided lamp hung just under a
+    /// ceiling, as in cube.mgf); on: every lying object and footprint (blocks on a floor, furniture),
+    /// which multiplies the polygons of furnished rooms (classroom 5.8k → 15k); off: none.
+    #[arg(long, value_enum, default_value_t = scene::contacts::SplitContacts::Auto,
+          value_name = "auto|on|off")]
+    pub split_contacts: scene::contacts::SplitContacts,
     /// Largest gap that still counts as a contact, relative to the smaller polygon's diameter.
     #[arg(long, default_value_t = scene::contacts::DEFAULT_CONTACT_GAP, value_name = "G",
           value_parser = parse_contact_gap)]
     pub contact_gap: f64,
-}
-
-/// An option that is on or off.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Switch {
-    On,
-    Off,
 }
 
 /// Parses `--contact-gap`: a fraction in [0, MAX_CONTACT_GAP].
@@ -121,8 +115,9 @@ impl SceneArgs {
                 .extend(luminaire.photometry.warnings.iter().cloned());
             scene.add_luminaire(luminaire);
         }
-        let split = (self.split_contacts == Switch::On)
-            .then(|| scene::contacts::split_contacts(&mut scene, self.contact_gap));
+        let split = (self.split_contacts != scene::contacts::SplitContacts::Off).then(|| {
+            scene::contacts::split_contacts(&mut scene, self.split_contacts, self.contact_gap)
+        });
         Ok((scene, name, split))
     }
 

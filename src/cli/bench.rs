@@ -115,11 +115,17 @@ impl RenderBench {
         outln!("|---|---|---|---|---|---|---|---|---|---|")?;
         for name in &self.scenes {
             let start = Instant::now();
-            let scene = if name == "cornell" {
+            let mut scene = if name == "cornell" {
                 scene::cornell::cornell_box()
             } else {
                 scene::load(&PathBuf::from(name), &LoadOptions::default())?
             };
+            // The CLI's default: cut only along contacts that would leak emitted light.
+            scene::contacts::split_contacts(
+                &mut scene,
+                scene::contacts::SplitContacts::Auto,
+                scene::contacts::DEFAULT_CONTACT_GAP,
+            );
             let load = start.elapsed().as_secs_f64();
             let solution = simulate(&scene, &settings, progress)?;
             let solve = start.elapsed().as_secs_f64() - load;

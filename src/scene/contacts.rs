@@ -14,6 +14,15 @@
 //!   edges of one object that join end to end form a footprint, and its convex hull is the outline (the
 //!   Cornell box's blocks have no bottom face).
 //!
+//! Which contacts cut ([`SplitContacts`]): `on` cuts along every one; `auto` (the default) only along
+//! those through which a leak can carry significant light: an *emitter* Q lying on a reflecting P with a
+//! real gap between them and Q's emitting side facing P (cube.mgf's two-sided lamp, an uplight under a
+//! ceiling). The light trapped in such a gap is of the emitter's order; an element of P that straddles
+//! Q's outline averages it with the room's and sends it into the room. Every other contact leaks only
+//! reflected light that is already averaged over the straddling element's neighbourhood (blocks on a
+//! floor, one-sided panels facing away from the ceiling they hang under), which refinement resolves, so
+//! `auto` leaves furnished rooms (nearly) as they are (BENCHMARKS.md, "Automatic contact splitting").
+//!
 //! A one-sided P is not split by what lies behind it (it cannot see it). Candidate pairs come from a
 //! uniform grid over the polygons' boxes (no quadratic work); P is then cut along each outline that
 //! crosses its interior ([`crate::geometry::clip`]), and each convex piece becomes triangles and
@@ -31,6 +40,14 @@ use rayon::prelude::*;
 pub const DEFAULT_CONTACT_GAP: f64 = 0.02;
 /// Largest contact gap accepted (relative): beyond it, "contact" would mean any nearby parallel surface.
 pub const MAX_CONTACT_GAP: f64 = 0.25;
+/// `auto` splits along an emitter only where the side openings of the gap between it and the surface
+/// (perimeter × gap) are at most this share of the cavity's walls (both faces plus the openings): a
+/// trap, from which little light escapes physically (cube.mgf's lamp, 1 m wide 1 cm under the
+/// ceiling: 2%), so that what straddling elements leak is of the order of the gap's light, not of
+/// what escapes. A wide-open gap (a 4 cm fluorescent tube 2 cm under its housing, the classroom: 34%)
+/// lets the light out anyway; cutting along it there multiplied the classroom's solve time by 2.7
+/// (BENCHMARKS.md, "Automatic contact splitting").
+const TRAP_OPENING: f64 = 0.25;
 /// Points closer than this fraction of P's diameter to an outline's edge lie on it: no piece is thinner.
 const SNAP: f64 = 1e-5;
 /// Most outlines one polygon is cut along (further ones are left out, with a warning).
@@ -39,6 +56,20 @@ const MAX_OUTLINES: usize = 256;
 const MAX_PIECES: usize = 4096;
 /// Most contact edges gathered on one polygon for footprints (further ones are left out).
 const MAX_CONTACT_EDGES: usize = 4096;
+
+/// Which contacts [`split_contacts`] cuts along (`--split-contacts`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SplitContacts {
+    /// None: polygons stay as the scene gives them.
+    Off,
+    /// Only the outlines of emitters that lie on a surface with their emitting side toward it, across
+    /// a real gap (see the module doc): where trapped light would leak.
+    #[default]
+    Auto,
+    /// Every lying object's outline and every footprint.
+    On,
+}
 
 /// What [`split_contacts`] did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -84,11 +115,11 @@ impl Face {
     }
 }
 
-/// Splits every polygon of `scene` along the outlines of the polygons in contact with it (`gap` relative
-/// to the smaller diameter, see the module doc): each is replaced, in place, by its pieces. Budget overruns
-/// are warnings, never errors.
-pub fn split_contacts(scene: &mut Scene, gap: f64) -> ContactSplit {
-    let results = contact_pieces(scene, gap);
+/// Splits every polygon of `scene` along the outlines of the polygons in contact with it that `mode`
+/// selects (`gap` relative to the smaller diameter, see the module doc): each is replaced, in place, by
+/// its pieces. Budget overruns are warnings, never errors.
+pub fn split_contacts(scene: &mut Scene, mode: SplitContacts, gap: f64) -> ContactSplit {
+    let results = contact_pieces(scene, mode, gap);
     let mut report = ContactSplit::default();
     let mut polygons = Vec::with_capacity(scene.polygons.len());
     let mut counts = Vec::with_capacity(scene.polygons.len());
@@ -134,9 +165,12 @@ pub fn split_contacts(scene: &mut Scene, gap: f64) -> ContactSplit {
     report
 }
 
-/// For each polygon of `scene`, its pieces when outlines of polygons in contact with it cross it
-/// (`None` when none does); the scene is left as it is. Luminaire openings are never cut.
-pub fn contact_pieces(scene: &Scene, gap: f64) -> Vec<Option<Pieces>> {
+/// For each polygon of `scene`, its pieces when outlines of polygons in contact with it that `mode`
+/// selects cross it (`None` when none does); the scene is left as it is. Luminaire openings are never cut.
+pub fn contact_pieces(scene: &Scene, mode: SplitContacts, gap: f64) -> Vec<Option<Pieces>> {
+    if mode == SplitContacts::Off {
+        return vec![None; scene.polygons.len()];
+    }
     let gap = gap.clamp(0.0, MAX_CONTACT_GAP);
     let faces: Vec<Face> = scene.polygons.iter().map(|p| Face::new(&p.shape)).collect();
     let grid = BoxGrid::new(&faces);
@@ -147,7 +181,7 @@ pub fn contact_pieces(scene: &Scene, gap: f64) -> Vec<Option<Pieces>> {
             if openings[i].is_some() || faces[i].diameter <= 0.0 {
                 return None;
             }
-            let outlines = contact_outlines(scene, &faces, &grid, i, gap);
+            let outlines = contact_outlines(scene, &faces, &grid, i, mode, gap);
             cut_polygon(&scene.polygons[i], &faces[i], outlines)
         })
         .collect()
@@ -173,16 +207,23 @@ pub struct Pieces {
 }
 
 /// The outlines (cutting planes through their edges, in P's projection) of the polygons in contact with
-/// polygon `i`, in a deterministic order: lying polygons by index, then footprints.
+/// polygon `i` that `mode` selects, in a deterministic order: lying polygons by index, then footprints
+/// (`on` only).
 fn contact_outlines(
     scene: &Scene,
     faces: &[Face],
     grid: &BoxGrid,
     i: usize,
+    mode: SplitContacts,
     gap: f64,
 ) -> Vec<Vec<Plane>> {
     let p = &faces[i];
     let two_sided = scene.polygons[i].two_sided;
+    let auto = mode == SplitContacts::Auto;
+    if auto && scene.material_of(&scene.polygons[i]).reflectance.is_black() {
+        // Light trapped over a black surface is absorbed there: nothing to leak.
+        return Vec::new();
+    }
     let reach = gap * p.diameter;
     let mut outlines = Vec::new();
     // Contact edges standing on P: (object, end, end, gap).
@@ -204,11 +245,17 @@ fn contact_outlines(
             continue;
         }
         if distances.iter().all(|d| d.abs() <= g) {
+            if auto && !traps_emission(scene, j, p, farthest) {
+                continue;
+            }
             let mut outline = vertices.to_vec();
             if scene.polygons[j].shape.vector_area().dot(p.normal) < 0.0 {
                 outline.reverse();
             }
             outlines.push(outline_planes(&outline, p.normal));
+            continue;
+        }
+        if auto {
             continue;
         }
         let n = vertices.len();
@@ -224,6 +271,23 @@ fn contact_outlines(
     }
     outlines.extend(footprints(p, &edges));
     outlines
+}
+
+/// Whether polygon `j`, lying on P at signed distance `offset` (its vertex farthest from P's plane),
+/// emits into a gap that traps its light: it is an emitter, the gap is real (not coplanar, where no
+/// light enters), its emitting side faces P (two-sided, or its normal points back toward P's plane),
+/// and the gap's side openings are a small part of the cavity's walls ([`TRAP_OPENING`]).
+fn traps_emission(scene: &Scene, j: usize, p: &Face, offset: f64) -> bool {
+    let q = &scene.polygons[j];
+    let vertices = q.shape.vertices();
+    let perimeter: f64 = (0..vertices.len())
+        .map(|k| vertices[k].distance(vertices[(k + 1) % vertices.len()]))
+        .sum();
+    let opening = perimeter * offset.abs();
+    !scene.material_of(q).emission.is_black()
+        && offset.abs() > SNAP * p.diameter
+        && (q.two_sided || q.shape.normal().dot(p.normal) * offset < 0.0)
+        && opening <= TRAP_OPENING * (2.0 * q.shape.area() + opening)
 }
 
 /// Convex hulls, in P's plane, of the chains of contact edges of one object that join end to end (within
@@ -348,12 +412,12 @@ fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Opt
 /// diagonal, same winding.
 ///
 /// Why: the bases are orthonormal for the parametric measure ([`crate::bases`]), which is the area
-/// measure only where the Jacobian is constant. On a trapezoid the pull of push-pull (children weighted
-/// by their areas) gives a parent whose children are all constant a spurious gradient toward the wide
-/// side, and a coupling that integrates it with the Jacobian emits more than the children do: cube.mgf's
-/// lamp, cut along the ceiling's diagonal into trapezoids, sent 8% more power into the room through its
-/// inner elements under `--accuracy 10%` with the linear basis (BENCHMARKS.md, "Splitting surfaces
-/// along contacts"). Cutting only ever makes such pieces here, so they are triangulated here.
+/// measure only where the Jacobian is constant. Before push-pull and couplings solved with the overlap
+/// matrix of a trapezoid ([`crate::bases::Overlap`]), a parent whose children were all constant got a
+/// spurious gradient: cube.mgf's lamp, cut along the ceiling's diagonal into trapezoids, sent 8% more
+/// power into the room under `--accuracy 10%` (BENCHMARKS.md, "Splitting surfaces along contacts").
+/// Trapezoids are handled exactly now; pieces stay affine because their overlap matrix is the identity
+/// (no solve per element and sweep) and the cube.mgf measurements were made with them.
 fn affine_pieces(shape: Shape, snap: f64) -> Vec<Shape> {
     match shape {
         Shape::Quad([a, b, c, d]) if (a + c - b - d).length() > snap => {

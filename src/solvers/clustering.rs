@@ -315,8 +315,9 @@ pub fn couple_cluster(
     };
     let c_source = source_end.mean_cosine(h, source, r_centre, kind);
     let mut block = vec![0.0; size * size];
-    // Per receiver node: δ_{j,β}(x_k) (only β = 1 is non-zero) and the point factor K_{j,1}(x_k).
-    let (errors, node_factors, unoccluded) = match &r.kind {
+    // Per receiver node: δ_{j,β}(x_k) (only β = 1 is non-zero) and the point factor K_{j,1}(x_k); the
+    // receiver-averaged transfer with visibility, and without.
+    let (errors, node_factors, transfer, unoccluded) = match &r.kind {
         ElementKind::Cluster(_) => {
             let c_receiver = receiver_end.mean_cosine(h, receiver, s_centre, kind);
             let r2 = (s_centre - r_centre).length_squared().max(1e-300);
@@ -331,7 +332,7 @@ pub fn couple_cluster(
                 1.0
             };
             block[0] = open * v;
-            (vec![0.0f32; size], vec![block[0] as f32], open)
+            (vec![0.0f32; size], vec![block[0] as f32], block[0], open)
         }
         ElementKind::Surface(surface) => {
             let shape = &surface.shape;
@@ -356,6 +357,11 @@ pub fn couple_cluster(
                     block[alpha * size] += w * phi[k * size + alpha] * inner[k];
                 }
             }
+            let transfer = block[0];
+            // Moments to coefficients on a trapezoid-like quad (Algorithm 4.1 step 4a).
+            if let Some(overlap) = h.basis.overlap(shape, r.area) {
+                overlap.solve_columns(&mut block, size);
+            }
             let mut errors = vec![0.0f32; nodes.len() * size];
             for (k, value) in inner.iter().enumerate() {
                 // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
@@ -367,11 +373,12 @@ pub fn couple_cluster(
             (
                 errors,
                 inner.iter().map(|&f| f as f32).collect(),
+                transfer,
                 unoccluded,
             )
         }
     };
-    let v = visible_fraction(block[0], unoccluded);
+    let v = visible_fraction(transfer, unoccluded);
     Coupling {
         coupling: LinkCoupling::new(
             &block,

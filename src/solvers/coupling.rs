@@ -13,9 +13,9 @@
 //! keeping the cubature's visibility and its shape across the source.
 //!
 //! With the averaged-orthonormal bases of [`crate::bases`] the overlap matrix of eq. (4) is `A_i I` on
-//! triangles and parallelograms, so the solve of step 4a is a division by `A_i` (on other convex quads
-//! the bilinear map's varying Jacobian makes `O` only approximately diagonal; we neglect that, as the
-//! error is second order in the quad's departure from a parallelogram).
+//! triangles and parallelograms, so the solve of step 4a is a division by `A_i`; on other convex quads
+//! the bilinear map's varying Jacobian makes it `A_i G` with a full `G` ([`crate::bases::Overlap`]),
+//! which step 4a solves with (else a uniformly lit trapezoid would get a false gradient).
 //!
 //! Visibility reuse: where the visibility back end offers shaft tests ([`Visibility::shafts`]), a
 //! surface link whose shaft is Clear takes transmittance 1 at every node pair and a Blocked one 0,
@@ -215,6 +215,10 @@ fn couple_in_full(
                 block[alpha * size + beta] += wa * inner[k * size + beta];
             }
         }
+    }
+    // Step 4a on a quad whose overlap matrix is not A_i I.
+    if let Some(overlap) = basis.overlap(r_shape, r.area) {
+        overlap.solve_columns(&mut block, size);
     }
     // Step 4b: δ_{j,β}(x_k) = Σ_α R_{α,β} φ_α(x_k) − K_{j,β}(x_k).
     let mut errors = vec![0.0f32; n * size];

@@ -168,6 +168,10 @@ fn leaf_direct(
             *c += values[k] * (w * phi[k * size + alpha]);
         }
     }
+    // Moments to coefficients on a trapezoid-like quad (as couplings do).
+    if let Some(overlap) = basis.overlap(shape, e.area) {
+        overlap.solve_rgb(&mut coefficients);
+    }
     let residual = values
         .iter()
         .enumerate()

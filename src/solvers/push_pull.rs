@@ -1,8 +1,14 @@
 //! Push-pull (Hanrahan et al. 1991) for basis coefficients: irradiance gathered at any level of a patch's
 //! tree is pushed down to the leaves through the basis's two-scale relation ([`crate::bases`]), where
-//! `L = E + ρ H` coefficient by coefficient, and radiance is pulled up as the area-weighted projection of
+//! `L = E + ρ H` coefficient by coefficient, and radiance is pulled up as the area-L2 projection of
 //! the children's functions onto the parent's basis, so that links to interior elements see the
 //! children's radiance. With the constant basis this is the classic average.
+//!
+//! The pull sums the children's area moments (`(A_k/A) P_kᵀ G_k c_k`, exact: the parent's functions
+//! restricted to child k are `P_k` combinations of the child's) and solves with the parent's overlap
+//! matrix `G` of eq. (4) ([`crate::bases::Overlap`]). `G` is the identity on triangles and
+//! parallelograms, where this is the plain area-weighted pull; on a trapezoid it keeps constant
+//! children constant (no false gradient) and the pulled function's power equal to the children's.
 
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -84,8 +90,13 @@ impl Walk<'_> {
             let mut b: Vec<Rgb> = incident.iter().map(|&x| self.reflectance * x).collect();
             // Emission is constant over a patch: the constant function represents it exactly (δ_e = 0).
             b[0] += self.emission;
-            self.update.absorbed += (Rgb::WHITE - self.reflectance) * incident[0] * (PI * e.area);
-            self.update.exitant += b[0] * (PI * e.area);
+            // Area averages: coefficient 0, or on a trapezoid Σ_α c_α (1/A) ∫ φ_α dA.
+            let (mean_incident, mean_exitant) = match h.basis.overlap(e.shape(), e.area) {
+                Some(overlap) => (overlap.mean(&incident), overlap.mean(&b)),
+                None => (incident[0], b[0]),
+            };
+            self.update.absorbed += (Rgb::WHITE - self.reflectance) * mean_incident * (PI * e.area);
+            self.update.exitant += mean_exitant * (PI * e.area);
             b
         } else {
             let domain = e.shape().domain();
@@ -93,9 +104,16 @@ impl Walk<'_> {
             for (k, &child) in e.children.iter().enumerate() {
                 let down = h.basis.push_rgb(domain, k, &incident);
                 let child_radiance = self.visit(child, down);
-                let weight = h.element(child).area / e.area;
+                let c = h.element(child);
+                let moments = match h.basis.overlap(c.shape(), c.area) {
+                    Some(overlap) => overlap.moments_rgb(&child_radiance),
+                    None => child_radiance,
+                };
                 h.basis
-                    .pull_add_rgb(domain, k, weight, &child_radiance, &mut sum);
+                    .pull_add_rgb(domain, k, c.area / e.area, &moments, &mut sum);
+            }
+            if let Some(overlap) = h.basis.overlap(e.shape(), e.area) {
+                overlap.solve_rgb(&mut sum);
             }
             sum
         };
