@@ -315,7 +315,7 @@ pub fn couple_cluster(
     };
     let c_source = source_end.mean_cosine(h, source, r_centre, kind);
     let mut block = vec![0.0; size * size];
-    // Per receiver node: δ_{j,β}(x_k) (only β = 1 is non-zero) and the point factor K_{j,1}(x_k).
+    // Per receiver node: δ_{j,1}(x_k) (the only non-zero δ_{j,β}) and the point factor K_{j,1}(x_k).
     let (errors, node_factors, unoccluded) = match &r.kind {
         ElementKind::Cluster(_) => {
             let c_receiver = receiver_end.mean_cosine(h, receiver, s_centre, kind);
@@ -331,7 +331,7 @@ pub fn couple_cluster(
                 1.0
             };
             block[0] = open * v;
-            (vec![0.0f32; size], vec![block[0] as f32], open)
+            (vec![0.0f32], vec![block[0] as f32], open)
         }
         ElementKind::Surface(surface) => {
             let shape = &surface.shape;
@@ -356,14 +356,17 @@ pub fn couple_cluster(
                     block[alpha * size] += w * phi[k * size + alpha] * inner[k];
                 }
             }
-            let mut errors = vec![0.0f32; nodes.len() * size];
-            for (k, value) in inner.iter().enumerate() {
-                // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
-                let projected: f64 = (0..size)
-                    .map(|alpha| block[alpha * size] * phi[k * size + alpha])
-                    .sum();
-                errors[k * size] = (projected - value) as f32;
-            }
+            // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
+            let errors = inner
+                .iter()
+                .enumerate()
+                .map(|(k, value)| {
+                    let projected: f64 = (0..size)
+                        .map(|alpha| block[alpha * size] * phi[k * size + alpha])
+                        .sum();
+                    (projected - value) as f32
+                })
+                .collect();
             (
                 errors,
                 inner.iter().map(|&f| f as f32).collect(),
@@ -373,7 +376,7 @@ pub fn couple_cluster(
     };
     let v = visible_fraction(block[0], unoccluded);
     Coupling {
-        coupling: LinkCoupling::new(
+        coupling: LinkCoupling::constant_source(
             &block,
             &errors,
             &node_factors,
@@ -408,16 +411,15 @@ fn near_coupling(
             .nodes
             .len(),
     };
-    let mut errors = vec![0.0f32; nodes * size];
-    if !h.is_cluster(receiver) {
-        for k in 0..nodes {
-            errors[k * size] = -missing;
-        }
-    }
+    let error = if h.is_cluster(receiver) {
+        0.0
+    } else {
+        -missing
+    };
     Coupling {
-        coupling: LinkCoupling::new(
+        coupling: LinkCoupling::constant_source(
             &vec![0.0; size * size],
-            &errors,
+            &vec![error; nodes],
             &vec![0.0f32; nodes],
             1.0,
             0.0,
