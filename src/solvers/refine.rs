@@ -400,7 +400,14 @@ pub fn refine_scheduled(
         }
         let mut next = Vec::new();
         let round_size = candidates.len();
-        for (k, (c, verdict)) in candidates.into_iter().zip(decisions).enumerate() {
+        let mut verdicts = decisions.into_iter();
+        let (mut k, mut kept) = (0, admissible.len());
+        // This round's admissible candidates stay in place, in order, and the list becomes (or joins)
+        // the admissible ones: a later pass starts with every link as a candidate, and a copy would
+        // hold them all twice.
+        candidates.retain_mut(|c| {
+            let verdict = verdicts.next().expect("one verdict per candidate");
+            k += 1;
             outcome.oracle_rays += verdict.rays;
             outcome.form_factor_rays += verdict.coupling_rays;
             outcome.shaft_tests += verdict.shaft_tests;
@@ -412,7 +419,7 @@ pub fn refine_scheduled(
                 Decision::SubdivideSource => !hierarchy.is_cluster(c.source),
             };
             // Every candidate of this round not judged yet becomes at least one link too.
-            let links = admissible.len() + next.len() + (round_size - k - 1) + MAX_NEW_CANDIDATES;
+            let links = kept + next.len() + (round_size - k) + MAX_NEW_CANDIDATES;
             if decision != Decision::Admissible
                 && ((splits_surface && hierarchy.elements.len() + 4 > settings.max_elements)
                     || links > settings.max_links)
@@ -438,13 +445,14 @@ pub fn refine_scheduled(
                 None => c.occluders,
             };
             match decision {
-                Decision::Admissible if verdict.no_interaction => {}
-                Decision::Admissible => admissible.push(Candidate {
-                    oracle_factor: verdict.oracle_factor,
-                    coupling: verdict.coupling.map(|k| *k).or(c.coupling),
-                    shaft,
-                    ..c
-                }),
+                Decision::Admissible if verdict.no_interaction => return false,
+                Decision::Admissible => {
+                    c.oracle_factor = verdict.oracle_factor;
+                    c.coupling = verdict.coupling.map(|k| *k).or(c.coupling.take());
+                    c.shaft = shaft;
+                    kept += 1;
+                    return true;
+                }
                 Decision::SubdivideReceiver if c.receiver == c.source => {
                     // A cluster's self-link: links among its contents, and their own self-links.
                     outcome.refined_links += 1;
@@ -480,6 +488,12 @@ pub fn refine_scheduled(
                     }
                 }
             }
+            false
+        });
+        if admissible.is_empty() {
+            admissible = candidates;
+        } else {
+            admissible.append(&mut candidates);
         }
         candidates = next;
     }
@@ -635,6 +649,9 @@ struct Verdict {
     /// The error estimate compared with the threshold (for a [`RefinementSchedule`]).
     error: f64,
 }
+
+// `memory::link_peak_bytes` counts a verdict as at most a candidate's size.
+const _: () = assert!(std::mem::size_of::<Verdict>() <= std::mem::size_of::<Candidate>());
 
 impl Verdict {
     fn admissible(oracle_factor: OracleFactor) -> Self {
