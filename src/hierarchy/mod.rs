@@ -964,6 +964,32 @@ mod tests {
         }
     }
 
+    /// A cluster link's coupling ([`LinkCoupling::constant_source`]) gives every source radiance the
+    /// node errors of the full form whose `δ_{j,β}` vanish for β > 1, exactly, in fewer values.
+    #[test]
+    fn constant_source_couplings_keep_the_full_node_errors() {
+        let n = 16;
+        let block: Vec<f64> = (0..9).map(|i| 0.01 * (i as f64 + 1.0)).collect();
+        let deltas: Vec<f32> = (0..n).map(|k| (k as f32 - 7.5) * 1e-3).collect();
+        let full_errors: Vec<f32> = deltas.iter().flat_map(|&d| [d, 0.0, 0.0]).collect();
+        let factors = vec![0.1f32; n];
+        let full = LinkCoupling::new(&block, &full_errors, &factors, 0.5, 0.01);
+        let compact = LinkCoupling::constant_source(&block, &deltas, &factors, 0.5, 0.01);
+        assert_eq!(compact.node_count(), n);
+        assert_eq!(compact.block(), full.block());
+        assert_eq!(compact.node_factors(), full.node_factors());
+        assert_eq!(compact.values.len(), 9 + 2 * n);
+        let source = [
+            Rgb::new(2.0, 1.0, 0.5),
+            Rgb::new(-0.4, 0.2, 0.1),
+            Rgb::new(0.6, -0.3, 0.15),
+        ];
+        for k in 0..n {
+            assert_eq!(compact.node_error(k, &source), full.node_error(k, &source));
+        }
+        assert_eq!(compact.clone().reduced(&source), compact);
+    }
+
     /// For the constant basis the reduced form holds the same numbers.
     #[test]
     fn constant_basis_couplings_are_already_reduced() {

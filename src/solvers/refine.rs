@@ -364,7 +364,10 @@ pub fn refine_scheduled(
     mut schedule: Option<&mut dyn RefinementSchedule>,
 ) -> RefineOutcome {
     let mut outcome = RefineOutcome::default();
-    let mut admissible: Vec<Candidate> = Vec::new();
+    // Each round's admissible candidates, in order (one list per round: appending them to one list
+    // would reallocate it, doubling, after the first round of a later pass kept nearly every link).
+    let mut admissible: Vec<Vec<Candidate>> = Vec::new();
+    let mut admitted = 0;
     // Partial shaft tests of refined links whose occluder lists their descendants' tests examine.
     let mut partial_tests: Vec<ShaftTest> = Vec::new();
     let mut round = 0;
@@ -401,10 +404,10 @@ pub fn refine_scheduled(
         let mut next = Vec::new();
         let round_size = candidates.len();
         let mut verdicts = decisions.into_iter();
-        let (mut k, mut kept) = (0, admissible.len());
-        // This round's admissible candidates stay in place, in order, and the list becomes (or joins)
-        // the admissible ones: a later pass starts with every link as a candidate, and a copy would
-        // hold them all twice.
+        let (mut k, mut kept) = (0, admitted);
+        // This round's admissible candidates stay in place, in order, and the list becomes the round's
+        // admissible one: a later pass starts with every link as a candidate, and a copy would hold
+        // them all twice.
         candidates.retain_mut(|c| {
             let verdict = verdicts.next().expect("one verdict per candidate");
             k += 1;
@@ -490,16 +493,13 @@ pub fn refine_scheduled(
             }
             false
         });
-        if admissible.is_empty() {
-            admissible = candidates;
-        } else {
-            admissible.append(&mut candidates);
-        }
+        admitted = kept;
+        admissible.push(candidates);
         candidates = next;
     }
     // Coupled a chunk at a time, so that the links on their way to their receivers are never all held
     // twice (as candidates and as computed links); couplings do not read the link lists.
-    let mut pending = admissible.into_iter();
+    let mut pending = admissible.into_iter().flatten();
     loop {
         let chunk: Vec<Candidate> = pending.by_ref().take(COUPLING_CHUNK).collect();
         if chunk.is_empty() {
