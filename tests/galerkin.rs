@@ -7,7 +7,7 @@ use radiosity::bases::BasisKind;
 use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::{point_to_point, point_to_polygon};
 use radiosity::geometry::{DVec2, DVec3, Shape};
-use radiosity::hierarchy::{ErrorStorage, Hierarchy, Link};
+use radiosity::hierarchy::{ErrorStorage, Hierarchy, Link, OracleFactor};
 use radiosity::pipeline::{simulate, Accuracy, OracleKind, SimulationSettings, SolverKind};
 use radiosity::progress::Progress;
 use radiosity::scene::{generators, Material, Polygon, Scene};
@@ -63,7 +63,7 @@ fn solve_receiver(scene: &Scene, kind: BasisKind, level: u16, vis: &dyn Visibili
         h.elements[leaf as usize].links.push(Link {
             source: emitter,
             coupling: k.coupling,
-            oracle_factor: None,
+            oracle_factor: OracleFactor::NONE,
             shaft: k.shaft,
         });
     }

@@ -48,7 +48,7 @@ pub struct Link {
     /// The refinement oracle's radiance-independent factor for this link (its error estimate divided by
     /// ρ_i B_j), kept so that re-refinement after a solve needs no new kernel samples; `None` when the
     /// source was dark when the link was judged (or for the link error oracle, which reads `coupling`).
-    pub oracle_factor: Option<f64>,
+    pub oracle_factor: OracleFactor,
     /// The shaft test's verdict on this link (`None`: not tested), which the links of its sub-elements
     /// inherit when Clear or Blocked ([`crate::visibility::shaft`]).
     pub shaft: Option<crate::visibility::shaft::ShaftVerdict>,
@@ -58,6 +58,32 @@ impl Link {
     /// Receiver-area-averaged form factor F_ij (visibility included): the constant–constant entry.
     pub fn form_factor(&self) -> f64 {
         self.coupling.form_factor()
+    }
+}
+
+/// The oracle factor a link or candidate caches ([`Link::oracle_factor`]): an `Option<f64>` in 8 bytes
+/// instead of 16, NaN standing for none, since every link and every refinement candidate holds one. A
+/// factor that is itself NaN reads as none and is recomputed, from the link's own seed, to the same NaN.
+#[derive(Clone, Copy, Debug)]
+pub struct OracleFactor(f64);
+
+impl OracleFactor {
+    pub const NONE: Self = OracleFactor(f64::NAN);
+
+    pub fn get(self) -> Option<f64> {
+        (!self.0.is_nan()).then_some(self.0)
+    }
+}
+
+impl From<Option<f64>> for OracleFactor {
+    fn from(factor: Option<f64>) -> Self {
+        OracleFactor(factor.unwrap_or(f64::NAN))
+    }
+}
+
+impl PartialEq for OracleFactor {
+    fn eq(&self, other: &Self) -> bool {
+        self.get() == other.get()
     }
 }
 
@@ -82,7 +108,8 @@ pub struct LinkCoupling {
     values: Box<[f32]>,
     /// Basis size `b` of both ends.
     size: u8,
-    /// Whether the error coefficients are stored in §4.3's reduced form.
+    /// Whether the error coefficients are stored one per node: §4.3's reduced form, or the exact
+    /// `δ_{j,1}(x_k)` of a [`LinkCoupling::constant_source`] coupling.
     reduced: bool,
     /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
     pub visibility: f32,
@@ -109,6 +136,55 @@ impl LinkCoupling {
             size * size == block.len() && errors.len() == node_factors.len() * size,
             "a coupling block is b × b and there are b error coefficients per node"
         );
+        Self::stored(
+            block,
+            errors,
+            node_factors,
+            false,
+            visibility,
+            visibility_error,
+        )
+    }
+
+    /// A coupling whose error coefficients vary with the constant source function only
+    /// (`δ_{j,β}(x_k) = 0` for β > 1, as for every link with a cluster at one end, whose source is seen
+    /// as a constant): from the `n` coefficients `δ_{j,1}(x_k)`, stored one per node in the layout of
+    /// the reduced form, where `δ_j(x_k) = L_{j,1} δ_{j,1}(x_k)` is then exact for any source radiance.
+    /// The `n (b − 1)` zeros are not stored: a cluster link of the linear basis holds 41 values
+    /// instead of 73 (BENCHMARKS.md, "Peak memory of office3 and the classroom").
+    pub fn constant_source(
+        block: &[f64],
+        node_errors: &[f32],
+        node_factors: &[f32],
+        visibility: f32,
+        visibility_error: f32,
+    ) -> Self {
+        assert_eq!(
+            node_errors.len(),
+            node_factors.len(),
+            "one error coefficient per node"
+        );
+        Self::stored(
+            block,
+            node_errors,
+            node_factors,
+            true,
+            visibility,
+            visibility_error,
+        )
+    }
+
+    /// The single allocation of [`LinkCoupling`]: block, error coefficients (`errors_per_node` per
+    /// node: `b`, or 1 when `reduced`), node factors.
+    fn stored(
+        block: &[f64],
+        errors: &[f32],
+        node_factors: &[f32],
+        reduced: bool,
+        visibility: f32,
+        visibility_error: f32,
+    ) -> Self {
+        let size = (block.len() as f64).sqrt().round() as usize;
         let values = block
             .iter()
             .map(|&k| k as f32)
@@ -118,7 +194,7 @@ impl LinkCoupling {
         LinkCoupling {
             values,
             size: u8::try_from(size).expect("basis sizes are at most MAX_BASIS_SIZE"),
-            reduced: false,
+            reduced,
             visibility,
             visibility_error,
         }
@@ -886,6 +962,32 @@ mod tests {
             let (a, b) = (full.node_error(k, &even), dark.node_error(k, &even));
             assert!((a.g - b.g).abs() <= 1e-6 * (1.0 + a.g.abs()), "node {k}");
         }
+    }
+
+    /// A cluster link's coupling ([`LinkCoupling::constant_source`]) gives every source radiance the
+    /// node errors of the full form whose `δ_{j,β}` vanish for β > 1, exactly, in fewer values.
+    #[test]
+    fn constant_source_couplings_keep_the_full_node_errors() {
+        let n = 16;
+        let block: Vec<f64> = (0..9).map(|i| 0.01 * (i as f64 + 1.0)).collect();
+        let deltas: Vec<f32> = (0..n).map(|k| (k as f32 - 7.5) * 1e-3).collect();
+        let full_errors: Vec<f32> = deltas.iter().flat_map(|&d| [d, 0.0, 0.0]).collect();
+        let factors = vec![0.1f32; n];
+        let full = LinkCoupling::new(&block, &full_errors, &factors, 0.5, 0.01);
+        let compact = LinkCoupling::constant_source(&block, &deltas, &factors, 0.5, 0.01);
+        assert_eq!(compact.node_count(), n);
+        assert_eq!(compact.block(), full.block());
+        assert_eq!(compact.node_factors(), full.node_factors());
+        assert_eq!(compact.values.len(), 9 + 2 * n);
+        let source = [
+            Rgb::new(2.0, 1.0, 0.5),
+            Rgb::new(-0.4, 0.2, 0.1),
+            Rgb::new(0.6, -0.3, 0.15),
+        ];
+        for k in 0..n {
+            assert_eq!(compact.node_error(k, &source), full.node_error(k, &source));
+        }
+        assert_eq!(compact.clone().reduced(&source), compact);
     }
 
     /// For the constant basis the reduced form holds the same numbers.

@@ -315,8 +315,8 @@ pub fn couple_cluster(
     };
     let c_source = source_end.mean_cosine(h, source, r_centre, kind);
     let mut block = vec![0.0; size * size];
-    // Per receiver node: δ_{j,β}(x_k) (only β = 1 is non-zero) and the point factor K_{j,1}(x_k); the
-    // receiver-averaged transfer with visibility, and without.
+    // Per receiver node: δ_{j,1}(x_k) (the only non-zero δ_{j,β}) and the point factor K_{j,1}(x_k);
+    // the receiver-averaged transfer with visibility, and without.
     let (errors, node_factors, transfer, unoccluded) = match &r.kind {
         ElementKind::Cluster(_) => {
             let c_receiver = receiver_end.mean_cosine(h, receiver, s_centre, kind);
@@ -332,7 +332,7 @@ pub fn couple_cluster(
                 1.0
             };
             block[0] = open * v;
-            (vec![0.0f32; size], vec![block[0] as f32], block[0], open)
+            (vec![0.0f32], vec![block[0] as f32], block[0], open)
         }
         ElementKind::Surface(surface) => {
             let shape = &surface.shape;
@@ -362,14 +362,17 @@ pub fn couple_cluster(
             if let Some(overlap) = h.basis.overlap(shape, r.area) {
                 overlap.solve_columns(&mut block, size);
             }
-            let mut errors = vec![0.0f32; nodes.len() * size];
-            for (k, value) in inner.iter().enumerate() {
-                // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
-                let projected: f64 = (0..size)
-                    .map(|alpha| block[alpha * size] * phi[k * size + alpha])
-                    .sum();
-                errors[k * size] = (projected - value) as f32;
-            }
+            // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
+            let errors = inner
+                .iter()
+                .enumerate()
+                .map(|(k, value)| {
+                    let projected: f64 = (0..size)
+                        .map(|alpha| block[alpha * size] * phi[k * size + alpha])
+                        .sum();
+                    (projected - value) as f32
+                })
+                .collect();
             (
                 errors,
                 inner.iter().map(|&f| f as f32).collect(),
@@ -380,7 +383,7 @@ pub fn couple_cluster(
     };
     let v = visible_fraction(transfer, unoccluded);
     Coupling {
-        coupling: LinkCoupling::new(
+        coupling: LinkCoupling::constant_source(
             &block,
             &errors,
             &node_factors,
@@ -415,16 +418,15 @@ fn near_coupling(
             .nodes
             .len(),
     };
-    let mut errors = vec![0.0f32; nodes * size];
-    if !h.is_cluster(receiver) {
-        for k in 0..nodes {
-            errors[k * size] = -missing;
-        }
-    }
+    let error = if h.is_cluster(receiver) {
+        0.0
+    } else {
+        -missing
+    };
     Coupling {
-        coupling: LinkCoupling::new(
+        coupling: LinkCoupling::constant_source(
             &vec![0.0; size * size],
-            &errors,
+            &vec![error; nodes],
             &vec![0.0f32; nodes],
             1.0,
             0.0,

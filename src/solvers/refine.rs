@@ -10,7 +10,7 @@ use super::coupling::{couple_with_prior, shaft_test, visibility_error, CouplingS
 use super::link_rng;
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
-use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling};
+use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling, OracleFactor};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
 use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
@@ -23,7 +23,7 @@ pub struct Candidate {
     pub receiver: ElementId,
     pub source: ElementId,
     pub coupling: Option<LinkCoupling>,
-    pub oracle_factor: Option<f64>,
+    pub oracle_factor: OracleFactor,
     /// Visibility `v` of the parent link when that link was partially occluded: a link between
     /// sub-elements whose own node pairs all agree (all open or all blocked) may have sampled a
     /// partial occlusion too coarsely, so it keeps the parent's visibility error (one generation).
@@ -49,7 +49,7 @@ impl Candidate {
             receiver,
             source,
             coupling: None,
-            oracle_factor: None,
+            oracle_factor: OracleFactor::NONE,
             inherited_visibility,
             shaft,
             occluders,
@@ -277,7 +277,8 @@ pub fn check_initial_links(hierarchy: &Hierarchy, max_links: usize) -> anyhow::R
 pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
     let mut out = Vec::with_capacity(hierarchy.link_count());
     for (id, e) in hierarchy.elements.iter_mut().enumerate() {
-        for link in e.links.drain(..) {
+        // Taken rather than drained: an emptied list would keep its buffer through the whole pass.
+        for link in std::mem::take(&mut e.links) {
             out.push(Candidate {
                 receiver: id as ElementId,
                 source: link.source,
@@ -363,7 +364,10 @@ pub fn refine_scheduled(
     mut schedule: Option<&mut dyn RefinementSchedule>,
 ) -> RefineOutcome {
     let mut outcome = RefineOutcome::default();
-    let mut admissible: Vec<Candidate> = Vec::new();
+    // Each round's admissible candidates, in order (one list per round: appending them to one list
+    // would reallocate it, doubling, after the first round of a later pass kept nearly every link).
+    let mut admissible: Vec<Vec<Candidate>> = Vec::new();
+    let mut admitted = 0;
     // Partial shaft tests of refined links whose occluder lists their descendants' tests examine.
     let mut partial_tests: Vec<ShaftTest> = Vec::new();
     let mut round = 0;
@@ -399,7 +403,14 @@ pub fn refine_scheduled(
         }
         let mut next = Vec::new();
         let round_size = candidates.len();
-        for (k, (c, verdict)) in candidates.into_iter().zip(decisions).enumerate() {
+        let mut verdicts = decisions.into_iter();
+        let (mut k, mut kept) = (0, admitted);
+        // This round's admissible candidates stay in place, in order, and the list becomes the round's
+        // admissible one: a later pass starts with every link as a candidate, and a copy would hold
+        // them all twice.
+        candidates.retain_mut(|c| {
+            let verdict = verdicts.next().expect("one verdict per candidate");
+            k += 1;
             outcome.oracle_rays += verdict.rays;
             outcome.form_factor_rays += verdict.coupling_rays;
             outcome.shaft_tests += verdict.shaft_tests;
@@ -411,7 +422,7 @@ pub fn refine_scheduled(
                 Decision::SubdivideSource => !hierarchy.is_cluster(c.source),
             };
             // Every candidate of this round not judged yet becomes at least one link too.
-            let links = admissible.len() + next.len() + (round_size - k - 1) + MAX_NEW_CANDIDATES;
+            let links = kept + next.len() + (round_size - k) + MAX_NEW_CANDIDATES;
             if decision != Decision::Admissible
                 && ((splits_surface && hierarchy.elements.len() + 4 > settings.max_elements)
                     || links > settings.max_links)
@@ -421,7 +432,7 @@ pub fn refine_scheduled(
             }
             let partial = verdict
                 .coupling
-                .as_ref()
+                .as_deref()
                 .or(c.coupling.as_ref())
                 .map(|k| k.visibility)
                 .filter(|v| *v > 0.0 && *v < 1.0);
@@ -437,13 +448,14 @@ pub fn refine_scheduled(
                 None => c.occluders,
             };
             match decision {
-                Decision::Admissible if verdict.no_interaction => {}
-                Decision::Admissible => admissible.push(Candidate {
-                    oracle_factor: verdict.oracle_factor,
-                    coupling: verdict.coupling.or(c.coupling),
-                    shaft,
-                    ..c
-                }),
+                Decision::Admissible if verdict.no_interaction => return false,
+                Decision::Admissible => {
+                    c.oracle_factor = verdict.oracle_factor;
+                    c.coupling = verdict.coupling.map(|k| *k).or(c.coupling.take());
+                    c.shaft = shaft;
+                    kept += 1;
+                    return true;
+                }
                 Decision::SubdivideReceiver if c.receiver == c.source => {
                     // A cluster's self-link: links among its contents, and their own self-links.
                     outcome.refined_links += 1;
@@ -479,11 +491,47 @@ pub fn refine_scheduled(
                     }
                 }
             }
-        }
+            false
+        });
+        admitted = kept;
+        admissible.push(candidates);
         candidates = next;
     }
+    // Coupled a chunk at a time, so that the links on their way to their receivers are never all held
+    // twice (as candidates and as computed links); couplings do not read the link lists.
+    let mut pending = admissible.into_iter().flatten();
+    loop {
+        let chunk: Vec<Candidate> = pending.by_ref().take(COUPLING_CHUNK).collect();
+        if chunk.is_empty() {
+            break;
+        }
+        couple_chunk(
+            hierarchy,
+            visibility,
+            settings,
+            &partial_tests,
+            chunk,
+            &mut outcome,
+        );
+    }
+    outcome
+}
+
+/// Admissible candidates coupled per chunk by [`refine_scheduled`]: enough for every thread.
+const COUPLING_CHUNK: usize = 1 << 15;
+
+/// Couples `chunk` in parallel (keeping the couplings that candidates carry) and stores the links at
+/// their receivers in candidate order; costs go to `outcome`.
+fn couple_chunk(
+    hierarchy: &mut Hierarchy,
+    visibility: &dyn Visibility,
+    settings: &RefineSettings,
+    partial_tests: &[ShaftTest],
+    chunk: Vec<Candidate>,
+    outcome: &mut RefineOutcome,
+) {
     let h = &*hierarchy;
-    let computed: Vec<(Option<(ElementId, Link)>, Coupled)> = admissible
+    let computed: Vec<(Option<(ElementId, Link)>, Coupled)> = chunk
         .into_par_iter()
         .map(|c| match c.coupling {
             Some(coupling) => (
@@ -505,7 +553,7 @@ pub fn refine_scheduled(
                     c.receiver,
                     c.source,
                     &settings.coupling,
-                    c.shaft_prior(&partial_tests),
+                    c.shaft_prior(partial_tests),
                 );
                 let cost = Coupled {
                     rays: k.rays,
@@ -535,7 +583,6 @@ pub fn refine_scheduled(
             hierarchy.elements[receiver as usize].links.push(link);
         }
     }
-    outcome
 }
 
 /// What one coupling cost: rays cast, shaft tests run, rays saved by their verdicts.
@@ -584,9 +631,10 @@ struct Verdict {
     /// Rays cast by the oracle's own samples.
     rays: u64,
     /// Radiance-independent factor of the estimate, to cache on the link.
-    oracle_factor: Option<f64>,
-    /// The coupling computed to judge the link (link error oracle), to keep on it.
-    coupling: Option<LinkCoupling>,
+    oracle_factor: OracleFactor,
+    /// The coupling computed to judge the link (link error oracle), to keep on it (boxed: other
+    /// oracles leave it empty, and a round holds a verdict per candidate).
+    coupling: Option<Box<LinkCoupling>>,
     coupling_rays: u64,
     /// The elements cannot exchange light at all (drop the link).
     no_interaction: bool,
@@ -602,8 +650,11 @@ struct Verdict {
     error: f64,
 }
 
+// `memory::link_peak_bytes` counts a verdict as at most a candidate's size.
+const _: () = assert!(std::mem::size_of::<Verdict>() <= std::mem::size_of::<Candidate>());
+
 impl Verdict {
-    fn admissible(oracle_factor: Option<f64>) -> Self {
+    fn admissible(oracle_factor: OracleFactor) -> Self {
         Verdict {
             decision: Decision::Admissible,
             rays: 0,
@@ -636,7 +687,7 @@ fn decide(
         return Verdict {
             decision: Decision::SubdivideReceiver,
             error: f64::INFINITY,
-            ..Verdict::admissible(None)
+            ..Verdict::admissible(OracleFactor::NONE)
         };
     }
     let splittable = |id: ElementId| h.is_cluster(id) || h.element(id).area > settings.min_area;
@@ -646,7 +697,7 @@ fn decide(
     if !splittable(c.receiver) && !splittable(c.source) {
         return Verdict::admissible(c.oracle_factor);
     }
-    let mut verdict = Verdict::admissible(None);
+    let mut verdict = Verdict::admissible(OracleFactor::NONE);
     let (error, threshold, split) = if oracle.judges_couplings() {
         if c.coupling.is_none() {
             let mut k = couple_with_prior(
@@ -668,9 +719,9 @@ fn decide(
             }
             verdict.coupling_rays = k.rays;
             verdict.no_interaction = k.unoccluded <= 0.0;
-            verdict.coupling = Some(k.coupling);
+            verdict.coupling = Some(Box::new(k.coupling));
         }
-        let coupling = verdict.coupling.as_ref().or(c.coupling.as_ref());
+        let coupling = verdict.coupling.as_deref().or(c.coupling.as_ref());
         let judgement = coupling
             .and_then(|k| oracle.link_error(context, c.receiver, c.source, k))
             .unwrap_or_default();
@@ -681,16 +732,16 @@ fn decide(
         )
     } else {
         let weight = reflected_source_radiance(h, c.receiver, c.source);
-        let error = match c.oracle_factor {
+        let error = match c.oracle_factor.get() {
             Some(factor) => {
-                verdict.oracle_factor = Some(factor);
+                verdict.oracle_factor = c.oracle_factor;
                 weight * factor
             }
             None => {
                 let mut rng = link_rng(settings.seed, c.receiver, c.source, ORACLE_STREAM);
                 let estimate = oracle.estimate(context, c.receiver, c.source, &mut rng);
                 verdict.rays = estimate.rays;
-                verdict.oracle_factor = (weight > 0.0).then(|| estimate.error / weight);
+                verdict.oracle_factor = (weight > 0.0).then(|| estimate.error / weight).into();
                 estimate.error
             }
         };
@@ -757,7 +808,7 @@ fn decide_cluster_link(
     };
     let mut verdict = Verdict {
         error,
-        ..Verdict::admissible(None)
+        ..Verdict::admissible(OracleFactor::NONE)
     };
     if error <= threshold {
         return verdict;
