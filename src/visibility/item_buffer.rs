@@ -223,8 +223,11 @@ impl Scratch {
     fn count_and_clear(&mut self, items: usize) -> Vec<u32> {
         let mut won = vec![0u32; items];
         for (y, &(first, end)) in self.written.iter().enumerate() {
+            if first >= end {
+                continue; // a row the draw did not write
+            }
             let row = y * self.nx;
-            for p in row + first..row + end.max(first) {
+            for p in row + first..row + end {
                 if self.owner[p] != u32::MAX {
                     won[self.owner[p] as usize] += 1;
                 }
