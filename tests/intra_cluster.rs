@@ -339,10 +339,11 @@ fn per_link_radiance(h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
 /// when no patch is visible toward `toward`).
 fn bucket_weight_change(h: &Hierarchy, id: ElementId, toward: DVec3) -> f64 {
     let offset = toward - h.center_of(id);
-    let along = bucket_direction(direction_bucket(offset).0);
+    let bucket = direction_bucket(offset);
+    let along = bucket_direction(bucket);
     let contents = h.contents(h.cluster(id).expect("cluster"));
     let buffers = h.item_buffers.as_ref().expect("item buffers");
-    let fractions = buffers.fractions(id, offset, || {
+    let fractions = buffers.fractions(id, bucket, || {
         contents.iter().map(|&s| *h.element(s).shape()).collect()
     });
     let change: f64 = contents

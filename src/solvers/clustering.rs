@@ -103,7 +103,7 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
 pub fn projected_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> {
     let contents = h.contents(h.cluster(id).expect("a cluster"));
     let fractions = h.item_buffers.as_ref().map(|buffers| {
-        buffers.fractions(id, toward - h.center_of(id), || {
+        buffers.fractions(id, bucket_toward(h, id, toward), || {
             contents.iter().map(|&s| *h.element(s).shape()).collect()
         })
     });
@@ -439,19 +439,20 @@ fn near_coupling(
     }
 }
 
-/// The visible projected area of each patch of cluster `id` seen along the unit direction `along`,
-/// `w_k = A_k max(0, n_k · d) f_k`, with `f_k` its visible fraction in the cluster's item buffer of
-/// that direction's bucket (Sillion–Drettakis §6.1). Sweeps take `along` to be a bucket's centre
-/// direction, the one its item buffer is drawn along, so that every link in the bucket shares one set
-/// of weights; [`projected_areas`] (couplings) takes each patch's own direction to a point instead.
+/// The visible projected area of each patch of cluster `id` seen along the centre direction `d` of
+/// direction bucket `bucket` (the one its item buffer is drawn along), `w_k = A_k max(0, n_k · d) f_k`,
+/// with `f_k` its visible fraction in the cluster's item buffer of that bucket (Sillion–Drettakis
+/// §6.1): every link in the bucket shares one set of weights; [`projected_areas`] (couplings) takes
+/// each patch's own direction to a point instead.
 fn visible_areas_along(
     h: &Hierarchy,
     buffers: &ItemBuffers,
     id: ElementId,
-    along: DVec3,
+    bucket: u16,
 ) -> Vec<f64> {
+    let along = bucket_direction(bucket);
     let contents = h.contents(h.cluster(id).expect("a cluster"));
-    let fractions = buffers.fractions(id, along, || {
+    let fractions = buffers.fractions(id, bucket, || {
         contents.iter().map(|&s| *h.element(s).shape()).collect()
     });
     contents
@@ -512,7 +513,7 @@ impl ClusterSweep {
                         .links
                         .iter()
                         .filter(|l| h.is_cluster(l.source) && carries_light(l))
-                        .map(move |l| (l.source, bucket_toward(h, l.source, h.center_of(id)).0))
+                        .map(move |l| (l.source, bucket_toward(h, l.source, h.center_of(id))))
                 })
                 .collect();
             keys.par_sort_unstable();
@@ -520,8 +521,7 @@ impl ClusterSweep {
             sweep.sent = keys
                 .into_par_iter()
                 .map(|(cluster, bucket)| {
-                    let along = bucket_direction(bucket);
-                    ((cluster, bucket), sent_along(h, buffers, cluster, along))
+                    ((cluster, bucket), sent_along(h, buffers, cluster, bucket))
                 })
                 .collect();
         }
@@ -536,14 +536,14 @@ impl ClusterSweep {
         let Some(buffers) = h.item_buffers.as_deref().filter(|_| h.is_cluster(source)) else {
             return average;
         };
-        let (bucket, along) = bucket_toward(h, source, toward);
+        let bucket = bucket_toward(h, source, toward);
         match self
             .sent
             .binary_search_by_key(&(source, bucket), |&(key, _)| key)
         {
             Ok(k) => self.sent[k].1,
             // Not asked for by any link when the sweep began: computed on the spot, the same value.
-            Err(_) => sent_along(h, buffers, source, along),
+            Err(_) => sent_along(h, buffers, source, bucket),
         }
     }
 
@@ -577,14 +577,13 @@ impl ClusterSweep {
                             .filter(|l| carries_light(l))
                             .map(|l| {
                                 let target = h.center_of(l.source);
-                                (bucket_toward(h, id, target).0, l.source, gathered(l))
+                                (bucket_toward(h, id, target), l.source, gathered(l))
                             })
                             .collect();
                         // Stable: equal buckets keep link order, so the sums below do too.
                         by_bucket.sort_by_key(|&(bucket, _, _)| bucket);
                         for run in by_bucket.chunk_by(|a, b| a.0 == b.0) {
-                            let along = bucket_direction(run[0].0);
-                            let areas = visible_areas_along(h, buffers, id, along);
+                            let areas = visible_areas_along(h, buffers, id, run[0].0);
                             if areas.iter().sum::<f64>() > 0.0 {
                                 let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
                                 share_by_areas(h, contents, e.area, total, &areas, &mut share);
@@ -651,16 +650,17 @@ pub fn carries_light(link: &crate::hierarchy::Link) -> bool {
     link.form_factor() > 0.0
 }
 
-/// The direction bucket of the direction from cluster `id`'s centre toward the point `toward`, and the
-/// bucket's centre direction ([`direction_bucket`]).
-fn bucket_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> (u16, DVec3) {
+/// The direction bucket ([`direction_bucket`]) of the direction from cluster `id`'s centre toward the
+/// point `toward`.
+fn bucket_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> u16 {
     direction_bucket(toward - h.center_of(id))
 }
 
-/// Radiance cluster `id` sends along the unit direction `along`: its patches' radiances averaged over
-/// their visible projected areas along it; its average radiance when nothing faces that way.
-fn sent_along(h: &Hierarchy, buffers: &ItemBuffers, id: ElementId, along: DVec3) -> Rgb {
-    let areas = visible_areas_along(h, buffers, id, along);
+/// Radiance cluster `id` sends along the centre direction of bucket `bucket`: its patches' radiances
+/// averaged over their visible projected areas along it; its average radiance when nothing faces that
+/// way.
+fn sent_along(h: &Hierarchy, buffers: &ItemBuffers, id: ElementId, bucket: u16) -> Rgb {
+    let areas = visible_areas_along(h, buffers, id, bucket);
     let total: f64 = areas.iter().sum();
     if total <= 0.0 {
         return h.element(id).radiance[0];

@@ -33,6 +33,8 @@ pub trait GatheringSolver: Sync + Send {
 /// comes from `clusters`, computed once per sweep.
 pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out: &mut [Rgb]) {
     let size = out.len();
+    // This element's centre, found once for all its cluster links (a surface's is its centroid).
+    let mut centre = None;
     for link in &hierarchy.element(id).links {
         if hierarchy.is_cluster(link.source) {
             if !carries_light(link) {
@@ -40,7 +42,8 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
             }
             // A cluster's coupling is constant in the source (column 0 only); with item buffers what
             // it sends this way comes from its visible patches (§6.1).
-            let l = clusters.radiance_toward(hierarchy, link.source, hierarchy.center_of(id));
+            let centre = *centre.get_or_insert_with(|| hierarchy.center_of(id));
+            let l = clusters.radiance_toward(hierarchy, link.source, centre);
             for (alpha, h) in out.iter_mut().enumerate() {
                 *h += l * f64::from(link.coupling.block()[alpha * size]);
             }

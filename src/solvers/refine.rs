@@ -111,7 +111,7 @@ pub fn can_interact(receiver: &Shape, source: &Shape) -> bool {
 }
 
 /// What [`can_interact`] needs of a shape, computed once per shape (the initial-link count tests every
-/// pair of patches).
+/// pair of patches, a split each of its children against the other end).
 struct Facing<'a> {
     shape: &'a Shape,
     normal: DVec3,
@@ -295,6 +295,12 @@ pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
 
 const ORACLE_STREAM: u64 = 1;
 
+/// A candidate link's receiver and source, each with its [`Facing`] when already known.
+type Ends<'a, 'f> = (
+    (ElementId, Option<&'f Facing<'a>>),
+    (ElementId, Option<&'f Facing<'a>>),
+);
+
 /// Most candidates one refinement creates (a cluster self-link: every ordered pair of its children).
 const MAX_NEW_CANDIDATES: usize =
     crate::hierarchy::clusters::MAX_CHILDREN * crate::hierarchy::clusters::MAX_CHILDREN;
@@ -460,10 +466,13 @@ pub fn refine_scheduled(
                     // A cluster's self-link: links among its contents, and their own self-links.
                     outcome.refined_links += 1;
                     let children = hierarchy.split(c.receiver);
-                    for &a in &children {
-                        for &b in &children {
-                            if a != b || hierarchy.is_cluster(a) {
-                                push_if_interacting(hierarchy, &mut next, a, b, None, None, None);
+                    let h = &*hierarchy;
+                    let facings: Vec<_> = children.iter().map(|&a| facing_of(h, a)).collect();
+                    for (&a, fa) in children.iter().zip(&facings) {
+                        for (&b, fb) in children.iter().zip(&facings) {
+                            if a != b || h.is_cluster(a) {
+                                let ends = ((a, fa.as_ref()), (b, fb.as_ref()));
+                                push_if_interacting(h, &mut next, ends, None, None, None);
                             }
                         }
                     }
@@ -473,10 +482,12 @@ pub fn refine_scheduled(
                     if hierarchy.element(c.receiver).is_leaf() {
                         outcome.subdivisions += 1;
                     }
-                    for child in hierarchy.split(c.receiver) {
-                        push_if_interacting(
-                            hierarchy, &mut next, child, c.source, partial, inherited, occluders,
-                        );
+                    let children = hierarchy.split(c.receiver);
+                    let h = &*hierarchy;
+                    let source = facing_of(h, c.source);
+                    for child in children {
+                        let ends = ((child, None), (c.source, source.as_ref()));
+                        push_if_interacting(h, &mut next, ends, partial, inherited, occluders);
                     }
                 }
                 Decision::SubdivideSource => {
@@ -484,10 +495,12 @@ pub fn refine_scheduled(
                     if hierarchy.element(c.source).is_leaf() {
                         outcome.subdivisions += 1;
                     }
-                    for child in hierarchy.split(c.source) {
-                        push_if_interacting(
-                            hierarchy, &mut next, c.receiver, child, partial, inherited, occluders,
-                        );
+                    let children = hierarchy.split(c.source);
+                    let h = &*hierarchy;
+                    let receiver = facing_of(h, c.receiver);
+                    for child in children {
+                        let ends = ((c.receiver, receiver.as_ref()), (child, None));
+                        push_if_interacting(h, &mut next, ends, partial, inherited, occluders);
                     }
                 }
             }
@@ -593,11 +606,18 @@ struct Coupled {
     rays_saved: u64,
 }
 
+/// [`Facing`] of a surface element (`None` for a cluster), computed once where a split pairs it with
+/// several children.
+fn facing_of(h: &Hierarchy, id: ElementId) -> Option<Facing<'_>> {
+    (!h.is_cluster(id)).then(|| Facing::of(h.element(id).shape()))
+}
+
+/// Pushes the candidate link `(receiver, source)` when the two can exchange light. Each end comes with
+/// its [`Facing`] where the caller already has it (a surface's is computed here otherwise).
 fn push_if_interacting(
     h: &Hierarchy,
     out: &mut Vec<Candidate>,
-    receiver: ElementId,
-    source: ElementId,
+    ((receiver, receiver_facing), (source, source_facing)): Ends,
     inherited_visibility: Option<f32>,
     shaft: Option<ShaftVerdict>,
     occluders: Option<u32>,
@@ -612,7 +632,22 @@ fn push_if_interacting(
     } else if h.is_cluster(receiver) || h.is_cluster(source) {
         cluster_can_interact(h, receiver, source)
     } else {
-        can_interact(h.element(receiver).shape(), h.element(source).shape())
+        let (own_r, own_s);
+        let r = match receiver_facing {
+            Some(f) => f,
+            None => {
+                own_r = Facing::of(h.element(receiver).shape());
+                &own_r
+            }
+        };
+        let s = match source_facing {
+            Some(f) => f,
+            None => {
+                own_s = Facing::of(h.element(source).shape());
+                &own_s
+            }
+        };
+        r.has_in_front(s) && s.has_in_front(r)
     };
     if interacting {
         out.push(Candidate::new(

@@ -21,6 +21,7 @@
 
 use crate::geometry::{DVec2, DVec3, Shape};
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::ops::Range;
 use std::sync::{Arc, RwLock};
 
@@ -42,8 +43,8 @@ pub enum IntraClusterKind {
     ItemBuffer,
 }
 
-/// The cube-map cell of direction `d` (not necessarily unit) and that cell's centre direction (unit).
-pub fn direction_bucket(d: DVec3) -> (u16, DVec3) {
+/// The cube-map cell of direction `d` (not necessarily unit); [`bucket_direction`] gives its centre.
+pub fn direction_bucket(d: DVec3) -> u16 {
     let a = d.abs();
     let axis = if a.x >= a.y && a.x >= a.z {
         0
@@ -58,8 +59,7 @@ pub fn direction_bucket(d: DVec3) -> (u16, DVec3) {
     let n = BUCKETS_PER_FACE;
     let cell = |c: f64| (((c / major.abs() + 1.0) * 0.5 * n as f64) as usize).min(n - 1);
     let (i, j) = (cell(d[s]), cell(d[t]));
-    let bucket = ((face * n + i) * n + j) as u16;
-    (bucket, bucket_direction(bucket))
+    ((face * n + i) * n + j) as u16
 }
 
 /// The centre direction (unit) of cube-map cell `bucket` ([`direction_bucket`]), along which its item
@@ -117,74 +117,142 @@ pub fn visible_fractions(shapes: &[Shape], toward: DVec3) -> Vec<f32> {
     let ny = (((hi.y - lo.y) / pixel).ceil() as usize).clamp(1, MAX_SIDE);
     // Back faces are drawn this much further away, far below any real gap between surfaces.
     let bias = 1e-9 * (extent + depth_hi - depth_lo);
-    let mut depth = vec![f64::NEG_INFINITY; nx * ny];
-    let mut owner = vec![u32::MAX; nx * ny];
-    let mut covered = vec![0u32; shapes.len()];
-    for (k, shape) in shapes.iter().enumerate() {
-        let n = shape.normal();
-        let facing = n.dot(toward);
-        if facing.abs() < 1e-12 {
-            continue; // edge-on: no area in the buffer
+    SCRATCH.with_borrow_mut(|scratch| {
+        scratch.prepare(nx, ny);
+        let mut spans = Vec::new();
+        let mut covered = vec![0u32; shapes.len()];
+        for (k, shape) in shapes.iter().enumerate() {
+            let n = shape.normal();
+            let facing = n.dot(toward);
+            if facing.abs() < 1e-12 {
+                continue; // edge-on: no area in the buffer
+            }
+            let offset = if facing > 0.0 { 0.0 } else { -bias };
+            let mut corners = [DVec2::ZERO; 4];
+            for (c, &v) in corners.iter_mut().zip(shape.vertices()) {
+                *c = (project(v) - lo) / pixel;
+            }
+            let plane = n.dot(shape.vertices()[0]);
+            let (nu, nw) = (n.dot(u) * pixel, n.dot(w) * pixel);
+            let (cu, cw) = (lo.x * n.dot(u), lo.y * n.dot(w));
+            // Depth toward the viewer of the plane at pixel coordinates (x, y) is
+            // `(plane - cu - cw - x nu - y nw) / facing + offset`, evaluated in that order.
+            let base = plane - cu - cw;
+            spans.clear();
+            spans_inside(&corners[..shape.vertex_count()], nx, ny, &mut spans);
+            for (y, xs) in spans.drain(..) {
+                covered[k] += xs.len() as u32;
+                let y_nw = (y as f64 + 0.5) * nw;
+                scratch.draw_span(y, xs, k as u32, |x| {
+                    (base - x * nu - y_nw) / facing + offset
+                });
+            }
         }
-        let offset = if facing > 0.0 { 0.0 } else { -bias };
-        let corners: Vec<DVec2> = shape
-            .vertices()
+        let depth_at_centroid: Vec<Option<f64>> = shapes
             .iter()
-            .map(|&v| (project(v) - lo) / pixel)
+            .zip(&covered)
+            .map(|(shape, &c)| {
+                (c == 0).then(|| {
+                    let q = (project(shape.centroid()) - lo) / pixel;
+                    let (x, y) = (q.x as usize, q.y as usize);
+                    scratch.depth[y.min(ny - 1) * nx + x.min(nx - 1)]
+                })
+            })
             .collect();
-        let plane = n.dot(shape.vertices()[0]);
-        let (nu, nw) = (n.dot(u) * pixel, n.dot(w) * pixel);
-        let (cu, cw) = (lo.x * n.dot(u), lo.y * n.dot(w));
-        // Depth toward the viewer of the plane at pixel coordinates (x, y).
-        let depth_at = |x: f64, y: f64| (plane - cu - cw - x * nu - y * nw) / facing + offset;
-        for (y, xs) in spans_inside(&corners, nx, ny) {
-            let cy = y as f64 + 0.5;
-            covered[k] += xs.len() as u32;
-            for x in xs {
-                let z = depth_at(x as f64 + 0.5, cy);
-                let p = y * nx + x;
-                if z > depth[p] {
-                    depth[p] = z;
-                    owner[p] = k as u32;
+        let won = scratch.count_and_clear(shapes.len());
+        shapes
+            .iter()
+            .enumerate()
+            .map(|(k, shape)| match depth_at_centroid[k] {
+                None => won[k] as f32 / covered[k] as f32,
+                // Too small for the buffer (or edge-on): judged at its centroid.
+                Some(depth) if depth <= shape.centroid().dot(toward) + bias => 1.0,
+                Some(_) => 0.0,
+            })
+            .collect()
+    })
+}
+
+thread_local! {
+    /// Each thread's buffer, kept between draws so that a draw touches only the rows it covers.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
+}
+
+/// An item buffer's pixels, reused between draws: between draws every depth is −∞ and every owner
+/// empty ([`Scratch::count_and_clear`] restores them where a draw wrote).
+#[derive(Default)]
+struct Scratch {
+    nx: usize,
+    depth: Vec<f64>,
+    owner: Vec<u32>,
+    /// Per row, the first and end column a draw wrote (none when first ≥ end).
+    written: Vec<(usize, usize)>,
+}
+
+impl Scratch {
+    /// Room for an `nx × ny` buffer (pixel `(x, y)` at `y nx + x`).
+    fn prepare(&mut self, nx: usize, ny: usize) {
+        self.nx = nx;
+        if self.depth.len() < nx * ny {
+            self.depth.resize(nx * ny, f64::NEG_INFINITY);
+            self.owner.resize(nx * ny, u32::MAX);
+        }
+        self.written.clear();
+        self.written.resize(ny, (usize::MAX, 0));
+    }
+
+    /// Draws item `k` over columns `xs` of row `y`, its depth at pixel coordinate `x` being
+    /// `depth_at(x)`: the nearer item (larger depth) keeps each pixel, the earlier one a tie.
+    #[inline]
+    fn draw_span(&mut self, y: usize, xs: Range<usize>, k: u32, depth_at: impl Fn(f64) -> f64) {
+        let written = &mut self.written[y];
+        *written = (written.0.min(xs.start), written.1.max(xs.end));
+        let row = y * self.nx;
+        let depth = &mut self.depth[row + xs.start..row + xs.end];
+        let owner = &mut self.owner[row + xs.start..row + xs.end];
+        for (i, (d, o)) in depth.iter_mut().zip(owner.iter_mut()).enumerate() {
+            // Column as an `i32` (at most `MAX_SIDE`): packed conversions let this loop vectorise.
+            let z = depth_at(f64::from((xs.start + i) as i32) + 0.5);
+            let nearer = z > *d;
+            *d = if nearer { z } else { *d };
+            *o = if nearer { k } else { *o };
+        }
+    }
+
+    /// Pixels each of `items` items won, restoring the written pixels to empty.
+    fn count_and_clear(&mut self, items: usize) -> Vec<u32> {
+        let mut won = vec![0u32; items];
+        for (y, &(first, end)) in self.written.iter().enumerate() {
+            if first >= end {
+                continue; // a row the draw did not write
+            }
+            let row = y * self.nx;
+            for p in row + first..row + end {
+                if self.owner[p] != u32::MAX {
+                    won[self.owner[p] as usize] += 1;
                 }
+                self.owner[p] = u32::MAX;
+                self.depth[p] = f64::NEG_INFINITY;
             }
         }
+        won
     }
-    let mut won = vec![0u32; shapes.len()];
-    for &o in &owner {
-        if o != u32::MAX {
-            won[o as usize] += 1;
-        }
-    }
-    shapes
-        .iter()
-        .enumerate()
-        .map(|(k, shape)| {
-            if covered[k] > 0 {
-                return won[k] as f32 / covered[k] as f32;
-            }
-            // Too small for the buffer (or edge-on): judged at its centroid.
-            let c = shape.centroid();
-            let q = (project(c) - lo) / pixel;
-            let (x, y) = (q.x as usize, q.y as usize);
-            let p = y.min(ny - 1) * nx + x.min(nx - 1);
-            if depth[p] <= c.dot(toward) + bias {
-                1.0
-            } else {
-                0.0
-            }
-        })
-        .collect()
 }
 
 /// Pixels of an `nx × ny` buffer whose centres lie in the convex polygon `corners` (pixel units), as
-/// one span of columns per row.
-fn spans_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, Range<usize>)> {
+/// one span of columns per row, appended to `out`.
+fn spans_inside(corners: &[DVec2], nx: usize, ny: usize, out: &mut Vec<(usize, Range<usize>)>) {
+    // Each edge as its start and direction, found once (at most 4: a triangle or a quad).
+    let mut edge_array = [(DVec2::ZERO, DVec2::ZERO); 4];
+    for (i, e) in edge_array.iter_mut().enumerate().take(corners.len()) {
+        *e = (corners[i], corners[(i + 1) % corners.len()] - corners[i]);
+    }
+    let edges = &edge_array[..corners.len()];
     let signed_area: f64 = (0..corners.len())
         .map(|i| corners[i].perp_dot(corners[(i + 1) % corners.len()]))
         .sum();
     if signed_area == 0.0 {
-        return Vec::new();
+        return;
     }
     let sign = signed_area.signum();
     let (lo, hi) = corners.iter().fold(
@@ -195,24 +263,18 @@ fn spans_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, Range<us
     let last = |v: f64, n: usize| ((v - 0.5).floor().max(-1.0) + 1.0).min(n as f64) as usize;
     let inside = |x: usize, y: usize| {
         let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-        (0..corners.len()).all(|i| {
-            let (a, b) = (corners[i], corners[(i + 1) % corners.len()]);
-            sign * (b - a).perp_dot(p - a) >= 0.0
-        })
+        edges.iter().all(|&(a, d)| sign * d.perp_dot(p - a) >= 0.0)
     };
     let (x_lo, x_hi) = (first(lo.x), last(hi.x, nx));
-    let mut out = Vec::new();
     if x_lo >= x_hi {
-        return out;
+        return;
     }
     for y in first(lo.y)..last(hi.y, ny) {
         // Scanline: each edge bounds the row's centres from one side; the span's ends are then
         // settled by the exact edge test, so the pixels are the ones a test of every pixel would keep.
         let cy = y as f64 + 0.5;
         let (mut left, mut right) = (lo.x, hi.x);
-        for i in 0..corners.len() {
-            let (a, b) = (corners[i], corners[(i + 1) % corners.len()]);
-            let d = b - a;
+        for &(a, d) in edges {
             let slope = sign * d.y;
             if slope == 0.0 {
                 continue;
@@ -245,14 +307,40 @@ fn spans_inside(corners: &[DVec2], nx: usize, ny: usize) -> Vec<(usize, Range<us
             out.push((y, x0..x1));
         }
     }
-    out
 }
 
 /// Visible fractions by (cluster, direction bucket), and the bytes they hold.
 #[derive(Debug, Default)]
 struct Cache {
-    buffers: HashMap<(u32, u16), Arc<[f32]>>,
+    buffers: HashMap<(u32, u16), Arc<[f32]>, BuildHasherDefault<KeyHasher>>,
     bytes: usize,
+}
+
+/// Hashes a cache key by one rotation and multiplication per field (as rustc's Fx hash): the keys are
+/// small integers chosen by the program, and SipHash was most of the cost of a cache hit (sweeps ask
+/// for cached buffers over a million times on the classroom).
+#[derive(Debug, Default)]
+struct KeyHasher(u64);
+
+impl KeyHasher {
+    fn add(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+}
+
+impl Hasher for KeyHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        bytes.iter().for_each(|&b| self.add(u64::from(b)));
+    }
+    fn write_u16(&mut self, n: u16) {
+        self.add(u64::from(n));
+    }
+    fn write_u32(&mut self, n: u32) {
+        self.add(u64::from(n));
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 /// Item buffers of clusters, cached per (cluster, direction bucket) up to a number of bytes (a share of
@@ -277,15 +365,14 @@ impl ItemBuffers {
         }
     }
 
-    /// Visible fractions of `cluster`'s contents (drawn by `contents` when not cached) seen along the
-    /// bucket of `toward`.
+    /// Visible fractions of `cluster`'s contents (drawn by `contents` when not cached) seen along
+    /// direction bucket `bucket` ([`direction_bucket`]).
     pub fn fractions(
         &self,
         cluster: u32,
-        toward: DVec3,
+        bucket: u16,
         contents: impl FnOnce() -> Vec<Shape>,
     ) -> Arc<[f32]> {
-        let (bucket, direction) = direction_bucket(toward);
         let key = (cluster, bucket);
         if let Some(hit) = self
             .cache
@@ -296,7 +383,7 @@ impl ItemBuffers {
         {
             return hit.clone();
         }
-        let fractions: Arc<[f32]> = visible_fractions(&contents(), direction).into();
+        let fractions: Arc<[f32]> = visible_fractions(&contents(), bucket_direction(bucket)).into();
         let mut cache = self.cache.write().expect("item buffer cache");
         let bytes = ENTRY_OVERHEAD + 4 * fractions.len();
         if cache.bytes + bytes <= self.max_bytes && !cache.buffers.contains_key(&key) {
@@ -348,7 +435,9 @@ mod tests {
                         })
                 })
                 .collect();
-            let spans: Vec<(usize, usize)> = spans_inside(&corners, nx, ny)
+            let mut spans = Vec::new();
+            spans_inside(&corners, nx, ny, &mut spans);
+            let spans: Vec<(usize, usize)> = spans
                 .into_iter()
                 .flat_map(|(y, xs)| xs.map(move |x| (x, y)))
                 .collect();
@@ -411,11 +500,12 @@ mod tests {
                 (1.0 - z * z).sqrt() * a.sin(),
                 z,
             );
-            let (b, c) = direction_bucket(d);
+            let b = direction_bucket(d);
+            let c = bucket_direction(b);
             assert!((b as usize) < 6 * BUCKETS_PER_FACE * BUCKETS_PER_FACE);
             assert!(d.angle_between(c) < 0.2, "{d} {c}");
-            assert_eq!(direction_bucket(c).0, b, "a bucket's centre lies in it");
-            assert_ne!(direction_bucket(-d).0, b);
+            assert_eq!(direction_bucket(c), b, "a bucket's centre lies in it");
+            assert_ne!(direction_bucket(-d), b);
         }
     }
 }
