@@ -9,14 +9,16 @@
 //! boxes: on large scenes traversal waits on node fetches from memory, so bytes per child and levels per
 //! ray are what count. One visit tests the eight boxes in one SIMD pass: AVX2 + FMA where the CPU has them
 //! (detected at run time), a portable lane loop elsewhere; both give the same answers. A leaf is one block
-//! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with their edge
-//! vectors precomputed, so that one AVX2 pass of `f64` lanes filters all four (see [`Block`]).
+//! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with the first
+//! vertex in `f64` and the edge vectors in `f32` (three cache lines), so that one AVX2 pass of `f64`
+//! lanes filters all four (see [`Block`], [`classify`]).
 //!
 //! Precision split: node boxes and traversal are `f32`, but every box is padded by a margin far above
 //! `f32` rounding, so culling is conservative; the primitive tests are the exact double precision test of
-//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers, behind a filter
-//! that computes the reference's own determinant and numerators (bit-identical in every lane). Answers are
-//! therefore the reference's answers (up to ties between polygons at the same `t`), including its
+//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers (rebuilt from the
+//! `f64` vertices), behind a filter on the `f32` edges with a rigorous error bound, which drops a lane
+//! only where the reference surely misses and ends an occlusion query only where it surely hits.
+//! Answers are therefore the reference's answers (up to ties between polygons at the same `t`), including its
 //! robustness: a segment between two points on scene polygons is not blocked by those polygons, nor by
 //! polygons coplanar with its start.
 
