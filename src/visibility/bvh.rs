@@ -675,10 +675,16 @@ impl Bvh {
                     order[j] = (enter[k], k);
                     n += 1;
                 }
-                // Interior children are fetched while the leaves are tested.
+                // Every child is fetched before the first leaf test, the interior ones while the
+                // leaves are tested; a leaf's lane references too, which its exact tests read (a
+                // closest hit needs one per hit lane).
                 for &(_, k) in &order[..n] {
+                    let c = node.child[k] as usize;
                     if node.leaves & (1 << k) == 0 {
-                        prefetch(std::slice::from_ref(&self.nodes[node.child[k] as usize]));
+                        prefetch(std::slice::from_ref(&self.nodes[c]));
+                    } else {
+                        prefetch(std::slice::from_ref(&self.blocks[c]));
+                        prefetch(std::slice::from_ref(&self.lanes[c]));
                     }
                 }
                 // Leaves first, nearer first, so that their hits cull the interior children.
