@@ -71,7 +71,7 @@ pub fn ray_polygon(ray: &Ray, v: &[DVec3], t_min: f64, t_max: f64) -> Option<(f6
 /// Relative distance (to the coordinates' magnitude) below which a ray origin counts as lying in a
 /// polygon's plane: far above the rounding of points sampled on the polygon (~1e-16), far below any
 /// geometric feature.
-const IN_PLANE: f64 = 1e-10;
+pub(super) const IN_PLANE: f64 = 1e-10;
 
 /// Möller–Trumbore on the triangle `a, a + e1, a + e2` with `s = origin - a`: the ray parameter in
 /// `(t_min, t_max)` and the barycentric (u, v) of the hit.

@@ -9,18 +9,20 @@
 //! boxes: on large scenes traversal waits on node fetches from memory, so bytes per child and levels per
 //! ray are what count. One visit tests the eight boxes in one SIMD pass: AVX2 + FMA where the CPU has them
 //! (detected at run time), a portable lane loop elsewhere; both give the same answers. A leaf is one block
-//! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with their edge
-//! vectors precomputed, so that one AVX2 pass of `f64` lanes filters all four (see [`Block`]).
+//! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with the first
+//! vertex in `f64` and the edge vectors in `f32` (three cache lines), so that one AVX2 pass of `f64`
+//! lanes filters all four (see [`Block`], [`classify`]).
 //!
 //! Precision split: node boxes and traversal are `f32`, but every box is padded by a margin far above
 //! `f32` rounding, so culling is conservative; the primitive tests are the exact double precision test of
-//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers, behind a filter
-//! that computes the reference's own determinant and numerators (bit-identical in every lane). Answers are
-//! therefore the reference's answers (up to ties between polygons at the same `t`), including its
+//! the exhaustive reference ([`super::brute_force::ray_triangle`]) on the same numbers (rebuilt from the
+//! `f64` vertices), behind a filter on the `f32` edges with a rigorous error bound, which drops a lane
+//! only where the reference surely misses and ends an occlusion query only where it surely hits.
+//! Answers are therefore the reference's answers (up to ties between polygons at the same `t`), including its
 //! robustness: a segment between two points on scene polygons is not blocked by those polygons, nor by
 //! polygons coplanar with its start.
 
-use super::brute_force::ray_triangle as triangle;
+use super::brute_force::{ray_triangle as triangle, IN_PLANE};
 use super::{Hit, Visibility};
 use crate::geometry::{DVec2, DVec3, Ray, Shape};
 use glam::{Vec3A, Vec4};
@@ -47,10 +49,14 @@ const RELATIVE_PAD: f64 = 1.0 / 262_144.0;
 /// High bit of a binary child reference marks a leaf; the low bits are then the first primitive.
 const LEAF_FLAG: u32 = 1 << 31;
 /// Most primitives a tree can hold (first-primitive indices must fit below [`LEAF_FLAG`], vertex
-/// offsets below [`QUAD_FLAG`], and polygon indices below [`EMPTY_LANE`]).
+/// offsets below [`SECOND_TRIANGLE`], and polygon indices below [`EMPTY_LANE`]).
 const MAX_PRIMS: usize = 1 << 27;
-/// High bit of a primitive's vertex offset marks a quad.
+/// High bit of a lane's vertex offset marks a quad.
 const QUAD_FLAG: u32 = 1 << 31;
+/// Next bit marks a quad's second triangle, `v0 v2 v3`.
+const SECOND_TRIANGLE: u32 = 1 << 30;
+/// The vertex offset under the flags (below `4 * MAX_PRIMS`).
+const VERTEX_OFFSET: u32 = SECOND_TRIANGLE - 1;
 /// Children per wide node.
 const WIDTH: usize = 8;
 /// Grid steps of a node's quantised boxes: coordinates `0..=QUANT_MAX`.
@@ -78,96 +84,239 @@ struct Node {
 
 const _: () = assert!(std::mem::size_of::<Node>() == 128);
 
-/// A leaf: up to [`LANES`] triangles, coordinate by coordinate (`a[axis][lane]`), with the reference
-/// test's inputs precomputed (`e1 = v1 - v0`, `e2 = v2 - v0`; a quad fills two adjacent lanes, `v0 v1 v2`
-/// then `v0 v2 v3`, as `brute_force::ray_polygon` splits it), so that the test runs on bit-identical
-/// numbers without gathering vertices, and four lanes load as one register per coordinate. 320 bytes:
-/// 72 per triangle lane, 8 for which polygon it belongs to.
+/// A leaf's hot data: up to [`LANES`] triangles, coordinate by coordinate (`a[axis][lane]`), with the
+/// reference test's first vertex `a` in `f64` (so `s = origin - a` is the reference's own) and its edges
+/// `e1 = v1 - v0`, `e2 = v2 - v0` rounded to `f32` (a quad fills two adjacent lanes, `v0 v1 v2` then
+/// `v0 v2 v3`, as `brute_force::ray_polygon` splits it). 192 bytes, three cache lines, against 320
+/// for `f64` edges: on large scenes traversal waits on memory, and this is what every visited leaf
+/// costs. The filter [`classify`] reads only this; the exact test of the lanes it keeps rebuilds the
+/// `f64` edges bit for bit from [`Bvh::vertices`] (see [`LaneRefs`]).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Block {
     a: [[f64; LANES]; 3],
-    e1: [[f64; LANES]; 3],
-    e2: [[f64; LANES]; 3],
-    /// Offset of the lane's polygon's first vertex in `Bvh::vertices`, with `QUAD_FLAG` for quads.
+    /// `f32` edges, each component within `2^-24` of the `f64` edge relative to itself, or NaN in every
+    /// component when that cannot hold (outside `f32`'s normal range): the filter then keeps the lane.
+    e1: [[f32; LANES]; 3],
+    e2: [[f32; LANES]; 3],
+}
+
+const _: () = assert!(std::mem::size_of::<Block>() == 192);
+
+/// A leaf's cold data, read only for the lanes the filter keeps and for the closest hit's record.
+#[derive(Clone, Copy, Debug)]
+struct LaneRefs {
+    /// Offset of the lane's polygon's first vertex in `Bvh::vertices`, with [`QUAD_FLAG`] for quads
+    /// and [`SECOND_TRIANGLE`] for a quad's `v0 v2 v3` lane.
     vertex: [u32; LANES],
     /// The lane's polygon, or [`EMPTY_LANE`].
     polygon: [u32; LANES],
 }
 
-const _: () = assert!(std::mem::size_of::<Block>() == 320);
-
 impl Block {
+    /// Unused lanes are all zero: their determinant is 0, which the filter rejects.
     const EMPTY: Block = Block {
         a: [[0.0; LANES]; 3],
         e1: [[0.0; LANES]; 3],
         e2: [[0.0; LANES]; 3],
-        vertex: [0; LANES],
-        polygon: [EMPTY_LANE; LANES],
     };
 
-    /// Lane `k`'s triangle `(a, e1, e2)`.
+    /// Stores the triangle `(a, e1, e2)` in lane `k`.
+    fn set_lane(&mut self, k: usize, a: DVec3, e1: DVec3, e2: DVec3) {
+        let (f1, f2) = (to_f32_edge(e1), to_f32_edge(e2));
+        for axis in 0..3 {
+            self.a[axis][k] = a[axis];
+            self.e1[axis][k] = f1[axis];
+            self.e2[axis][k] = f2[axis];
+        }
+    }
+
+    /// Lane `k`'s `(a, e1, e2)` as the filter sees them (edges widened from `f32`).
     #[inline(always)]
     fn lane(&self, k: usize) -> (DVec3, DVec3, DVec3) {
-        let get = |v: &[[f64; LANES]; 3]| DVec3::new(v[0][k], v[1][k], v[2][k]);
-        (get(&self.a), get(&self.e1), get(&self.e2))
+        let get =
+            |v: &[[f32; LANES]; 3]| DVec3::new(v[0][k].into(), v[1][k].into(), v[2][k].into());
+        let a = DVec3::new(self.a[0][k], self.a[1][k], self.a[2][k]);
+        (a, get(&self.e1), get(&self.e2))
     }
+}
 
-    /// Ray parameter in `(t_min, t_max)` of lane `k`'s triangle, with its barycentric (u, v): the
-    /// reference test on the same numbers as `brute_force::ray_polygon`.
-    #[inline(always)]
-    fn hit(&self, k: usize, ray: &Ray, t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
-        let (a, e1, e2) = self.lane(k);
-        triangle(ray, ray.origin - a, e1, e2, t_min, t_max)
-    }
-
-    /// Whether any lane blocks the ray in `(t_min, t_max)`: the filter `K` first, the exact test for the
-    /// lanes it keeps. For occlusion a quad's two triangles are independent (the reference's quad hits
-    /// iff either does).
-    #[inline(always)]
-    fn occludes<K: Simd>(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
-        let mut lanes = K::filter(ray, self);
-        while lanes != 0 {
-            let k = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
-            if self.hit(k, ray, t_min, t_max).is_some() {
-                return true;
-            }
-        }
-        false
+/// `e` rounded to `f32` when every component keeps its relative error within `2^-24` (the filter's
+/// error model), else NaN (a lane the filter always keeps).
+fn to_f32_edge(e: DVec3) -> [f32; 3] {
+    let rounded = e.as_vec3().to_array();
+    let faithful = (0..3).all(|i| {
+        let r = f64::from(rounded[i]);
+        r.is_finite() && (r - e[i]).abs() <= e[i].abs() / 16_777_216.0
+    });
+    if faithful {
+        rounded
+    } else {
+        [f32::NAN; 3]
     }
 }
 
 /// 2^900: `|x| * 2^900 > |det|` means `x / det` is far from underflowing to zero.
 const TWO_POW_900: f64 = f64::from_bits((1023 + 900) << 52);
+/// Bound on the filter's error relative to the absolute sum of the products it adds up (see
+/// [`classify`]): `2^-22`, twice the `2^-23` that the `f32` edges and the `f64` roundings can cause.
+const FILTER_ERROR: f64 = 1.0 / 4_194_304.0;
+/// Absolute term of the filter's error bounds: far above the underflow of a few `f64` products
+/// (`2^-1074` each) and far below the reference's `1e-300` determinant cutoff.
+const FILTER_FLOOR: f64 = 1e-305;
 
-/// Whether [`triangle`] (`ray_triangle(ray, s, e1, e2, ..)`, with direction `d`) can return a hit: the
-/// same determinant and barycentric numerators, compared against `det` without its division, so most
-/// misses skip the division's latency (the portable filter, and the reference for the AVX2 one). It answers `false` only where the reference surely rejects:
-/// `u = U * (1 / det)` is negative when `U` and `det` have opposite signs and `U` is too large for the
-/// product to underflow to `-0`, and exceeds 1 when `|U| > |det| (1 + 1e-14)`, far beyond the two
-/// roundings (2^-52); likewise for `w` and `u + w`.
+/// The ray as the leaf filter reads it: the reference's origin and direction, their absolute values,
+/// and the parameter range.
+#[derive(Clone, Copy, Debug)]
+struct FilterRay {
+    origin: DVec3,
+    direction: DVec3,
+    direction_abs: DVec3,
+    /// The origin's largest component: with the lane's `|s|`, the reference's in-plane `scale`.
+    origin_max: f64,
+    /// Rejection below `t_min`: `t_min`, or `-inf` when negative (the test assumes `t_min >= 0`).
+    reject_lo: f64,
+    /// Rejection above `t_max`: `t_max`, or `inf` when negative (likewise).
+    reject_hi: f64,
+    /// Sure hits above `max(t_min, 0)`.
+    sure_lo: f64,
+    /// Sure hits below `t_max`.
+    sure_hi: f64,
+}
+
+impl FilterRay {
+    fn new(ray: &Ray, t_min: f64, t_max: f64) -> FilterRay {
+        let mut f = FilterRay {
+            origin: ray.origin,
+            direction: ray.direction,
+            direction_abs: ray.direction.abs(),
+            origin_max: ray.origin.abs().max_element(),
+            reject_lo: if t_min >= 0.0 {
+                t_min
+            } else {
+                f64::NEG_INFINITY
+            },
+            reject_hi: 0.0,
+            sure_lo: t_min.max(0.0),
+            sure_hi: 0.0,
+        };
+        f.set_t_max(t_max);
+        f
+    }
+
+    #[inline(always)]
+    fn set_t_max(&mut self, t_max: f64) {
+        self.reject_hi = if t_max >= 0.0 { t_max } else { f64::INFINITY };
+        self.sure_hi = t_max;
+    }
+}
+
+/// What the filter knows of a block's lanes, bit `k` for lane `k`: the lanes the reference test may
+/// accept, and among them those it surely accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Lanes {
+    maybe: u32,
+    sure: u32,
+}
+/// `x x y` with every term's sign made positive, for `x, y >= 0`: the absolute sums of the cross
+/// product's terms.
 #[inline(always)]
-fn may_hit(d: DVec3, s: DVec3, e1: DVec3, e2: DVec3) -> bool {
+fn abs_cross(x: DVec3, y: DVec3) -> DVec3 {
+    DVec3::new(
+        x.y * y.z + y.y * x.z,
+        x.z * y.x + y.z * x.x,
+        x.x * y.y + y.x * x.y,
+    )
+}
+
+/// Whether [`triangle`] (`ray_triangle(ray, s, e1, e2, t_min, t_max)`, with the `f64` edges) can
+/// return a hit, and whether it surely does, computed from the `f32` edges `e1`, `e2` (widened; `s =
+/// origin - a` and the ray are the reference's own), as `(maybe, sure)`: it answers `maybe = false`
+/// only where the reference surely rejects, and `sure = true` only where it surely accepts (so an
+/// occlusion query needs no exact test, nor its vertex fetch, for a ray blocked well inside a
+/// triangle). The portable filter, and the reference for the AVX2 one, which computes the same
+/// operations.
+///
+/// Error model: the determinant `det = e1 . (d x e2)` and the numerators `U = s . (d x e2)`,
+/// `W = d . (s x e1)`, `T = e2 . (s x e1)` are sums of six products of three inputs. The `f32` edges
+/// change each product by at most `2 * 2^-24` of itself (one rounding per edge, relative `2^-24`),
+/// and both `f64` evaluations add a few `2^-53`, so each computed value is within about `2^-23` of
+/// the products' absolute sum (`|e1| . (|d| x+ |e2|)` etc., [`abs_cross`]) of the reference's value.
+/// The bounds `err = FILTER_ERROR * sum + FILTER_FLOOR` are twice that, which also covers the
+/// roundings of the comparisons below (each `2^-53` of terms no larger than the sum) and of the
+/// reference's divisions (`2^-52`). Given `|det| > err_det`, the determinant's sign is the
+/// reference's, and (sign-normalised, `a = |det|`):
+/// - `U + err_U < 0` means `u < 0` (the `2^900` test keeps `U / det` from underflowing to `-0`),
+///   `U - err_U > a + err_det` means `u > 1`; likewise `w < 0` and `u + w > 1`;
+/// - `T + err_T < t_min (a - err_det)` means `t < t_min` (for `t_min >= 0`), `T - err_T > t_max (a +
+///   err_det)` means `t > t_max` (for `t_max >= 0`): a ray leaving a surface is rejected by its own
+///   polygon here, without the exact test's fetch of its vertices;
+/// - `a + err_det < 1e-300` is the reference's degenerate cutoff (and rejects unused, all-zero lanes).
+///
+/// It is a sure hit when the opposite bounds hold: `a - err_det >= 1e-300`, `U - err_U > 0`,
+/// `W - err_W > 0`, `(U + err_U) + (W + err_W) < a - err_det`, `t` within `(max(t_min, 0), t_max)`
+/// by the same margins, and the origin surely off the plane: `|T| - err_T > 2 IN_PLANE scale L`,
+/// with `L`, the sum of `|e1| x+ |e2|`, at least `|e1 x e2|`.
+///
+/// NaN anywhere (a lane whose edges do not fit `f32`) keeps the lane, never surely.
+#[inline(always)]
+fn classify(ray: &FilterRay, a: DVec3, e1: DVec3, e2: DVec3) -> (bool, bool) {
+    let (d, s) = (ray.direction, ray.origin - a);
     let p = d.cross(e2);
     let det = e1.dot(p);
-    let a = det.abs();
-    // The reference's `det.abs() < 1e-300` (and a NaN determinant, whose u fails every test).
-    if a.is_nan() || a < 1e-300 {
-        return false;
+    let abs = det.abs();
+    let (s_abs, e1_abs, e2_abs) = (s.abs(), e1.abs(), e2.abs());
+    let p_abs = abs_cross(ray.direction_abs, e2_abs);
+    let err_det = FILTER_ERROR * e1_abs.dot(p_abs) + FILTER_FLOOR;
+    if abs + err_det < 1e-300 {
+        return (false, false);
+    }
+    // The determinant's sign is surely the reference's (false for NaN).
+    let signed = abs > err_det;
+    if !signed {
+        return (true, false);
     }
     let sign = if det < 0.0 { -1.0 } else { 1.0 };
-    let far = a * (1.0 + 1e-14);
-    let negative = |x: f64| x < 0.0 && x.abs() * TWO_POW_900 > a;
+    let far = abs + err_det;
+    let negative = |x: f64| x < 0.0 && x.abs() * TWO_POW_900 > abs;
     let u = sign * s.dot(p);
-    if negative(u) || u > far {
-        return false;
+    let err_u = FILTER_ERROR * s_abs.dot(p_abs) + FILTER_FLOOR;
+    let (u_lo, u_hi) = (u - err_u, u + err_u);
+    if negative(u_hi) || u_lo > far {
+        return (false, false);
     }
-    let w = sign * d.dot(s.cross(e1));
-    if negative(w) {
-        return false;
+    let q = s.cross(e1);
+    let q_abs = abs_cross(s_abs, e1_abs);
+    let w = sign * d.dot(q);
+    let err_w = FILTER_ERROR * ray.direction_abs.dot(q_abs) + FILTER_FLOOR;
+    let (w_lo, w_hi) = (w - err_w, w + err_w);
+    if negative(w_hi) || u_lo + w_lo > far {
+        return (false, false);
     }
-    !(u >= 0.0 && w >= 0.0 && u + w > far)
+    let t = sign * e2.dot(q);
+    let err_t = FILTER_ERROR * e2_abs.dot(q_abs) + FILTER_FLOOR;
+    let (t_lo, t_hi) = (t - err_t, t + err_t);
+    let near = abs - err_det;
+    if t_hi < ray.reject_lo * near || t_lo > ray.reject_hi * far {
+        return (false, false);
+    }
+    // `max` as `max_element` (and `_mm256_max_pd`) computes it.
+    let s_max = s_abs.max_element();
+    let scale = if ray.origin_max > s_max {
+        ray.origin_max
+    } else {
+        s_max
+    };
+    let n = abs_cross(e1_abs, e2_abs);
+    let off_plane = (2.0 * IN_PLANE) * scale * ((n.x + n.y) + n.z);
+    let sure = near >= 1e-300
+        && u_lo > 0.0
+        && w_lo > 0.0
+        && u_hi + w_hi < near
+        && t_lo > ray.sure_lo * far
+        && t_hi < ray.sure_hi * near
+        && t.abs() - err_t > off_plane;
+    (true, sure)
 }
 
 /// SAH bounding volume hierarchy over the scene's polygons.
@@ -179,6 +328,8 @@ pub struct Bvh {
     root_max: DVec3,
     /// The leaves, in the order traversal meets them.
     blocks: Vec<Block>,
+    /// Per block, where its lanes' exact triangles and polygons are.
+    lanes: Vec<LaneRefs>,
     /// The polygons' vertices in leaf order, for the parameters and side of the final closest hit.
     vertices: Vec<DVec3>,
     /// The SIMD kernels this CPU runs.
@@ -270,6 +421,7 @@ impl Bvh {
         let mut leaves = Leaves {
             shapes,
             blocks: Vec::new(),
+            lanes: Vec::new(),
             vertices: Vec::new(),
         };
         let mut nodes = Vec::new();
@@ -288,6 +440,7 @@ impl Bvh {
             root_min: bounds.min.as_dvec3(),
             root_max: bounds.max.as_dvec3(),
             blocks: leaves.blocks,
+            lanes: leaves.lanes,
             vertices: leaves.vertices,
             kernel: Kernel::detect(),
         }
@@ -298,16 +451,69 @@ impl Bvh {
         self.nodes.len()
     }
 
-    /// The shape of lane `k` of `block`, rebuilt bit-exactly from the stored vertices.
-    fn shape(&self, block: &Block, k: usize) -> Shape {
-        let tagged = block.vertex[k];
-        let o = (tagged & !QUAD_FLAG) as usize;
+    /// The shape of lane `k` of block `index`, rebuilt bit-exactly from the stored vertices.
+    fn shape(&self, index: usize, k: usize) -> Shape {
+        let tagged = self.lanes[index].vertex[k];
+        let o = (tagged & VERTEX_OFFSET) as usize;
         let v = &self.vertices;
         if tagged & QUAD_FLAG != 0 {
             Shape::Quad([v[o], v[o + 1], v[o + 2], v[o + 3]])
         } else {
             Shape::Triangle([v[o], v[o + 1], v[o + 2]])
         }
+    }
+
+    /// Lane `k` of block `index` as the reference test's `(a, e1, e2)`: `v0` and the `f64` edges, computed
+    /// from the vertices as the reference computes them (so bit for bit its numbers).
+    #[inline(always)]
+    fn exact_lane(&self, index: usize, k: usize) -> (DVec3, DVec3, DVec3) {
+        let tag = self.lanes[index].vertex[k];
+        let o = (tag & VERTEX_OFFSET) as usize;
+        let i = o + 1 + usize::from(tag & SECOND_TRIANGLE != 0);
+        let v = &self.vertices;
+        (v[o], v[i] - v[o], v[i + 1] - v[o])
+    }
+
+    /// Ray parameter in `(t_min, t_max)` of lane `k` of block `index`, with its barycentric (u, v): the
+    /// reference test on the same numbers as `brute_force::ray_polygon`.
+    #[inline(always)]
+    fn hit(
+        &self,
+        index: usize,
+        k: usize,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<(f64, f64, f64)> {
+        let (a, e1, e2) = self.exact_lane(index, k);
+        triangle(ray, ray.origin - a, e1, e2, t_min, t_max)
+    }
+
+    /// Whether any lane of block `index` blocks the ray in `(t_min, t_max)`: the filter `K` first, the
+    /// exact test for the lanes it keeps. For occlusion a quad's two triangles are independent (the
+    /// reference's quad hits iff either does).
+    #[inline(always)]
+    fn block_occludes<K: Simd>(
+        &self,
+        index: usize,
+        ray: &Ray,
+        filter: &FilterRay,
+        t_min: f64,
+        t_max: f64,
+    ) -> bool {
+        let lanes = K::filter(filter, &self.blocks[index]);
+        if lanes.sure != 0 {
+            return true;
+        }
+        let mut lanes = lanes.maybe;
+        while lanes != 0 {
+            let k = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            if self.hit(index, k, ray, t_min, t_max).is_some() {
+                return true;
+            }
+        }
+        false
     }
 
     /// Clips the ray to the root box in double precision and prepares the `f32` traversal ray. Traversal
@@ -365,8 +571,9 @@ impl Bvh {
         let Some(trav) = self.setup(ray, t_min, t_max) else {
             return false;
         };
+        let filter = FilterRay::new(ray, t_min, t_max);
         if self.nodes.is_empty() {
-            return self.blocks[0].occludes::<K>(ray, t_min, t_max);
+            return self.block_occludes::<K>(0, ray, &filter, t_min, t_max);
         }
         let mut stack = Stack::new();
         let mut current = 0u32;
@@ -410,7 +617,7 @@ impl Bvh {
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                if self.blocks[node.child[k] as usize].occludes::<K>(ray, t_min, t_max) {
+                if self.block_occludes::<K>(node.child[k] as usize, ray, &filter, t_min, t_max) {
                     return true;
                 }
             }
@@ -428,17 +635,19 @@ impl Bvh {
         // Closest lane so far: (t, block, lane, barycentric u, v).
         let mut best: Option<(f64, usize, usize, f64, f64)> = None;
         let mut limit = t_max;
+        let mut filter = FilterRay::new(ray, t_min, t_max);
         // Lanes in order, each tested up to the nearest hit so far: a quad's second triangle replaces
         // its first only when strictly nearer, as in the reference.
         let mut leaf = |index: u32, trav: &mut TravRay| {
-            let block = &self.blocks[index as usize];
-            let mut lanes = K::filter(ray, block);
+            let index = index as usize;
+            let mut lanes = K::filter(&filter, &self.blocks[index]).maybe;
             while lanes != 0 {
                 let k = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                if let Some((t, u, v)) = block.hit(k, ray, t_min, limit) {
-                    best = Some((t, index as usize, k, u, v));
+                if let Some((t, u, v)) = self.hit(index, k, ray, t_min, limit) {
+                    best = Some((t, index, k, u, v));
                     limit = t;
+                    filter.set_t_max(t);
                     trav.set_far(t);
                 }
             }
@@ -466,10 +675,16 @@ impl Bvh {
                     order[j] = (enter[k], k);
                     n += 1;
                 }
-                // Interior children are fetched while the leaves are tested.
+                // Every child is fetched before the first leaf test, the interior ones while the
+                // leaves are tested; a leaf's lane references too, which its exact tests read (a
+                // closest hit needs one per hit lane).
                 for &(_, k) in &order[..n] {
+                    let c = node.child[k] as usize;
                     if node.leaves & (1 << k) == 0 {
-                        prefetch(std::slice::from_ref(&self.nodes[node.child[k] as usize]));
+                        prefetch(std::slice::from_ref(&self.nodes[c]));
+                    } else {
+                        prefetch(std::slice::from_ref(&self.blocks[c]));
+                        prefetch(std::slice::from_ref(&self.lanes[c]));
                     }
                 }
                 // Leaves first, nearer first, so that their hits cull the interior children.
@@ -511,15 +726,14 @@ impl Bvh {
     /// The hit record of the closest lane found.
     fn finish(&self, ray: &Ray, best: Option<(f64, usize, usize, f64, f64)>) -> Option<Hit> {
         let (t, index, k, u, v) = best?;
-        let block = &self.blocks[index];
-        let shape = self.shape(block, k);
+        let shape = self.shape(index, k);
         let uv = match shape {
             Shape::Triangle(_) => DVec2::new(u, v),
             Shape::Quad(_) => shape.parameters_of(ray.at(t)),
         };
         Some(Hit {
             t,
-            polygon: block.polygon[k] as usize,
+            polygon: self.lanes[index].polygon[k] as usize,
             uv,
             front: ray.direction.dot(shape.vector_area()) < 0.0,
         })
@@ -626,9 +840,9 @@ trait Simd {
     /// every slab by `2^-18 M |inv|`: a box the exact ray meets is never culled.
     fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]);
 
-    /// [`may_hit`] of each lane of `block` (bit `k` for lane `k`), computed with exactly its operations,
-    /// so bit-identical and conservative in every kernel.
-    fn filter(ray: &Ray, block: &Block) -> u32;
+    /// [`classify`] of each lane of `block`, computed with exactly its operations, so bit-identical and
+    /// conservative in every kernel.
+    fn filter(ray: &FilterRay, block: &Block) -> Lanes;
 }
 
 /// Lane loops in plain Rust (any CPU).
@@ -655,11 +869,13 @@ impl Simd for Portable {
     }
 
     #[inline(always)]
-    fn filter(ray: &Ray, block: &Block) -> u32 {
-        let mut lanes = 0;
+    fn filter(ray: &FilterRay, block: &Block) -> Lanes {
+        let mut lanes = Lanes { maybe: 0, sure: 0 };
         for k in 0..LANES {
             let (a, e1, e2) = block.lane(k);
-            lanes |= u32::from(may_hit(ray.direction, ray.origin - a, e1, e2)) << k;
+            let (maybe, sure) = classify(ray, a, e1, e2);
+            lanes.maybe |= u32::from(maybe) << k;
+            lanes.sure |= u32::from(sure) << k;
         }
         lanes
     }
@@ -679,25 +895,32 @@ impl Simd for Avx2 {
     }
 
     #[inline(always)]
-    fn filter(ray: &Ray, block: &Block) -> u32 {
+    fn filter(ray: &FilterRay, block: &Block) -> Lanes {
         // SAFETY: as above.
         unsafe { filter_avx2(ray, block) }
     }
 }
 
-/// [`may_hit`] on four lanes of `f64`: the same products, sums and comparisons in the same order (no
-/// fused multiply-add), so every lane's answer is bit for bit the scalar one.
+/// [`classify`] on four lanes of `f64` (the `f32` edges widened on load): the same products, sums and
+/// comparisons in the same order (no fused multiply-add), so every lane's answer is bit for
+/// bit the scalar one.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn filter_avx2(ray: &Ray, block: &Block) -> u32 {
+fn filter_avx2(ray: &FilterRay, block: &Block) -> Lanes {
     use std::arch::x86_64::*;
     type V = [__m256d; 3];
-    // SAFETY: each row is four `f64` at a 32-byte aligned offset of the 64-byte aligned block.
+    // SAFETY: each row is four `f64` (32-byte aligned) or four `f32` (16-byte aligned) at an aligned
+    // offset of the 64-byte aligned block.
     let load = |rows: &[[f64; LANES]; 3]| rows.map(|r| unsafe { _mm256_load_pd(r.as_ptr()) });
+    let widen = |rows: &[[f32; LANES]; 3]| {
+        rows.map(|r| _mm256_cvtps_pd(unsafe { _mm_load_ps(r.as_ptr()) }))
+    };
     let splat = |v: DVec3| v.to_array().map(|x| _mm256_set1_pd(x));
-    let (mul, add, sub) = (_mm256_mul_pd, _mm256_add_pd, _mm256_sub_pd);
-    // `glam`'s `DVec3::cross` and `DVec3::dot`, term for term.
+    let (mul, add, sub, max) = (_mm256_mul_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_max_pd);
+    let (and, or) = (_mm256_and_pd, _mm256_or_pd);
+    let (gt, lt) = (_mm256_cmp_pd::<_CMP_GT_OQ>, _mm256_cmp_pd::<_CMP_LT_OQ>);
+    // `glam`'s `DVec3::cross` and `dot`, and `abs_cross`, term for term.
     let cross = |x: V, y: V| {
         [
             sub(mul(x[1], y[2]), mul(y[1], x[2])),
@@ -705,41 +928,96 @@ fn filter_avx2(ray: &Ray, block: &Block) -> u32 {
             sub(mul(x[0], y[1]), mul(y[0], x[1])),
         ]
     };
+    let abs_cross = |x: V, y: V| {
+        [
+            add(mul(x[1], y[2]), mul(y[1], x[2])),
+            add(mul(x[2], y[0]), mul(y[2], x[0])),
+            add(mul(x[0], y[1]), mul(y[0], x[1])),
+        ]
+    };
     let dot = |x: V, y: V| add(add(mul(x[0], y[0]), mul(x[1], y[1])), mul(x[2], y[2]));
-    let (d, o) = (splat(ray.direction), splat(ray.origin));
+    let sign_bit = _mm256_set1_pd(-0.0);
+    let abs = |x: __m256d| _mm256_andnot_pd(sign_bit, x);
+    // `max_pd(x, y)` is `if x > y { x } else { y }`, as in `max_element`, NaN included.
+    let max_element = |x: V| max(x[0], max(x[1], x[2]));
+    let (d, o, d_abs) = (
+        splat(ray.direction),
+        splat(ray.origin),
+        splat(ray.direction_abs),
+    );
     let a = load(&block.a);
     let s = [0, 1, 2].map(|i| sub(o[i], a[i]));
-    let (e1, e2) = (load(&block.e1), load(&block.e2));
+    let (e1, e2) = (widen(&block.e1), widen(&block.e2));
     let p = cross(d, e2);
     let det = dot(e1, p);
-    let sign_bit = _mm256_set1_pd(-0.0);
+    let det_abs = abs(det);
+    let (s_abs, e1_abs, e2_abs) = (s.map(abs), e1.map(abs), e2.map(abs));
+    let p_abs = abs_cross(d_abs, e2_abs);
+    let (error, floor) = (_mm256_set1_pd(FILTER_ERROR), _mm256_set1_pd(FILTER_FLOOR));
+    let bound = |x: V, y: V| add(mul(error, dot(x, y)), floor);
+    let err_det = bound(e1_abs, p_abs);
+    let degenerate = lt(add(det_abs, err_det), _mm256_set1_pd(1e-300));
+    let signed = gt(det_abs, err_det);
     // `sign * x` with `sign = ±1` is `x` with the determinant's sign bit flipped in.
-    let sign = _mm256_and_pd(det, sign_bit);
-    let abs = _mm256_andnot_pd(sign_bit, det);
+    let sign = and(det, sign_bit);
+    let (far, near) = (add(det_abs, err_det), sub(det_abs, err_det));
     let zero = _mm256_setzero_pd();
-    let usable = _mm256_cmp_pd::<_CMP_GE_OQ>(abs, _mm256_set1_pd(1e-300));
-    let far = mul(abs, _mm256_set1_pd(1.0 + 1e-14));
     let negative = |x: __m256d| {
-        let huge = mul(_mm256_andnot_pd(sign_bit, x), _mm256_set1_pd(TWO_POW_900));
-        _mm256_and_pd(
-            _mm256_cmp_pd::<_CMP_LT_OQ>(x, zero),
-            _mm256_cmp_pd::<_CMP_GT_OQ>(huge, abs),
-        )
+        let huge = mul(abs(x), _mm256_set1_pd(TWO_POW_900));
+        and(lt(x, zero), gt(huge, det_abs))
     };
     let u = _mm256_xor_pd(dot(s, p), sign);
-    let w = _mm256_xor_pd(dot(d, cross(s, e1)), sign);
-    let both = _mm256_and_pd(
-        _mm256_cmp_pd::<_CMP_GE_OQ>(u, zero),
-        _mm256_cmp_pd::<_CMP_GE_OQ>(w, zero),
-    );
-    let reject = _mm256_or_pd(
-        _mm256_or_pd(negative(u), _mm256_cmp_pd::<_CMP_GT_OQ>(u, far)),
-        _mm256_or_pd(
-            negative(w),
-            _mm256_and_pd(both, _mm256_cmp_pd::<_CMP_GT_OQ>(add(u, w), far)),
+    let err_u = bound(s_abs, p_abs);
+    let (u_lo, u_hi) = (sub(u, err_u), add(u, err_u));
+    let q = cross(s, e1);
+    let q_abs = abs_cross(s_abs, e1_abs);
+    let w = _mm256_xor_pd(dot(d, q), sign);
+    let err_w = bound(d_abs, q_abs);
+    let (w_lo, w_hi) = (sub(w, err_w), add(w, err_w));
+    let t = _mm256_xor_pd(dot(e2, q), sign);
+    let err_t = bound(e2_abs, q_abs);
+    let (t_lo, t_hi) = (sub(t, err_t), add(t, err_t));
+    let splat1 = _mm256_set1_pd;
+    let reject = or(
+        or(
+            or(negative(u_hi), gt(u_lo, far)),
+            or(negative(w_hi), gt(add(u_lo, w_lo), far)),
+        ),
+        or(
+            lt(t_hi, mul(splat1(ray.reject_lo), near)),
+            gt(t_lo, mul(splat1(ray.reject_hi), far)),
         ),
     );
-    _mm256_movemask_pd(_mm256_andnot_pd(reject, usable)) as u32
+    let scale = max(splat1(ray.origin_max), max_element(s_abs));
+    let n = abs_cross(e1_abs, e2_abs);
+    let off_plane = mul(
+        mul(splat1(2.0 * IN_PLANE), scale),
+        add(add(n[0], n[1]), n[2]),
+    );
+    let sure = and(
+        and(
+            and(
+                _mm256_cmp_pd::<_CMP_GE_OQ>(near, splat1(1e-300)),
+                gt(u_lo, zero),
+            ),
+            and(gt(w_lo, zero), lt(add(u_hi, w_hi), near)),
+        ),
+        and(
+            and(
+                gt(t_lo, mul(splat1(ray.sure_lo), far)),
+                lt(t_hi, mul(splat1(ray.sure_hi), near)),
+            ),
+            gt(sub(abs(t), err_t), off_plane),
+        ),
+    );
+    // Kept: not degenerate, and the sign uncertain or nothing rejects; sure: signed, kept and sure.
+    let dropped = or(degenerate, and(signed, reject));
+    let maybe = !(_mm256_movemask_pd(dropped) as u32) & ((1 << LANES) - 1);
+    let sure = _mm256_movemask_pd(_mm256_andnot_pd(reject, and(signed, sure))) as u32;
+    Lanes {
+        maybe,
+        sure: sure & maybe,
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -826,6 +1104,7 @@ fn binary_children(node: &BinNode) -> [ChildRef; 2] {
 struct Leaves<'a> {
     shapes: &'a [Shape],
     blocks: Vec<Block>,
+    lanes: Vec<LaneRefs>,
     vertices: Vec<DVec3>,
 }
 
@@ -833,6 +1112,10 @@ impl Leaves<'_> {
     /// Appends the block of `prims` (at most [`LANES`] lanes) and returns its index.
     fn push(&mut self, prims: &[BuildPrim]) -> u32 {
         let mut block = Block::EMPTY;
+        let mut refs = LaneRefs {
+            vertex: [0; LANES],
+            polygon: [EMPTY_LANE; LANES],
+        };
         let mut k = 0;
         for p in prims {
             let v = self.shapes[p.index as usize].vertices();
@@ -845,18 +1128,14 @@ impl Leaves<'_> {
             };
             // `v0 v1 v2`, and `v0 v2 v3` for a quad.
             for i in 1..v.len() - 1 {
-                let (e1, e2) = (v[i] - v[0], v[i + 1] - v[0]);
-                for axis in 0..3 {
-                    block.a[axis][k] = v[0][axis];
-                    block.e1[axis][k] = e1[axis];
-                    block.e2[axis][k] = e2[axis];
-                }
-                block.vertex[k] = tag;
-                block.polygon[k] = p.index;
+                block.set_lane(k, v[0], v[i] - v[0], v[i + 1] - v[0]);
+                refs.vertex[k] = if i == 2 { tag | SECOND_TRIANGLE } else { tag };
+                refs.polygon[k] = p.index;
                 k += 1;
             }
         }
         self.blocks.push(block);
+        self.lanes.push(refs);
         (self.blocks.len() - 1) as u32
     }
 }
@@ -1240,12 +1519,13 @@ impl Visibility for Bvh {
         "bvh"
     }
 
-    /// Nodes, leaf blocks and vertices.
+    /// Nodes, leaf blocks (hot and cold parts) and vertices.
     fn memory_bytes(&self) -> Option<usize> {
         use std::mem::size_of_val;
         Some(
             size_of_val(self.nodes.as_slice())
                 + size_of_val(self.blocks.as_slice())
+                + size_of_val(self.lanes.as_slice())
                 + size_of_val(self.vertices.as_slice()),
         )
     }
@@ -1254,6 +1534,7 @@ impl Visibility for Bvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::visibility::SEGMENT_EPSILON;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64Mcg;
 
@@ -1307,8 +1588,7 @@ mod tests {
             let (cmin, cmax) = child_box(node, k);
             let (cmin, cmax) = (cmin.max(min), cmax.min(max));
             if node.leaves & (1 << k) != 0 {
-                let block = &bvh.blocks[node.child[k] as usize];
-                for v in check_block(bvh, block, seen) {
+                for v in check_block(bvh, node.child[k] as usize, seen) {
                     assert!(
                         v.cmpge(cmin).all() && v.cmple(cmax).all(),
                         "{v} outside box"
@@ -1322,28 +1602,31 @@ mod tests {
         depth + 1
     }
 
-    /// Counts the polygons of a leaf block in `seen` (a quad fills two adjacent lanes), checks that its
-    /// lanes are the polygons' triangles, bit for bit, and that used lanes come first; returns the
-    /// polygons' vertices.
-    fn check_block(bvh: &Bvh, block: &Block, seen: &mut [u32]) -> Vec<DVec3> {
+    /// Counts the polygons of leaf block `index` in `seen` (a quad fills two adjacent lanes), checks that
+    /// its lanes are the polygons' triangles (the exact ones bit for bit, the filter's edges their `f32`
+    /// roundings), that used lanes come first and unused lanes are zero; returns the polygons' vertices.
+    fn check_block(bvh: &Bvh, index: usize, seen: &mut [u32]) -> Vec<DVec3> {
+        let (block, polygon) = (&bvh.blocks[index], &bvh.lanes[index].polygon);
         let mut vertices = Vec::new();
-        let used = block
-            .polygon
-            .iter()
-            .take_while(|&&p| p != EMPTY_LANE)
-            .count();
-        assert!(used > 0 && block.polygon[used..].iter().all(|&p| p == EMPTY_LANE));
+        let used = polygon.iter().take_while(|&&p| p != EMPTY_LANE).count();
+        assert!(used > 0 && polygon[used..].iter().all(|&p| p == EMPTY_LANE));
         let mut k = 0;
         while k < used {
-            let shape = bvh.shape(block, k);
-            seen[block.polygon[k] as usize] += 1;
+            let shape = bvh.shape(index, k);
+            seen[polygon[k] as usize] += 1;
             let v = shape.vertices();
             for i in 1..v.len() - 1 {
-                assert_eq!(block.polygon[k], block.polygon[k + 1 - i]);
-                assert_eq!(block.lane(k), (v[0], v[i] - v[0], v[i + 1] - v[0]));
+                assert_eq!(polygon[k], polygon[k + 1 - i]);
+                let (e1, e2) = (v[i] - v[0], v[i + 1] - v[0]);
+                assert_eq!(bvh.exact_lane(index, k), (v[0], e1, e2));
+                let f32_edge = |e: DVec3| e.as_vec3().as_dvec3();
+                assert_eq!(block.lane(k), (v[0], f32_edge(e1), f32_edge(e2)));
                 k += 1;
             }
             vertices.extend_from_slice(v);
+        }
+        for k in used..LANES {
+            assert_eq!(block.lane(k), (DVec3::ZERO, DVec3::ZERO, DVec3::ZERO));
         }
         vertices
     }
@@ -1356,7 +1639,7 @@ mod tests {
             let mut seen = vec![0; count];
             if bvh.nodes.is_empty() {
                 assert_eq!(bvh.blocks.len(), 1);
-                check_block(&bvh, &bvh.blocks[0], &mut seen);
+                check_block(&bvh, 0, &mut seen);
             } else {
                 let inf = DVec3::splat(f64::INFINITY);
                 let depth = check(&bvh, 0, -inf, inf, &mut seen);
@@ -1553,41 +1836,124 @@ mod tests {
         }
     }
 
-    /// The division-free filter never rejects what the reference test accepts, also at the triangle's
-    /// edges and vertices and for nearly parallel rays.
+    /// An adversarial triangle `(a, e1, e2)` for the filter, the point its ray aims at and the ray with
+    /// its parameter range: targets on the triangle's edges and corners or within a few `f32`
+    /// roundings of them, rays nearly in its plane, rays leaving its own surface (the rays radiosity
+    /// casts: hit at `t = 0`, below `t_min`), rays ending just before or after it and rays in any
+    /// direction, at scales from
+    /// `1e-30` to `1e30`, far from the origin, degenerate, or with edges `f32` cannot hold.
+    fn filter_case(rng: &mut Pcg64Mcg, i: usize) -> ((DVec3, DVec3, DVec3), DVec3, Ray, f64, f64) {
+        let v =
+            |rng: &mut Pcg64Mcg| DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
+        let scale = [1.0, 1e-3, 1e3, 1e-30, 1e30][i % 5];
+        let offset = if i.is_multiple_of(3) {
+            v(rng) * 1e3
+        } else {
+            DVec3::ZERO
+        };
+        let (a, mut e1, mut e2) = ((offset + v(rng)) * scale, v(rng) * scale, v(rng) * scale);
+        match i % 13 {
+            // Degenerate, nearly degenerate, axis-aligned, and an edge below `f32`'s normal range.
+            0 => e1 = e2 * 3.0,
+            1 => e1 = e2 * 3.0 + v(rng) * scale * 1e-9,
+            2 => (e1, e2) = (DVec3::new(e1.x, 0.0, 0.0), DVec3::new(0.0, e2.y, 0.0)),
+            3 => e1.x = 1e-40,
+            _ => {}
+        }
+        // About one `f32` rounding of a barycentric coordinate.
+        let f = 6e-8 * f64::from(rng.random_range(-3..=3));
+        let (bu, bw) = match (i / 5) % 7 {
+            0 => (0.0, 0.5 + f),
+            1 => (0.5 + f, 0.5),
+            2 => (1.0, f),
+            3 => (f, f),
+            4 => (f, 1.0 - f),
+            5 => (0.3, f),
+            _ => (rng.random::<f64>() * 0.5, rng.random::<f64>() * 0.5),
+        };
+        let target = a + bu * e1 + bw * e2;
+        let mut origin = target + v(rng) * 3.0 * scale;
+        let (mut t_min, mut t_max) = (0.0, f64::INFINITY);
+        let d = match (i / 35) % 6 {
+            // From a point of the triangle's own surface to a random point: a radiosity segment.
+            0 => {
+                origin = target;
+                (t_min, t_max) = (SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
+                v(rng) * 3.0 * scale
+            }
+            // Ending just before, at, or just after the triangle.
+            1 => {
+                t_max = 1.0 + 1e-9 * f64::from(rng.random_range(-2..=2));
+                t_min = SEGMENT_EPSILON;
+                target - origin
+            }
+            // Nearly in the plane.
+            2 => {
+                let (d, n) = (target - origin, e1.cross(e2).normalize_or_zero());
+                d - n * n.dot(d) * (1.0 - 1e-12)
+            }
+            // Negative parameter ranges.
+            3 => {
+                (t_min, t_max) = (-2.0, -0.5);
+                origin - target
+            }
+            // Any direction: mostly misses.
+            4 => v(rng) * scale,
+            _ => target - origin,
+        };
+        if i.is_multiple_of(17) {
+            e2.z = 1e39;
+        }
+        ((a, e1, e2), target, Ray::new(origin, d), t_min, t_max)
+    }
+
+    /// The leaf filter on `f32` edges never rejects a triangle that the exact test on the `f64` edges
+    /// hits, nor calls a hit sure that the exact test rejects (random and adversarial rays, see
+    /// [`filter_case`]); away from the edge cases it decides: it rejects rays in any direction that
+    /// miss and the polygon a segment starts on, and calls hits well inside a triangle sure.
     #[test]
     fn hit_filter_is_conservative() {
         let mut rng = Pcg64Mcg::seed_from_u64(5);
-        let mut rejected = 0;
-        for i in 0..200_000 {
-            let mut v = || DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
-            let (e1, e2, o) = (v(), v(), v() * 3.0);
-            // Targets on the triangle's edges and corners (barycentrics 0 or 1) or near them.
-            let (bu, bw) = match i % 4 {
-                0 => (0.0, 0.5),
-                1 => (0.5, 0.5),
-                2 => (1.0, 0.0),
-                _ => (1e-9 * (i % 7) as f64, 1.0 - 1e-9),
-            };
-            let target = bu * e1 + bw * e2;
-            let mut d = target - o;
-            if i % 5 == 0 {
-                // Nearly in the plane: tiny determinant.
-                let n = e1.cross(e2).normalize();
-                d -= n * n.dot(d) * (1.0 - 1e-12);
-            }
-            let ray = Ray::new(o, d);
-            let reference = triangle(&ray, o, e1, e2, 0.0, f64::INFINITY);
-            if !may_hit(d, o, e1, e2) {
-                rejected += 1;
-                assert!(reference.is_none(), "ray {i}: {reference:?}");
+        let (mut hits, mut own, mut any, mut inside) = (0, [0; 2], [0; 2], [0; 2]);
+        for i in 0..300_000 {
+            let ((a, e1, e2), _, ray, t_min, t_max) = filter_case(&mut rng, i);
+            let mut block = Block::EMPTY;
+            block.set_lane(0, a, e1, e2);
+            let reference = triangle(&ray, ray.origin - a, e1, e2, t_min, t_max);
+            let lanes = Portable::filter(&FilterRay::new(&ray, t_min, t_max), &block);
+            assert!(
+                lanes.maybe & 1 != 0 || reference.is_none(),
+                "case {i}: {reference:?}"
+            );
+            assert!(
+                lanes.sure & 1 == 0 || reference.is_some(),
+                "case {i}: sure miss"
+            );
+            assert!(lanes.maybe >> 1 == 0, "empty lanes are rejected");
+            hits += usize::from(reference.is_some());
+            // Well-formed triangles (not degenerate, edges that fit `f32`).
+            if i % 13 > 3 && !i.is_multiple_of(17) {
+                let rejected = usize::from(lanes.maybe == 0);
+                match (i / 35) % 6 {
+                    0 => own[rejected] += 1,
+                    4 if reference.is_none() => any[rejected] += 1,
+                    5 if (i / 5) % 7 == 6 => inside[usize::from(lanes.sure != 0)] += 1,
+                    _ => {}
+                }
             }
         }
-        assert!(rejected > 1000, "the filter rejects misses: {rejected}");
+        eprintln!("{hits} hits; own {own:?}, any {any:?} (kept, rejected); inside {inside:?} (not sure, sure)");
+        assert!(hits > 50_000, "{hits} hits");
+        assert!(own[1] > 10 * own[0], "rays leaving a triangle: {own:?}");
+        assert!(any[1] > 10 * any[0], "misses in any direction: {any:?}");
+        assert!(
+            inside[1] > 10 * inside[0],
+            "hits inside a triangle: {inside:?}"
+        );
     }
 
-    /// The AVX2 filter gives, lane for lane, the scalar filter's answer, on triangles hit at their edges
-    /// and corners, nearly parallel rays, degenerate triangles and empty lanes.
+    /// The AVX2 filter gives, lane for lane, the scalar filter's answer, on the adversarial cases of
+    /// [`filter_case`] (each lane's triangle moved so that the ray passes its target) and empty lanes.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn filter_kernels_agree() {
@@ -1595,44 +1961,26 @@ mod tests {
             return;
         }
         let mut rng = Pcg64Mcg::seed_from_u64(6);
-        let (mut kept, mut dropped) = (0, 0);
-        for i in 0..50_000 {
-            let mut v = || DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - 1.0;
-            let (o, target) = (v() * 3.0, v());
+        let (mut kept, mut dropped, mut sure) = (0, 0, 0);
+        for i in 0..60_000 {
+            let (lane, target, ray, t_min, t_max) = filter_case(&mut rng, i);
             let mut block = Block::EMPTY;
-            for k in 0..LANES - usize::from(i % 3 == 0) {
-                let (a, mut e1, e2) = (v(), v(), v());
-                match (i + k) % 5 {
-                    // Through an edge or a corner.
-                    0 => e1 = (target - a) * 2.0,
-                    1 => e1 = target - a,
-                    // Degenerate.
-                    2 if i % 7 == 0 => e1 = e2 * 3.0,
-                    _ => {}
-                }
-                for axis in 0..3 {
-                    block.a[axis][k] = a[axis];
-                    block.e1[axis][k] = e1[axis];
-                    block.e2[axis][k] = e2[axis];
-                }
-                block.polygon[k] = k as u32;
+            block.set_lane(0, lane.0, lane.1, lane.2);
+            for k in 1..LANES - usize::from(i % 3 == 0) {
+                let ((a, e1, e2), to, ..) = filter_case(&mut rng, i + k * 7919);
+                let a = if k % 2 == 0 { a + (target - to) } else { a };
+                block.set_lane(k, a, e1, e2);
             }
-            let mut d = target - o;
-            if i % 4 == 0 {
-                // Nearly in the plane of lane 0.
-                let (_, e1, e2) = block.lane(0);
-                let n = e1.cross(e2).normalize();
-                d -= n * n.dot(d) * (1.0 - 1e-12);
-            }
-            let ray = Ray::new(o, d);
+            let ray = FilterRay::new(&ray, t_min, t_max);
             let want = Portable::filter(&ray, &block);
             assert_eq!(Avx2::filter(&ray, &block), want, "case {i}");
-            kept += want.count_ones();
-            dropped += LANES as u32 - want.count_ones();
+            kept += want.maybe.count_ones();
+            dropped += LANES as u32 - want.maybe.count_ones();
+            sure += want.sure.count_ones();
         }
         assert!(
-            kept > 10_000 && dropped > 10_000,
-            "{kept} kept, {dropped} dropped"
+            kept > 20_000 && dropped > 20_000 && sure > 1_000,
+            "{kept} kept ({sure} surely), {dropped} dropped"
         );
     }
 
