@@ -21,7 +21,8 @@
 //! Q's outline averages it with the room's and sends it into the room. Every other contact leaks only
 //! reflected light that is already averaged over the straddling element's neighbourhood (blocks on a
 //! floor, one-sided panels facing away from the ceiling they hang under), which refinement resolves, so
-//! `auto` leaves furnished rooms (nearly) as they are (BENCHMARKS.md, "Automatic contact splitting").
+//! `auto` adds few polygons to furnished rooms (the classroom: its 48 lamp housings, into 240 pieces;
+//! BENCHMARKS.md, "Automatic contact splitting" and "Reference images and probes").
 //!
 //! A one-sided P is not split by what lies behind it (it cannot see it). Candidate pairs come from a
 //! uniform grid over the polygons' boxes (no quadratic work); P is then cut along each outline that
@@ -40,14 +41,6 @@ use rayon::prelude::*;
 pub const DEFAULT_CONTACT_GAP: f64 = 0.02;
 /// Largest contact gap accepted (relative): beyond it, "contact" would mean any nearby parallel surface.
 pub const MAX_CONTACT_GAP: f64 = 0.25;
-/// `auto` splits along an emitter only where the side openings of the gap between it and the surface
-/// (perimeter × gap) are at most this share of the cavity's walls (both faces plus the openings): a
-/// trap, from which little light escapes physically (cube.mgf's lamp, 1 m wide 1 cm under the
-/// ceiling: 2%), so that what straddling elements leak is of the order of the gap's light, not of
-/// what escapes. A wide-open gap (a 4 cm fluorescent tube 2 cm under its housing, the classroom: 34%)
-/// lets the light out anyway; cutting along it there multiplied the classroom's solve time by 2.7
-/// (BENCHMARKS.md, "Automatic contact splitting").
-const TRAP_OPENING: f64 = 0.25;
 /// Points closer than this fraction of P's diameter to an outline's edge lie on it: no piece is thinner.
 const SNAP: f64 = 1e-5;
 /// Most outlines one polygon is cut along (further ones are left out, with a warning).
@@ -245,7 +238,7 @@ fn contact_outlines(
             continue;
         }
         if distances.iter().all(|d| d.abs() <= g) {
-            if auto && !traps_emission(scene, j, p, farthest) {
+            if auto && !emits_into_gap(scene, j, p, farthest) {
                 continue;
             }
             let mut outline = vertices.to_vec();
@@ -274,20 +267,16 @@ fn contact_outlines(
 }
 
 /// Whether polygon `j`, lying on P at signed distance `offset` (its vertex farthest from P's plane),
-/// emits into a gap that traps its light: it is an emitter, the gap is real (not coplanar, where no
-/// light enters), its emitting side faces P (two-sided, or its normal points back toward P's plane),
-/// and the gap's side openings are a small part of the cavity's walls ([`TRAP_OPENING`]).
-fn traps_emission(scene: &Scene, j: usize, p: &Face, offset: f64) -> bool {
+/// emits into the gap: it is an emitter, the gap is real (not coplanar, where no light enters) and its
+/// emitting side faces P (two-sided, or its normal points back toward P's plane). However open the
+/// gap's sides, an element of P straddling the outline re-emits the emitter's back light from all its
+/// area: the classroom's 4 cm tubes 2 cm under their housings (side openings 34% of the cavity) left the
+/// floor 10% and the desks 6% too bright unsplit (BENCHMARKS.md, "Reference images and probes").
+fn emits_into_gap(scene: &Scene, j: usize, p: &Face, offset: f64) -> bool {
     let q = &scene.polygons[j];
-    let vertices = q.shape.vertices();
-    let perimeter: f64 = (0..vertices.len())
-        .map(|k| vertices[k].distance(vertices[(k + 1) % vertices.len()]))
-        .sum();
-    let opening = perimeter * offset.abs();
     !scene.material_of(q).emission.is_black()
         && offset.abs() > SNAP * p.diameter
         && (q.two_sided || q.shape.normal().dot(p.normal) * offset < 0.0)
-        && opening <= TRAP_OPENING * (2.0 * q.shape.area() + opening)
 }
 
 /// Convex hulls, in P's plane, of the chains of contact edges of one object that join end to end (within
