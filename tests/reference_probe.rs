@@ -190,7 +190,7 @@ fn random_points_of_a_furnished_office_are_found_on_their_planes() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/scenes/renderpark/office3/office.mgf");
     let scene = load(&path, &LoadOptions::default()).expect("office3 loads");
-    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape.clone()).collect();
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
     let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
     let tolerance = 1e-3 * scene.bounds().diagonal();
     for probe in random_points(&scene, 500, 1) {
