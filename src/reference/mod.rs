@@ -69,8 +69,8 @@ pub enum PixelFilter {
     Centre,
     /// The average radiance over the pixel (box filter), comparable with `render --spp 16` (and above):
     /// every path starts at its own jittered point of one cell of a 4 × 4 grid over the pixel, path `i`
-    /// of batch `b` in cell `(i + b) mod 16`, so that every cell gets the same number of paths and each
-    /// batch covers the whole pixel. The estimate converges to the pixel's average as `--spp` grows
+    /// of batch `b` in cell `(i + b) mod 16`, so that every cell gets the same number of paths and, from
+    /// 256 paths per pixel (16 per batch) on, each batch covers the whole pixel. The estimate converges to the pixel's average as `--spp` grows
     /// (edges included), and the standard error from the batches' spread is that of this average.
     #[default]
     Box,
