@@ -42,7 +42,7 @@ use crate::output::image::Image;
 use crate::progress::Progress;
 use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
-use crate::visibility::Visibility;
+use crate::visibility::{Hit, Visibility};
 use rand::{Rng, RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
@@ -539,10 +539,17 @@ impl<'a> PathTracer<'a> {
         ReferenceImage { mean, stderr }
     }
 
-    /// One path's estimate of the radiance seen along a camera ray: the emission of the surface hit plus
-    /// one reflected-light sample with first-vertex points `first`, or a luminaire opening's radiance.
-    fn camera_sample(&self, ray: &Ray, first: [DVec2; 2], rng: &mut Pcg64Mcg) -> Rgb {
-        let Some(hit) = self.visibility.intersect(ray, 0.0, f64::INFINITY) else {
+    /// One path's estimate of the radiance seen along a camera ray whose first hit is `hit`: the
+    /// emission of the surface hit plus one reflected-light sample with first-vertex points `first`, or a
+    /// luminaire opening's radiance.
+    fn camera_sample(
+        &self,
+        ray: &Ray,
+        hit: Option<Hit>,
+        first: [DVec2; 2],
+        rng: &mut Pcg64Mcg,
+    ) -> Rgb {
+        let Some(hit) = hit else {
             return Rgb::BLACK;
         };
         if let Some(k) = self.openings[hit.polygon] {
@@ -566,22 +573,28 @@ impl<'a> PathTracer<'a> {
         let seed = derive_seed(settings.seed, pixel);
         let mut sums = [Rgb::BLACK; BATCHES];
         let side = (BATCHES as f64).sqrt() as usize;
+        let first_hit = |ray: &Ray| self.visibility.intersect(ray, 0.0, f64::INFINITY);
+        // Every path of the centre filter follows the same camera ray: it is cast once per pixel.
+        let centre = (settings.filter == PixelFilter::Centre).then(|| {
+            let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
+            (ray, first_hit(&ray))
+        });
         for (b, sum) in sums.iter_mut().enumerate().take(batches) {
             let mut rng = stream(seed, b as u64);
             let sequence = FirstVertexSequence::new(&mut rng);
             for i in 0..per_batch {
-                let (px, py) = match settings.filter {
-                    PixelFilter::Centre => (0.5, 0.5),
-                    PixelFilter::Box => {
+                let (ray, hit) = match centre {
+                    Some(centre) => centre,
+                    None => {
                         let cell = (i + b) % BATCHES;
-                        (
-                            ((cell % side) as f64 + rng.random::<f64>()) / side as f64,
-                            ((cell / side) as f64 + rng.random::<f64>()) / side as f64,
-                        )
+                        let ray = camera.ray(
+                            x as f64 + ((cell % side) as f64 + rng.random::<f64>()) / side as f64,
+                            y as f64 + ((cell / side) as f64 + rng.random::<f64>()) / side as f64,
+                        );
+                        (ray, first_hit(&ray))
                     }
                 };
-                let ray = camera.ray(x as f64 + px, y as f64 + py);
-                *sum += self.camera_sample(&ray, sequence.point(i as u32), &mut rng);
+                *sum += self.camera_sample(&ray, hit, sequence.point(i as u32), &mut rng);
             }
         }
         Self::combine(Rgb::BLACK, &sums[..batches], per_batch)
