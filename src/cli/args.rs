@@ -176,7 +176,8 @@ pub struct SolveArgs {
     /// Factor by which error control lowers a failing element's link error threshold per pass.
     #[arg(long, default_value_t = 1.4, value_name = "F")]
     pub threshold_factor: f64,
-    /// Which a-posteriori error estimate to compute and control (Bekaert–Willems §4.3, eq. (11)).
+    /// Which a-posteriori error estimate to compute and control (Bekaert–Willems §4.3, eq. (11); signed:
+    /// the levels' error terms summed with their signs at each leaf's nodes).
     #[arg(long, value_enum, default_value_t = EstimateKind::Realistic)]
     pub error_estimate: EstimateKind,
     /// Most elements refinement may create.
