@@ -216,9 +216,10 @@ pub struct SolveArgs {
     /// emission (Σ A·max(E)); smaller is finer.
     #[arg(long, default_value_t = 3e-5)]
     pub eps: f64,
-    /// Power oracle: links that a shadow boundary crosses (sampled visibility v neither 0 nor 1) are
-    /// refined by their visibility error 2v(1−v)·ρBAF (Sillion–Drettakis Appendix A) against --eps/g,
-    /// g = 2·4^N: N more quadtree levels than eq. (1) alone where v = ½; 0 is eq. (1) alone.
+    /// Power oracle: links that a shadow boundary crosses (their sampled visibility varies over the
+    /// receiver, by s in L¹; Sillion–Drettakis Appendix A) are refined until s·ρBAF is below --eps/g,
+    /// g = 2·4^N: N quadtree levels deeper than eq. (1) alone where a hard boundary halves the
+    /// receiver; 0 is eq. (1) alone.
     #[arg(long, value_name = "N", default_value_t = 1.0)]
     pub shadow_levels: f64,
     /// Smallest splittable element area, relative to the total surface area.
