@@ -146,6 +146,9 @@ pub struct SimulationSettings {
     pub intra_cluster: IntraClusterKind,
     /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
     pub eps: f64,
+    /// Extra quadtree levels the power oracle's visibility term gives a link whose sampled visibility
+    /// is ½ ([`PowerOracle::for_shadow_levels`]); 0: eq. (1) alone.
+    pub shadow_levels: f64,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
     /// Radiance basis on every element (Bekaert–Willems §2).
@@ -226,6 +229,7 @@ impl Default for SimulationSettings {
             feature_size: 0.0,
             intra_cluster: IntraClusterKind::ItemBuffer,
             eps: 1e-3,
+            shadow_levels: 0.0,
             min_area: 1e-5,
             basis: BasisKind::Constant,
             cubature_degree: None,
@@ -321,7 +325,7 @@ pub fn make_oracle(
 ) -> Box<dyn RefinementOracle> {
     let samples = settings.oracle_samples;
     match settings.oracle {
-        OracleKind::Power => Box::new(PowerOracle),
+        OracleKind::Power => Box::new(PowerOracle::for_shadow_levels(settings.shadow_levels)),
         OracleKind::Smoothness => Box::new(SmoothnessOracle::for_hierarchy(samples, hierarchy)),
         OracleKind::MutualInformation => Box::new(MutualInformationOracle::new(samples)),
         OracleKind::Error => Box::new(LinkErrorOracle {

@@ -217,6 +217,12 @@ pub struct SolveArgs {
     /// emission (Σ A·max(E)); smaller is finer.
     #[arg(long, default_value_t = 3e-5)]
     pub eps: f64,
+    /// Power oracle: links that a shadow boundary crosses (their sampled visibility varies over the
+    /// receiver, by s in L¹; Sillion–Drettakis Appendix A) are refined until s·ρBAF is below --eps/g,
+    /// g = 2·4^N: N quadtree levels deeper than eq. (1) alone where a hard boundary halves the
+    /// receiver; 0 is eq. (1) alone.
+    #[arg(long, value_name = "N", default_value_t = 1.0)]
+    pub shadow_levels: f64,
     /// Smallest splittable element area, relative to the total surface area.
     #[arg(long, default_value_t = 1e-5)]
     pub min_area: f64,
@@ -250,11 +256,18 @@ pub struct SolveArgs {
     pub max_steps: usize,
 }
 
+/// Most `--shadow-levels`: each level quarters the area of the elements along shadow boundaries.
+const MAX_SHADOW_LEVELS: f64 = 8.0;
+
 impl SolveArgs {
     pub fn settings(&self, seed: u64) -> Result<SimulationSettings> {
         anyhow::ensure!(
             self.eps.is_finite() && self.eps >= 0.0,
             "--eps must be a non-negative number"
+        );
+        anyhow::ensure!(
+            (0.0..=MAX_SHADOW_LEVELS).contains(&self.shadow_levels),
+            "--shadow-levels must be between 0 and {MAX_SHADOW_LEVELS}"
         );
         anyhow::ensure!(
             self.min_area.is_finite() && self.min_area >= 0.0,
@@ -293,6 +306,7 @@ impl SolveArgs {
             feature_size,
             intra_cluster: self.intra_cluster,
             eps: self.eps,
+            shadow_levels: self.shadow_levels,
             min_area: self.min_area,
             basis: self.basis,
             cubature_degree: self.cubature_degree.map(usize::from),

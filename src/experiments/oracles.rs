@@ -139,6 +139,8 @@ pub fn run_one(
     let base = SimulationSettings {
         oracle,
         oracle_samples: samples,
+        // The paper's eq. (1), without the power oracle's visibility term.
+        shadow_levels: 0.0,
         ..experiment.base
     };
     let (solution, eps, solves, seconds) = solve_at_target(

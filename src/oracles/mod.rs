@@ -95,6 +95,15 @@ pub trait RefinementOracle: Sync + Send {
         None
     }
 
+    /// The estimate of a partially visible link from its visibility-blind `estimate` (same units,
+    /// compared with the same threshold) and `spread`, the L¹ variation of its visibility over the
+    /// receiver (`solvers::coupling::visibility_spread`, at most ½); `None`: the oracle does not weigh
+    /// visibility (the default). Refinement asks only about links that `estimate` finds admissible,
+    /// and samples their visibility only where the answer at `spread = ½` would refine them.
+    fn with_partial_visibility(&self, _estimate: f64, _spread: f64) -> Option<f64> {
+        None
+    }
+
     /// Which element to split when the estimate exceeds the threshold. The classic rule (Hanrahan et al.,
     /// used with eqs. (1), (2) and (15)) splits the larger of the two elements.
     fn element_to_split(

@@ -15,9 +15,35 @@ use crate::geometry::form_factor::point_to_polygon;
 use crate::hierarchy::ElementId;
 use rand_pcg::Pcg64Mcg;
 
-/// Feixas et al. eq. (1).
+/// Feixas et al. eq. (1), with a visibility term for links that carry a shadow boundary.
+///
+/// Eq. (1) is blind to visibility: a link whose receiver a shadow boundary crosses is judged by the
+/// power it carries, like an unoccluded one, and the shadow is averaged over elements sized for smooth
+/// light. Where the link's sampled visibility is partial, the estimate becomes `P · max(1, g s)`,
+/// with `s` the L¹ deviation of the visibility over the receiver from its average
+/// (Sillion–Drettakis Appendix A, eq. (3); `2v(1 − v)` by eq. (5) across a hard shadow boundary;
+/// `solvers::coupling::visibility_spread`): a partially visible link is refined (its receiver split)
+/// until that error, `s P`, is below `ε / g`, while unoccluded and wholly blocked links stay at ε.
+/// With `g = 2 · 4^N` a link with `s = ½` (a hard boundary through the receiver's middle) ends `N`
+/// quadtree levels deeper than eq. (1) alone would leave it (each level quarters `P`).
 #[derive(Clone, Copy, Debug, Default)]
-pub struct PowerOracle;
+pub struct PowerOracle {
+    /// `g`; 2 or less leaves eq. (1) as it is.
+    pub shadow_gain: f64,
+}
+
+impl PowerOracle {
+    /// The oracle whose visibility term refines links with `v = ½` `levels` levels deeper (0: eq. (1)).
+    pub fn for_shadow_levels(levels: f64) -> Self {
+        PowerOracle {
+            shadow_gain: if levels > 0.0 {
+                2.0 * 4f64.powf(levels)
+            } else {
+                0.0
+            },
+        }
+    }
+}
 
 impl RefinementOracle for PowerOracle {
     fn name(&self) -> &'static str {
@@ -40,5 +66,9 @@ impl RefinementOracle for PowerOracle {
             error: reflected_source_radiance(h, receiver, source) * transport,
             rays: 0,
         }
+    }
+
+    fn with_partial_visibility(&self, estimate: f64, spread: f64) -> Option<f64> {
+        (self.shadow_gain > 0.0).then(|| estimate * (self.shadow_gain * spread).max(1.0))
     }
 }

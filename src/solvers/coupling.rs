@@ -269,6 +269,41 @@ pub fn shaft_test(
     ))
 }
 
+/// How much the visibility of `coupling`'s source varies over its receiver: Sillion–Drettakis
+/// Appendix A eq. (3) with the receiver's cubature nodes `x_k` (weights `w_k`, the degree the coupling
+/// was made with) and an area source, `Σ w_k F_k |v_k − v| / Σ w_k F_k`, where `F_k` is the unoccluded
+/// point-to-source factor at `x_k`, `v_k` the fraction of it the node's rays found visible (the node
+/// factor over `F_k`) and `v` the link's visibility. It is eq. (5)'s `2v(1 − v)` where every node sees
+/// the source wholly or not at all (a shadow boundary crossing the receiver), and 0 where every node
+/// sees the same part of the source (an occluder cutting the source, not the receiver).
+pub fn visibility_spread(
+    hierarchy: &Hierarchy,
+    receiver: ElementId,
+    source: ElementId,
+    coupling: &LinkCoupling,
+    cubature_degree: usize,
+) -> f64 {
+    let shape = hierarchy.element(receiver).shape();
+    let nodes = nodes_on(shape, rule(shape.domain(), cubature_degree));
+    let normal = hierarchy.patch_of(receiver).normal;
+    let source = hierarchy.element(source).shape();
+    let v = f64::from(coupling.visibility);
+    let (mut spread, mut total) = (0.0, 0.0);
+    for (x, &visible) in nodes.iter().zip(coupling.node_factors()) {
+        let unoccluded = x.weight * point_to_polygon(x.point, normal, source);
+        if unoccluded > 0.0 {
+            let v_k = (x.weight * f64::from(visible) / unoccluded).clamp(0.0, 1.0);
+            spread += unoccluded * (v_k - v).abs();
+            total += unoccluded;
+        }
+    }
+    if total > 0.0 {
+        spread / total
+    } else {
+        0.0
+    }
+}
+
 /// `v`: the visible part of a link's transfer over its unoccluded part (1 when nothing can arrive).
 pub fn visible_fraction(visible: f64, unoccluded: f64) -> f64 {
     if unoccluded > 0.0 {

@@ -6,7 +6,9 @@
 //! link sets therefore do not depend on the number of threads.
 
 use super::clustering::{cluster_can_interact, transport_bound};
-use super::coupling::{couple_with_prior, shaft_test, visibility_error, CouplingSettings};
+use super::coupling::{
+    couple_with_prior, shaft_test, visibility_error, visibility_spread, CouplingSettings,
+};
 use super::link_rng;
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
@@ -735,25 +737,13 @@ fn decide(
     let mut verdict = Verdict::admissible(OracleFactor::NONE);
     let (error, threshold, split) = if oracle.judges_couplings() {
         if c.coupling.is_none() {
-            let mut k = couple_with_prior(
-                h,
-                context.visibility,
-                c.receiver,
-                c.source,
-                &settings.coupling,
-                c.shaft_prior(partial_tests),
-            );
-            verdict.shaft = k.shaft;
-            verdict.shaft_tests = u64::from(c.shaft.is_none() && k.shaft.is_some());
-            verdict.rays_saved = k.rays_saved;
+            let mut k = couple_for_verdict(context, settings, c, partial_tests, &mut verdict);
             if let Some(v) = c.inherited_visibility {
                 if k.coupling.visibility == 0.0 || k.coupling.visibility == 1.0 {
                     k.coupling.visibility_error =
                         visibility_error(k.unoccluded, f64::from(v), k.source_nodes);
                 }
             }
-            verdict.coupling_rays = k.rays;
-            verdict.no_interaction = k.unoccluded <= 0.0;
             verdict.coupling = Some(Box::new(k.coupling));
         }
         let coupling = verdict.coupling.as_deref().or(c.coupling.as_ref());
@@ -780,7 +770,22 @@ fn decide(
                 estimate.error
             }
         };
-        (error, settings.threshold, None)
+        if error > settings.threshold {
+            (error, settings.threshold, None)
+        } else {
+            // What the visibility term refines is the receiver's average of the visibility
+            // (Sillion–Drettakis Appendix A): splitting the source would not reduce it.
+            let seen = with_visibility(
+                context,
+                oracle,
+                settings,
+                c,
+                partial_tests,
+                error,
+                &mut verdict,
+            );
+            (seen, settings.threshold, Some(Decision::SubdivideReceiver))
+        }
     };
     verdict.error = error;
     if error <= threshold || verdict.no_interaction {
@@ -812,6 +817,75 @@ fn decide(
         verdict.partial_test = test.filter(|t| t.occluders().is_some()).map(Box::new);
     }
     verdict
+}
+
+/// Algorithm 4.1 for a candidate while judging it, its costs and shaft verdict put on `verdict`.
+fn couple_for_verdict(
+    context: &OracleContext,
+    settings: &RefineSettings,
+    c: &Candidate,
+    partial_tests: &[ShaftTest],
+    verdict: &mut Verdict,
+) -> super::coupling::Coupling {
+    let k = couple_with_prior(
+        context.hierarchy,
+        context.visibility,
+        c.receiver,
+        c.source,
+        &settings.coupling,
+        c.shaft_prior(partial_tests),
+    );
+    verdict.shaft = k.shaft;
+    verdict.shaft_tests = u64::from(c.shaft.is_none() && k.shaft.is_some());
+    verdict.rays_saved = k.rays_saved;
+    verdict.coupling_rays = k.rays;
+    verdict.no_interaction = k.unoccluded <= 0.0;
+    k
+}
+
+/// The estimate `error` of a link its oracle finds admissible, once the variation of its visibility
+/// over the receiver is weighed ([`RefinementOracle::with_partial_visibility`],
+/// [`visibility_spread`]). The visibility is the one its coupling sampled: the cached coupling, or one
+/// computed here and kept on `verdict` (the link's own if it stays); a Clear or Blocked shaft verdict
+/// says it is whole without rays. Links that no spread could refine are not looked at.
+fn with_visibility(
+    context: &OracleContext,
+    oracle: &dyn RefinementOracle,
+    settings: &RefineSettings,
+    c: &Candidate,
+    partial_tests: &[ShaftTest],
+    error: f64,
+    verdict: &mut Verdict,
+) -> f64 {
+    match oracle.with_partial_visibility(error, 0.5) {
+        Some(largest) if largest > settings.threshold => {}
+        _ => return error,
+    }
+    if c.coupling.is_none() {
+        if let Some(ShaftVerdict::Clear | ShaftVerdict::Blocked) = c.shaft {
+            return error;
+        }
+        let k = couple_for_verdict(context, settings, c, partial_tests, verdict);
+        verdict.coupling = Some(Box::new(k.coupling));
+    }
+    let coupling = verdict
+        .coupling
+        .as_deref()
+        .or(c.coupling.as_ref())
+        .expect("a coupling, cached or just computed");
+    if coupling.visibility <= 0.0 || coupling.visibility >= 1.0 {
+        return error;
+    }
+    let spread = visibility_spread(
+        context.hierarchy,
+        c.receiver,
+        c.source,
+        coupling,
+        settings.coupling.cubature_degree,
+    );
+    oracle
+        .with_partial_visibility(error, spread)
+        .unwrap_or(error)
 }
 
 /// A link with a cluster at one end, judged by the power-type bound of [`transport_bound`]:
