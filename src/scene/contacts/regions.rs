@@ -173,10 +173,40 @@ fn segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
     p.distance(a + d * t)
 }
 
-/// A member in the region's plane: its corners counter-clockwise and its area.
+/// Members, or convex unions of members: corners counter-clockwise in the region's plane, the same
+/// corners in the scene (as the scene has them: a lone member cuts exactly as the polygon did) and the
+/// area.
 struct Piece {
     corners: Vec<DVec2>,
+    points: Vec<DVec3>,
     area: f64,
+}
+
+impl Piece {
+    /// The convex hull of `pieces`' corners as a piece of their total area (hull corners are among
+    /// theirs, so their scene points are found by equality).
+    fn hull(pieces: &[&Piece]) -> Piece {
+        let corners: Vec<DVec2> = pieces.iter().flat_map(|p| p.corners.clone()).collect();
+        let points: Vec<DVec3> = pieces.iter().flat_map(|p| p.points.clone()).collect();
+        let hull = convex_hull(&corners);
+        let points = hull
+            .iter()
+            .map(|h| points[corners.iter().position(|c| c == h).unwrap_or(0)])
+            .collect();
+        Piece {
+            corners: hull,
+            points,
+            area: pieces.iter().map(|p| p.area).sum(),
+        }
+    }
+
+    /// For a piece made by [`Piece::hull`]: whether its members cover it, up to a strip `SNAP` × its
+    /// diameter wide (the clipper's own tolerance), so that their union is convex (they do not overlap:
+    /// a scene's polygons do not).
+    fn is_covered(&self) -> bool {
+        let size = diameter(&self.corners);
+        self.corners.len() >= 3 && area(&self.corners) - self.area <= SNAP * size * size
+    }
 }
 
 /// Area of a counter-clockwise polygon in the plane.
@@ -197,17 +227,10 @@ fn diameter(points: &[DVec2]) -> f64 {
     d
 }
 
-/// The convex hull of `a` and `b` when it is their union (its area exceeds theirs by less than a strip
-/// `SNAP` × its diameter wide: the clipper's own tolerance), else `None`.
+/// The convex hull of `a` and `b` when it is their union, else `None`.
 fn convex_union(a: &Piece, b: &Piece) -> Option<Piece> {
-    let points: Vec<DVec2> = a.corners.iter().chain(&b.corners).copied().collect();
-    let hull = convex_hull(&points);
-    let size = diameter(&hull);
-    let hull_area = area(&hull);
-    (hull.len() >= 3 && hull_area - (a.area + b.area) <= SNAP * size * size).then_some(Piece {
-        corners: hull,
-        area: a.area + b.area,
-    })
+    let hull = Piece::hull(&[a, b]);
+    hull.is_covered().then_some(hull)
 }
 
 /// The region of `members` (adjacent through `neighbours`), emitting toward `shines` of its first
@@ -227,35 +250,29 @@ fn region(
     let mut pieces: Vec<Piece> = members
         .iter()
         .map(|&m| {
-            let mut corners: Vec<DVec2> = scene.polygons[m]
-                .shape
-                .vertices()
-                .iter()
-                .map(|&p| flat(p))
-                .collect();
+            let mut points = scene.polygons[m].shape.vertices().to_vec();
             if faces[m].normal.dot(normal) < 0.0 {
-                corners.reverse();
+                points.reverse();
             }
+            let corners: Vec<DVec2> = points.iter().map(|&p| flat(p)).collect();
             let area = area(&corners);
-            Piece { corners, area }
+            Piece {
+                corners,
+                points,
+                area,
+            }
         })
         .collect();
-    let corners: Vec<DVec2> = pieces.iter().flat_map(|p| p.corners.clone()).collect();
-    let total: f64 = pieces.iter().map(|p| p.area).sum();
-    let hull = convex_hull(&corners);
-    let size = diameter(&hull);
-    if members.len() > 1 && area(&hull) - total <= SNAP * size * size {
-        pieces = vec![Piece {
-            corners: hull,
-            area: total,
-        }];
+    let hull = Piece::hull(&pieces.iter().collect::<Vec<_>>());
+    let size = diameter(&hull.corners);
+    if members.len() > 1 && hull.is_covered() {
+        pieces = vec![hull];
     } else if members.len() <= MAX_MERGED_MEMBERS {
         pieces = merge_convex(pieces, members, neighbours);
     }
     let bounds = members
         .iter()
         .fold(Aabb::EMPTY, |b, &m| b.union(&faces[m].bounds));
-    let lift = |p: &DVec2| origin + p.x * u + p.y * v;
     Region {
         face: Face {
             normal,
@@ -264,10 +281,7 @@ fn region(
             bounds,
         },
         shines,
-        pieces: pieces
-            .iter()
-            .map(|p| p.corners.iter().map(lift).collect())
-            .collect(),
+        pieces: pieces.into_iter().map(|p| p.points).collect(),
     }
 }
 
