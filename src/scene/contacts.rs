@@ -20,12 +20,13 @@
 //! ceiling, an IES luminaire's opening whose table sends light toward P). An emitter is judged as a
 //! whole: adjacent coplanar polygons emitting toward the same sides form one region (a lamp tessellated
 //! into triangles, a round opening's fan), which lies on P within the gap of its own size and cuts P
-//! along its outline, not along its internal edges ([`regions`]). The light trapped in such a gap is of the emitter's order; an element of P that straddles
-//! Q's outline averages it with the room's and sends it into the room. Every other contact leaks only
-//! reflected light that is already averaged over the straddling element's neighbourhood (blocks on a
-//! floor, one-sided panels facing away from the ceiling they hang under), which refinement resolves, so
-//! `auto` adds few polygons to furnished rooms (the classroom: its 48 lamp housings, into 240 pieces;
-//! BENCHMARKS.md, "Automatic contact splitting" and "Reference images and probes").
+//! along its outline, not along its internal edges ([`regions`]). The light trapped in such a gap is of
+//! the emitter's order; an element of P that straddles Q's outline averages it with the room's and
+//! sends it into the room. Every other contact leaks only reflected light that is already averaged over
+//! the straddling element's neighbourhood (blocks on a floor, one-sided panels facing away from the
+//! ceiling they hang under), which refinement resolves, so `auto` adds few polygons to furnished rooms
+//! (the classroom: its 48 lamp housings, into 240 pieces; BENCHMARKS.md, "Automatic contact splitting",
+//! "Reference images and probes" and "Emitting regions and IES openings").
 //!
 //! A one-sided P is not split by what lies behind it (it cannot see it). Candidate pairs come from a
 //! uniform grid over the polygons' boxes (no quadratic work); P is then cut along each outline that

@@ -55,7 +55,8 @@ impl Region {
 
 /// The sides toward which polygon `i` emits: [front, back]. A Lambertian emitter toward its front, and
 /// its back when two-sided; an IES luminaire's opening face toward its outward normal (both sides of a
-/// flat opening), where the luminaire's table sends light ([`super::super::luminaire::Luminaire::shines_toward`]).
+/// flat opening), where the luminaire's table sends light
+/// ([`crate::scene::luminaire::Luminaire::shines_toward`]).
 fn emitting_sides(scene: &Scene, i: usize, opening: Option<u32>) -> [bool; 2] {
     let polygon = &scene.polygons[i];
     match opening {
