@@ -42,7 +42,7 @@ pub struct SceneArgs {
     /// Split surfaces along the outlines of objects that touch or nearly touch them, so that no
     /// element straddles a contact and light cannot leak through it. auto (the default): only along
     /// emitters that shine into the gap between them and a surface (a two-sided lamp hung just under a
-    /// ceiling, as in cube.mgf); on: every lying object and footprint (blocks on a floor, furniture),
+    /// ceiling, as in cube.mgf, however tessellated; an IES luminaire's opening that shines up); on: every lying object and footprint (blocks on a floor, furniture),
     /// which multiplies the polygons of furnished rooms (classroom 5.8k → 15k); off: none.
     #[arg(long, value_enum, default_value_t = scene::contacts::SplitContacts::Auto,
           value_name = "auto|on|off")]

@@ -17,12 +17,16 @@
 //! Which contacts cut ([`SplitContacts`]): `on` cuts along every one; `auto` (the default) only along
 //! those through which a leak can carry significant light: an *emitter* Q lying on a reflecting P with a
 //! real gap between them and Q's emitting side facing P (cube.mgf's two-sided lamp, an uplight under a
-//! ceiling). The light trapped in such a gap is of the emitter's order; an element of P that straddles
-//! Q's outline averages it with the room's and sends it into the room. Every other contact leaks only
-//! reflected light that is already averaged over the straddling element's neighbourhood (blocks on a
-//! floor, one-sided panels facing away from the ceiling they hang under), which refinement resolves, so
-//! `auto` adds few polygons to furnished rooms (the classroom: its 48 lamp housings, into 240 pieces;
-//! BENCHMARKS.md, "Automatic contact splitting" and "Reference images and probes").
+//! ceiling, an IES luminaire's opening whose table sends light toward P). An emitter is judged as a
+//! whole: adjacent coplanar polygons emitting toward the same sides form one region (a lamp tessellated
+//! into triangles, a round opening's fan), which lies on P within the gap of its own size and cuts P
+//! along its outline, not along its internal edges ([`regions`]). The light trapped in such a gap is of
+//! the emitter's order; an element of P that straddles Q's outline averages it with the room's and
+//! sends it into the room. Every other contact leaks only reflected light that is already averaged over
+//! the straddling element's neighbourhood (blocks on a floor, one-sided panels facing away from the
+//! ceiling they hang under), which refinement resolves, so `auto` adds few polygons to furnished rooms
+//! (the classroom: its 48 lamp housings, into 240 pieces; BENCHMARKS.md, "Automatic contact splitting",
+//! "Reference images and probes" and "Emitting regions and IES openings").
 //!
 //! A one-sided P is not split by what lies behind it (it cannot see it). Candidate pairs come from a
 //! uniform grid over the polygons' boxes (no quadratic work); P is then cut along each outline that
@@ -30,11 +34,14 @@
 //! parallelograms ([`polygonize`], [`affine_pieces`]) with P's material, object, sidedness and origin.
 //! Luminaire openings are not split.
 
+mod regions;
+
 use super::polygonize::polygonize;
 use super::{Diagnostic, Polygon, Scene, MAX_POLYGONS};
 use crate::geometry::clip::{convex_hull, outline_planes, split_by_outline, Plane};
 use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use rayon::prelude::*;
+use regions::{emitting_regions, Region};
 
 /// Default contact gap, relative to the smaller polygon's diameter: `cube.mgf`'s lamp hangs 1 cm under
 /// the ceiling, 0.7% of the lamp's diagonal.
@@ -85,7 +92,8 @@ impl std::fmt::Display for ContactSplit {
     }
 }
 
-/// A polygon's plane and size, computed once.
+/// A polygon's (or an emitting region's) plane and size, computed once.
+#[derive(Clone)]
 struct Face {
     normal: DVec3,
     point: DVec3,
@@ -167,6 +175,12 @@ pub fn contact_pieces(scene: &Scene, mode: SplitContacts, gap: f64) -> Vec<Optio
     let gap = gap.clamp(0.0, MAX_CONTACT_GAP);
     let faces: Vec<Face> = scene.polygons.iter().map(|p| Face::new(&p.shape)).collect();
     let grid = BoxGrid::new(&faces);
+    let regions = emitting_regions(scene, &faces, &grid);
+    let region_faces: Vec<Face> = regions.iter().map(|r| r.face.clone()).collect();
+    let emitters = Emitters {
+        grid: BoxGrid::new(&region_faces),
+        regions,
+    };
     let openings = scene.opening_luminaires();
     (0..scene.polygons.len())
         .into_par_iter()
@@ -174,10 +188,16 @@ pub fn contact_pieces(scene: &Scene, mode: SplitContacts, gap: f64) -> Vec<Optio
             if openings[i].is_some() || faces[i].diameter <= 0.0 {
                 return None;
             }
-            let outlines = contact_outlines(scene, &faces, &grid, i, mode, gap);
+            let outlines = contact_outlines(scene, &faces, &grid, &emitters, i, mode, gap);
             cut_polygon(&scene.polygons[i], &faces[i], outlines)
         })
         .collect()
+}
+
+/// The scene's emitting regions and a grid over their boxes.
+struct Emitters {
+    regions: Vec<Region>,
+    grid: BoxGrid,
 }
 
 fn warn(scene: &mut Scene, polygon: usize, message: String) {
@@ -200,25 +220,59 @@ pub struct Pieces {
 }
 
 /// The outlines (cutting planes through their edges, in P's projection) of the polygons in contact with
-/// polygon `i` that `mode` selects, in a deterministic order: lying polygons by index, then footprints
-/// (`on` only).
+/// polygon `i` that `mode` selects, in a deterministic order: the pieces of emitting regions shining
+/// into a gap by region, then (`on` only) lying polygons by index, then footprints.
 fn contact_outlines(
     scene: &Scene,
     faces: &[Face],
     grid: &BoxGrid,
+    emitters: &Emitters,
     i: usize,
     mode: SplitContacts,
     gap: f64,
 ) -> Vec<Vec<Plane>> {
     let p = &faces[i];
     let two_sided = scene.polygons[i].two_sided;
-    let auto = mode == SplitContacts::Auto;
-    if auto && scene.material_of(&scene.polygons[i]).reflectance.is_black() {
+    if mode == SplitContacts::Auto && scene.material_of(&scene.polygons[i]).reflectance.is_black() {
         // Light trapped over a black surface is absorbed there: nothing to leak.
         return Vec::new();
     }
     let reach = gap * p.diameter;
+    // The signed distance of the corner farthest from P's plane when every corner lies within `g` of
+    // it, else `None`; a one-sided P does not see what lies behind it.
+    let lying = |corners: &mut dyn Iterator<Item = DVec3>, g: f64| {
+        let distances: Vec<f64> = corners.map(|v| p.distance(v)).collect();
+        let offset = farthest(&distances);
+        (distances.iter().all(|d| d.abs() <= g) && (two_sided || offset >= -SNAP * p.diameter))
+            .then_some(offset)
+    };
+    // An outline's corners, counter-clockwise seen from P's front.
+    let facing_p = |corners: &[DVec3], normal: DVec3| {
+        let mut outline = corners.to_vec();
+        if normal.dot(p.normal) < 0.0 {
+            outline.reverse();
+        }
+        outline_planes(&outline, p.normal)
+    };
     let mut outlines = Vec::new();
+    for r in emitters.grid.near(&p.bounds, reach) {
+        let region = &emitters.regions[r];
+        let g = gap * p.diameter.min(region.face.diameter);
+        let Some(offset) = lying(&mut region.corners(), g) else {
+            continue;
+        };
+        if shines_into_gap(region, p, offset) {
+            outlines.extend(
+                region
+                    .pieces
+                    .iter()
+                    .map(|piece| facing_p(piece, region.face.normal)),
+            );
+        }
+    }
+    if mode == SplitContacts::Auto {
+        return outlines;
+    }
     // Contact edges standing on P: (object, end, end, gap).
     let mut edges: Vec<(usize, DVec3, DVec3, f64)> = Vec::new();
     for j in grid.near(&p.bounds, reach) {
@@ -229,26 +283,11 @@ fn contact_outlines(
         let g = gap * p.diameter.min(q.diameter);
         let vertices = scene.polygons[j].shape.vertices();
         let distances: Vec<f64> = vertices.iter().map(|&v| p.distance(v)).collect();
-        // The vertex farthest from P's plane says on which side Q is.
-        let farthest = distances
-            .iter()
-            .copied()
-            .fold(0.0, |a: f64, d| if d.abs() > a.abs() { d } else { a });
-        if !two_sided && farthest < -SNAP * p.diameter {
+        if !two_sided && farthest(&distances) < -SNAP * p.diameter {
             continue;
         }
         if distances.iter().all(|d| d.abs() <= g) {
-            if auto && !emits_into_gap(scene, j, p, farthest) {
-                continue;
-            }
-            let mut outline = vertices.to_vec();
-            if scene.polygons[j].shape.vector_area().dot(p.normal) < 0.0 {
-                outline.reverse();
-            }
-            outlines.push(outline_planes(&outline, p.normal));
-            continue;
-        }
-        if auto {
+            outlines.push(facing_p(vertices, q.normal));
             continue;
         }
         let n = vertices.len();
@@ -266,17 +305,22 @@ fn contact_outlines(
     outlines
 }
 
-/// Whether polygon `j`, lying on P at signed distance `offset` (its vertex farthest from P's plane),
-/// emits into the gap: it is an emitter, the gap is real (not coplanar, where no light enters) and its
-/// emitting side faces P (two-sided, or its normal points back toward P's plane). However open the
-/// gap's sides, an element of P straddling the outline re-emits the emitter's back light from all its
-/// area: the classroom's 4 cm tubes 2 cm under their housings (side openings 34% of the cavity) left the
-/// floor 10% and the desks 6% too bright unsplit (BENCHMARKS.md, "Reference images and probes").
-fn emits_into_gap(scene: &Scene, j: usize, p: &Face, offset: f64) -> bool {
-    let q = &scene.polygons[j];
-    !scene.material_of(q).emission.is_black()
-        && offset.abs() > SNAP * p.diameter
-        && (q.two_sided || q.shape.normal().dot(p.normal) * offset < 0.0)
+/// The signed distance of largest magnitude (0 for none): on which side of a plane a polygon lies.
+fn farthest(distances: &[f64]) -> f64 {
+    distances
+        .iter()
+        .copied()
+        .fold(0.0, |a: f64, d| if d.abs() > a.abs() { d } else { a })
+}
+
+/// Whether an emitting region lying on P at signed distance `offset` (its corner farthest from P's
+/// plane) emits into the gap: the gap is real (not coplanar, where no light enters) and the region
+/// emits toward P (`-offset` along P's normal). However open the gap's sides, an element of P
+/// straddling the outline re-emits the emitter's back light from all its area: the classroom's 4 cm
+/// tubes 2 cm under their housings (side openings 34% of the cavity) left the floor 10% and the desks
+/// 6% too bright unsplit (BENCHMARKS.md, "Reference images and probes").
+fn shines_into_gap(region: &Region, p: &Face, offset: f64) -> bool {
+    offset.abs() > SNAP * p.diameter && region.shines_toward(-offset * p.normal)
 }
 
 /// Convex hulls, in P's plane, of the chains of contact edges of one object that join end to end (within

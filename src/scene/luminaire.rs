@@ -155,6 +155,35 @@ impl Luminaire {
         self.intensity(d) * (1.0 / area)
     }
 
+    /// Whether the luminaire sends light into the open half-space of directions d with d · `side` > 0:
+    /// some direction there has a positive table intensity. Tested on every cone of a table vertical
+    /// angle, at the table's horizontal angles in all their mirror images and at the azimuth of `side`
+    /// (where d · side is largest on the cone). Used to find openings that shine into a gap
+    /// ([`super::contacts`]); interpolated light between table angles that only grazes the half-space
+    /// is not seen.
+    pub fn shines_toward(&self, side: DVec3) -> bool {
+        let s = DVec3::new(
+            side.dot(self.frame[0]),
+            side.dot(self.frame[1]),
+            side.dot(self.frame[2]),
+        );
+        let table = &self.photometry;
+        let mut azimuths: Vec<f64> = table
+            .horizontal
+            .iter()
+            .flat_map(|&phi| [phi, -phi, 180.0 - phi, 180.0 + phi])
+            .collect();
+        azimuths.push(s.y.atan2(s.x).to_degrees());
+        table.vertical.iter().any(|&theta| {
+            let (sin, cos) = theta.to_radians().sin_cos();
+            azimuths.iter().any(|&phi| {
+                let (sp, cp) = phi.to_radians().sin_cos();
+                sin * (cp * s.x + sp * s.y) - cos * s.z > 1e-9 * s.length()
+                    && table.intensity(theta, phi) > 0.0
+            })
+        })
+    }
+
     /// Largest dimension of the opening (scene units; zero for a point).
     pub fn size(&self) -> f64 {
         self.faces
