@@ -215,7 +215,8 @@ impl SimulationSettings {
 }
 
 /// The library's default is the classic solver the oracle experiments start from (constant basis,
-/// power oracle, `eps`); the command line defaults to error control (`radiosity render --help`).
+/// power oracle, `eps`); the command line's defaults differ (linear basis, ε = 3e-5, one shadow level,
+/// clustering where needed: `radiosity render --help`).
 impl Default for SimulationSettings {
     fn default() -> Self {
         SimulationSettings {
