@@ -121,7 +121,8 @@ pub fn link_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorag
 
 /// A link's peak cost: [`link_bytes`], one more `Link` for the growth slack of its receiver's list
 /// (which doubles), and while a refinement pass runs, the link as a candidate (kept in place when
-/// admissible) and its verdict (at most a candidate's size); links are coupled and stored a chunk at a
+/// admissible) and its verdict (at most a candidate's size); a later pass judges stored links in place,
+/// with a verdict each. Links are coupled and stored a chunk at a
 /// time, so their copies on the way to their receivers are not counted per link.
 pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorage) -> usize {
     link_bytes(basis, cubature_degree, storage)

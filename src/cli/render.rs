@@ -148,18 +148,18 @@ impl RenderCommand {
             vertices.as_ref(),
         );
         let render_seconds = start.elapsed().as_secs_f64();
-        let mut scaled = image.clone();
-        scaled
-            .pixels
-            .iter_mut()
-            .for_each(|c| *c *= self.units.scale());
-
         self.write_image(&self.output, &image, &tone)?;
         if let Some(path) = &self.emitter_mask {
             emitter_mask(&solution.hierarchy, solution.visibility.as_ref(), &camera)
                 .write_png(path, None)?;
         }
         if let Some(path) = &self.hdr {
+            // In the chosen units; copied only here, as a large image's floats are many MB.
+            let mut scaled = image.clone();
+            scaled
+                .pixels
+                .iter_mut()
+                .for_each(|c| *c *= self.units.scale());
             scaled.write_exr(path)?;
         }
         for path in &self.export {

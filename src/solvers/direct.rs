@@ -93,6 +93,7 @@ impl FirstGather {
                 return outcome;
             }
             let before = outcome.subdivisions;
+            hierarchy.reserve_splits(split.len());
             for id in split {
                 if hierarchy.elements.len() + 4 > settings.max_elements {
                     outcome.refused_by_budget += 1;

@@ -23,8 +23,7 @@ use gathering::GatheringSolver;
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 use refine::{
-    initial_candidates, refine_scheduled, take_links, RefineOutcome, RefineSettings,
-    RefinementSchedule,
+    initial_candidates, refine_scheduled, RefineOutcome, RefineSettings, RefinementSchedule, Start,
 };
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -157,17 +156,17 @@ pub fn solve(
         report.passes = pass;
         // Later passes re-judge every link with the new radiance; the links stay in the hierarchy
         // whenever the loop ends.
-        let candidates = if pass == 1 {
-            initial_candidates(hierarchy)
+        let from = if pass == 1 {
+            Start::Initial(initial_candidates(hierarchy))
         } else {
-            take_links(hierarchy)
+            Start::StoredLinks
         };
         let (outcome, direct) = refine_pass(
             hierarchy,
             visibility,
             oracle,
             settings,
-            candidates,
+            from,
             &mut first_gather,
             &mut report,
             progress,
@@ -268,7 +267,7 @@ fn refine_pass(
     visibility: &dyn Visibility,
     oracle: &dyn RefinementOracle,
     settings: &SolveSettings,
-    candidates: Vec<refine::Candidate>,
+    from: refine::Start,
     first_gather: &mut direct::FirstGather,
     report: &mut SolveReport,
     progress: &Progress,
@@ -282,7 +281,7 @@ fn refine_pass(
         visibility,
         oracle,
         &settings.refine,
-        candidates,
+        from,
         &mut |round, n| spinner.set_message(format!("{label}, round {round}: {n} candidate links")),
         schedule,
     );

@@ -29,7 +29,7 @@
 //! deferred). Steps go on until the target is reached (no link above its own threshold, or error
 //! control's accuracy), a budget stops refinement, or `max_steps`.
 
-use super::refine::{initial_candidates, take_links, Judged, RefinementSchedule};
+use super::refine::{initial_candidates, Judged, RefinementSchedule, Start};
 use super::{
     end_pass, finish_report, refine_pass, start_report, sweep_to_tolerance, SolveReport,
     SolveSettings,
@@ -283,10 +283,10 @@ pub fn solve_progressive(
     for step in 1..=multigrid.max_steps.max(1) {
         let (start, cpu_start) = (Instant::now(), cpu_seconds());
         report.passes = step;
-        let candidates = if step == 1 {
-            initial_candidates(hierarchy)
+        let from = if step == 1 {
+            Start::Initial(initial_candidates(hierarchy))
         } else {
-            take_links(hierarchy)
+            Start::StoredLinks
         };
         schedule.start(step == 1);
         let (outcome, direct) = refine_pass(
@@ -294,7 +294,7 @@ pub fn solve_progressive(
             visibility,
             oracle,
             settings,
-            candidates,
+            from,
             &mut first_gather,
             &mut report,
             progress,

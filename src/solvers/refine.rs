@@ -3,7 +3,8 @@
 //! candidate order; split candidates are replaced by links to the children and judged in the next round.
 //! Admissible links get their couplings in parallel at the end, except under the link error oracle
 //! (Bekaert–Willems §5), which judges a link from its coupling and so computes it first. The element and
-//! link sets therefore do not depend on the number of threads.
+//! link sets therefore do not depend on the number of threads. A later pass judges the links where they
+//! are stored ([`Start::StoredLinks`]): only the links that refine leave their lists.
 
 use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{
@@ -55,6 +56,56 @@ impl Candidate {
             inherited_visibility,
             shaft,
             occluders,
+        }
+    }
+
+    /// This candidate as the oracle judges it.
+    fn judging(&self) -> Judging<'_> {
+        Judging {
+            receiver: self.receiver,
+            source: self.source,
+            coupling: self.coupling.as_ref(),
+            oracle_factor: self.oracle_factor,
+            inherited_visibility: self.inherited_visibility,
+            shaft: self.shaft,
+            occluders: self.occluders,
+        }
+    }
+
+    /// Takes what the verdict on this candidate kept ([`Admitted`]).
+    fn admit(&mut self, admitted: Admitted) {
+        self.oracle_factor = admitted.oracle_factor;
+        if let Some(coupling) = admitted.coupling {
+            self.coupling = Some(coupling);
+        }
+        self.shaft = admitted.shaft;
+    }
+}
+
+/// A link as the oracle judges it: a [`Candidate`], or a link stored at `receiver` (a later pass,
+/// [`Start::StoredLinks`]), borrowed either way.
+#[derive(Clone, Copy)]
+struct Judging<'c> {
+    receiver: ElementId,
+    source: ElementId,
+    coupling: Option<&'c LinkCoupling>,
+    oracle_factor: OracleFactor,
+    inherited_visibility: Option<f32>,
+    shaft: Option<ShaftVerdict>,
+    occluders: Option<u32>,
+}
+
+impl<'c> Judging<'c> {
+    /// The link `link` stored at `receiver`: its coupling is known, its shaft verdict its own.
+    fn stored(receiver: ElementId, link: &'c Link) -> Self {
+        Judging {
+            receiver,
+            source: link.source,
+            coupling: Some(&link.coupling),
+            oracle_factor: link.oracle_factor,
+            inherited_visibility: None,
+            shaft: link.shaft,
+            occluders: None,
         }
     }
 
@@ -274,25 +325,14 @@ pub fn check_initial_links(hierarchy: &Hierarchy, max_links: usize) -> anyhow::R
     Ok(())
 }
 
-/// Removes every link from the hierarchy and returns them as candidates (for re-refinement after the
-/// radiance changed), keeping their couplings.
-pub fn take_links(hierarchy: &mut Hierarchy) -> Vec<Candidate> {
-    let mut out = Vec::with_capacity(hierarchy.link_count());
-    for (id, e) in hierarchy.elements.iter_mut().enumerate() {
-        // Taken rather than drained: an emptied list would keep its buffer through the whole pass.
-        for link in std::mem::take(&mut e.links) {
-            out.push(Candidate {
-                receiver: id as ElementId,
-                source: link.source,
-                coupling: Some(link.coupling),
-                oracle_factor: link.oracle_factor,
-                inherited_visibility: None,
-                shaft: link.shaft,
-                occluders: None,
-            });
-        }
-    }
-    out
+/// What a refinement pass starts from.
+pub enum Start {
+    /// The first pass: candidates not yet linked ([`initial_candidates`]).
+    Initial(Vec<Candidate>),
+    /// A later pass (after the radiance changed): every link stored in the hierarchy, judged where it
+    /// is stored with its coupling and cached oracle factor, so that the links are never held a second
+    /// time as candidates.
+    StoredLinks,
 }
 
 const ORACLE_STREAM: u64 = 1;
@@ -318,24 +358,29 @@ pub struct Judged {
     pub cost: usize,
 }
 
-/// The candidate links refining `c` as `decision` creates, known before the split: the children of the
-/// end that splits (a surface leaf gets four), or for a cluster's self-link every ordered pair of its
-/// children plus the self-links of those that are clusters. Counted before the interaction test drops
+/// The candidate links refining the link `(receiver, source)` as `decision` creates, known before the
+/// split: the children of the end that splits (a surface leaf gets four), or for a cluster's self-link
+/// every ordered pair of its children plus the self-links of those that are clusters. Counted before the interaction test drops
 /// pairs that cannot exchange light, so an upper bound on the links it adds.
-pub fn links_created(h: &Hierarchy, c: &Candidate, decision: Decision) -> usize {
+pub fn links_created(
+    h: &Hierarchy,
+    receiver: ElementId,
+    source: ElementId,
+    decision: Decision,
+) -> usize {
     let children = |id: ElementId| match h.element(id).children.len() {
         0 if !h.is_cluster(id) => 4,
         n => n,
     };
     match decision {
         Decision::Admissible => 0,
-        Decision::SubdivideReceiver if c.receiver == c.source => {
-            let parts = &h.element(c.receiver).children;
+        Decision::SubdivideReceiver if receiver == source => {
+            let parts = &h.element(receiver).children;
             let clusters = parts.iter().filter(|&&p| h.is_cluster(p)).count();
             parts.len() * parts.len().saturating_sub(1) + clusters
         }
-        Decision::SubdivideReceiver => children(c.receiver),
-        Decision::SubdivideSource => children(c.source),
+        Decision::SubdivideReceiver => children(receiver),
+        Decision::SubdivideSource => children(source),
     }
 }
 
@@ -347,17 +392,17 @@ pub trait RefinementSchedule {
     fn select(&mut self, round: usize, judged: &mut [Judged]);
 }
 
-/// Refines `candidates` until every one is admissible, then stores them as links at their receivers.
+/// Refines from `start` until every link is admissible, then stores the new links at their receivers.
 pub fn refine(
     hierarchy: &mut Hierarchy,
     visibility: &dyn Visibility,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
-    candidates: Vec<Candidate>,
+    start: Start,
     on_round: &mut dyn FnMut(usize, usize),
 ) -> RefineOutcome {
     refine_scheduled(
-        hierarchy, visibility, oracle, settings, candidates, on_round, None,
+        hierarchy, visibility, oracle, settings, start, on_round, None,
     )
 }
 
@@ -367,150 +412,77 @@ pub fn refine_scheduled(
     visibility: &dyn Visibility,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
-    mut candidates: Vec<Candidate>,
+    start: Start,
     on_round: &mut dyn FnMut(usize, usize),
     mut schedule: Option<&mut dyn RefinementSchedule>,
 ) -> RefineOutcome {
-    let mut outcome = RefineOutcome::default();
+    let mut pass = Pass::default();
     // Each round's admissible candidates, in order (one list per round: appending them to one list
-    // would reallocate it, doubling, after the first round of a later pass kept nearly every link).
+    // would reallocate it, doubling, after a large round).
     let mut admissible: Vec<Vec<Candidate>> = Vec::new();
-    let mut admitted = 0;
-    // Partial shaft tests of refined links whose occluder lists their descendants' tests examine.
-    let mut partial_tests: Vec<ShaftTest> = Vec::new();
     let mut round = 0;
+    let mut candidates = match start {
+        Start::Initial(candidates) => candidates,
+        Start::StoredLinks => {
+            round = 1;
+            on_round(round, hierarchy.link_count());
+            refine_stored_links(
+                hierarchy,
+                visibility,
+                oracle,
+                settings,
+                &mut pass,
+                schedule.as_deref_mut(),
+            );
+            std::mem::take(&mut pass.next)
+        }
+    };
     while !candidates.is_empty() {
         round += 1;
         on_round(round, candidates.len());
-        let mut decisions: Vec<Verdict> = {
+        let mut verdicts: Vec<Verdict> = {
             let context = OracleContext {
                 hierarchy,
                 visibility,
             };
+            let tests = &pass.partial_tests;
             candidates
                 .par_iter()
-                .map(|c| decide(&context, oracle, settings, c, &partial_tests))
+                .map(|c| decide(&context, oracle, settings, c.judging(), tests))
                 .collect()
         };
         if let Some(schedule) = schedule.as_deref_mut() {
-            let mut judged: Vec<Judged> = decisions
-                .iter()
-                .zip(&candidates)
-                .map(|(v, c)| Judged {
-                    error: v.error,
-                    refine: v.decision != Decision::Admissible,
-                    cost: links_created(hierarchy, c, v.decision),
-                })
-                .collect();
-            schedule.select(round, &mut judged);
-            for (verdict, j) in decisions.iter_mut().zip(judged) {
-                if !j.refine {
-                    verdict.decision = Decision::Admissible;
-                }
-            }
+            let judged = candidates.iter().map(Candidate::judging).zip(&verdicts);
+            let selection = select(schedule, round, hierarchy, judged);
+            keep_unselected_admissible(verdicts.iter_mut(), selection);
         }
-        let mut next = Vec::new();
-        let round_size = candidates.len();
-        let mut verdicts = decisions.into_iter();
-        let (mut k, mut kept) = (0, admitted);
+        let judged = candidates.iter().map(Candidate::judging).zip(&verdicts);
+        let leaves = leaves_split(hierarchy, judged);
+        hierarchy.reserve_splits(leaves);
+        pass.start_round(verdicts.len());
+        let mut verdicts = verdicts.into_iter();
         // This round's admissible candidates stay in place, in order, and the list becomes the round's
-        // admissible one: a later pass starts with every link as a candidate, and a copy would hold
-        // them all twice.
+        // admissible one.
         candidates.retain_mut(|c| {
             let verdict = verdicts.next().expect("one verdict per candidate");
-            k += 1;
-            outcome.oracle_rays += verdict.rays;
-            outcome.form_factor_rays += verdict.coupling_rays;
-            outcome.shaft_tests += verdict.shaft_tests;
-            outcome.rays_saved += verdict.rays_saved;
-            let mut decision = verdict.decision;
-            let splits_surface = match decision {
-                Decision::Admissible => false,
-                Decision::SubdivideReceiver => !hierarchy.is_cluster(c.receiver),
-                Decision::SubdivideSource => !hierarchy.is_cluster(c.source),
-            };
-            // Every candidate of this round not judged yet becomes at least one link too.
-            let links = kept + next.len() + (round_size - k) + MAX_NEW_CANDIDATES;
-            if decision != Decision::Admissible
-                && ((splits_surface && hierarchy.elements.len() + 4 > settings.max_elements)
-                    || links > settings.max_links)
-            {
-                outcome.refused_by_budget += 1;
-                decision = Decision::Admissible;
+            match pass.settle(hierarchy, settings, c.judging(), verdict) {
+                Some(admitted) => {
+                    c.admit(admitted);
+                    true
+                }
+                None => false,
             }
-            let partial = verdict
-                .coupling
-                .as_deref()
-                .or(c.coupling.as_ref())
-                .map(|k| k.visibility)
-                .filter(|v| *v > 0.0 && *v < 1.0);
-            let shaft = verdict.shaft.or(c.shaft);
-            let inherited = shaft.and_then(ShaftVerdict::inherited);
-            // Children test only the polygons this link's Partial shaft holds (or an ancestor's).
-            let occluders = match verdict.partial_test {
-                _ if inherited.is_some() || decision == Decision::Admissible => c.occluders,
-                Some(test) => {
-                    partial_tests.push(*test);
-                    Some(partial_tests.len() as u32 - 1)
-                }
-                None => c.occluders,
-            };
-            match decision {
-                Decision::Admissible if verdict.no_interaction => return false,
-                Decision::Admissible => {
-                    c.oracle_factor = verdict.oracle_factor;
-                    c.coupling = verdict.coupling.map(|k| *k).or(c.coupling.take());
-                    c.shaft = shaft;
-                    kept += 1;
-                    return true;
-                }
-                Decision::SubdivideReceiver if c.receiver == c.source => {
-                    // A cluster's self-link: links among its contents, and their own self-links.
-                    outcome.refined_links += 1;
-                    let children = hierarchy.split(c.receiver);
-                    let h = &*hierarchy;
-                    let facings: Vec<_> = children.iter().map(|&a| facing_of(h, a)).collect();
-                    for (&a, fa) in children.iter().zip(&facings) {
-                        for (&b, fb) in children.iter().zip(&facings) {
-                            if a != b || h.is_cluster(a) {
-                                let ends = ((a, fa.as_ref()), (b, fb.as_ref()));
-                                push_if_interacting(h, &mut next, ends, None, None, None);
-                            }
-                        }
-                    }
-                }
-                Decision::SubdivideReceiver => {
-                    outcome.refined_links += 1;
-                    if hierarchy.element(c.receiver).is_leaf() {
-                        outcome.subdivisions += 1;
-                    }
-                    let children = hierarchy.split(c.receiver);
-                    let h = &*hierarchy;
-                    let source = facing_of(h, c.source);
-                    for child in children {
-                        let ends = ((child, None), (c.source, source.as_ref()));
-                        push_if_interacting(h, &mut next, ends, partial, inherited, occluders);
-                    }
-                }
-                Decision::SubdivideSource => {
-                    outcome.refined_links += 1;
-                    if hierarchy.element(c.source).is_leaf() {
-                        outcome.subdivisions += 1;
-                    }
-                    let children = hierarchy.split(c.source);
-                    let h = &*hierarchy;
-                    let receiver = facing_of(h, c.receiver);
-                    for child in children {
-                        let ends = ((c.receiver, receiver.as_ref()), (child, None));
-                        push_if_interacting(h, &mut next, ends, partial, inherited, occluders);
-                    }
-                }
-            }
-            false
         });
-        admitted = kept;
         admissible.push(candidates);
-        candidates = next;
+        candidates = std::mem::take(&mut pass.next);
+    }
+    // Each receiver's list grows once, by the links it is about to get, instead of doubling.
+    let mut arriving = vec![0u32; hierarchy.elements.len()];
+    for c in admissible.iter().flatten() {
+        arriving[c.receiver as usize] += 1;
+    }
+    for (e, n) in hierarchy.elements.iter_mut().zip(arriving) {
+        e.links.reserve_exact(n as usize);
     }
     // Coupled a chunk at a time, so that the links on their way to their receivers are never all held
     // twice (as candidates and as computed links); couplings do not read the link lists.
@@ -524,12 +496,281 @@ pub fn refine_scheduled(
             hierarchy,
             visibility,
             settings,
-            &partial_tests,
+            &pass.partial_tests,
             chunk,
-            &mut outcome,
+            &mut pass.outcome,
         );
     }
-    outcome
+    pass.outcome
+}
+
+/// The first round of a later pass ([`Start::StoredLinks`]): every stored link judged where it is, in
+/// element order, then settled in that order as a candidate list would be; admissible links stay in
+/// their lists (with what judging them cached), refined ones leave them, and their replacements wait
+/// in `pass.next`.
+fn refine_stored_links(
+    hierarchy: &mut Hierarchy,
+    visibility: &dyn Visibility,
+    oracle: &dyn RefinementOracle,
+    settings: &RefineSettings,
+    pass: &mut Pass,
+    schedule: Option<&mut (dyn RefinementSchedule + '_)>,
+) {
+    // One list of verdicts per element, each of its exact size (a flattened parallel collect would
+    // gather pieces of unknown length and copy them, holding the verdicts more than twice).
+    let mut verdicts: Vec<Vec<Verdict>> = {
+        let context = &OracleContext {
+            hierarchy,
+            visibility,
+        };
+        let tests = &pass.partial_tests;
+        hierarchy
+            .elements
+            .par_iter()
+            .enumerate()
+            .map(|(id, e)| {
+                e.links
+                    .iter()
+                    .map(|link| {
+                        let judging = Judging::stored(id as ElementId, link);
+                        decide(context, oracle, settings, judging, tests)
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    if let Some(schedule) = schedule {
+        let judged = stored_links(hierarchy).zip(verdicts.iter().flatten());
+        let selection = select(schedule, 1, hierarchy, judged);
+        keep_unselected_admissible(verdicts.iter_mut().flatten(), selection);
+    }
+    let judged = stored_links(hierarchy).zip(verdicts.iter().flatten());
+    let leaves = leaves_split(hierarchy, judged);
+    hierarchy.reserve_splits(leaves);
+    pass.start_round(verdicts.iter().map(Vec::len).sum());
+    // Elements that splits add on the way have no links yet.
+    for (id, element_verdicts) in verdicts.into_iter().enumerate() {
+        if element_verdicts.is_empty() {
+            continue;
+        }
+        let mut element_verdicts = element_verdicts.into_iter();
+        // Out of the hierarchy while its links are settled, as splits change the element list.
+        let mut links = std::mem::take(&mut hierarchy.elements[id].links);
+        links.retain_mut(|link| {
+            let verdict = element_verdicts.next().expect("one verdict per link");
+            match pass.settle(
+                hierarchy,
+                settings,
+                Judging::stored(id as ElementId, link),
+                verdict,
+            ) {
+                Some(admitted) => {
+                    link.oracle_factor = admitted.oracle_factor;
+                    if let Some(coupling) = admitted.coupling {
+                        link.coupling = coupling;
+                    }
+                    link.shaft = admitted.shaft;
+                    true
+                }
+                None => false,
+            }
+        });
+        hierarchy.elements[id].links = links;
+    }
+}
+
+/// Every link stored in `h`, in element order, as the oracle judges it.
+fn stored_links(h: &Hierarchy) -> impl Iterator<Item = Judging<'_>> {
+    h.elements.iter().enumerate().flat_map(|(id, e)| {
+        e.links
+            .iter()
+            .map(move |link| Judging::stored(id as ElementId, link))
+    })
+}
+
+/// Passes one round's verdicts on its links (`judged`, in order) through `schedule`; returns its
+/// selection, for [`keep_unselected_admissible`].
+fn select<'a>(
+    schedule: &mut dyn RefinementSchedule,
+    round: usize,
+    hierarchy: &Hierarchy,
+    judged: impl Iterator<Item = (Judging<'a>, &'a Verdict)>,
+) -> Vec<Judged> {
+    let mut selection: Vec<Judged> = judged
+        .map(|(c, v)| Judged {
+            error: v.error,
+            refine: v.decision != Decision::Admissible,
+            cost: links_created(hierarchy, c.receiver, c.source, v.decision),
+        })
+        .collect();
+    schedule.select(round, &mut selection);
+    selection
+}
+
+/// Makes admissible the verdicts that a schedule's `selection` keeps from refining.
+fn keep_unselected_admissible<'v>(
+    verdicts: impl Iterator<Item = &'v mut Verdict>,
+    selection: Vec<Judged>,
+) {
+    for (verdict, j) in verdicts.zip(selection) {
+        if !j.refine {
+            verdict.decision = Decision::Admissible;
+        }
+    }
+}
+
+/// The surface leaves that the verdicts on a round's links (`judged`, in order) split, each counted
+/// once: the room the round reserves in the element list ([`Hierarchy::reserve_splits`]).
+fn leaves_split<'a>(
+    h: &Hierarchy,
+    judged: impl Iterator<Item = (Judging<'a>, &'a Verdict)>,
+) -> usize {
+    let mut leaves: Vec<ElementId> = judged
+        .filter_map(|(c, v)| match v.decision {
+            Decision::Admissible => None,
+            Decision::SubdivideReceiver => Some(c.receiver),
+            Decision::SubdivideSource => Some(c.source),
+        })
+        .filter(|&id| !h.is_cluster(id) && h.element(id).is_leaf())
+        .collect();
+    leaves.sort_unstable();
+    leaves.dedup();
+    leaves.len()
+}
+
+/// What an admissible link keeps of its verdict.
+struct Admitted {
+    oracle_factor: OracleFactor,
+    /// The coupling computed to judge it, if it had none.
+    coupling: Option<LinkCoupling>,
+    shaft: Option<ShaftVerdict>,
+}
+
+/// The state of one refinement pass between its rounds.
+#[derive(Default)]
+struct Pass {
+    outcome: RefineOutcome,
+    /// Partial shaft tests of refined links whose occluder lists their descendants' tests examine.
+    partial_tests: Vec<ShaftTest>,
+    /// The next round's candidates.
+    next: Vec<Candidate>,
+    /// Links admitted so far (in every round).
+    kept: usize,
+    /// Links of this round settled so far, of `round_size`.
+    settled: usize,
+    round_size: usize,
+}
+
+impl Pass {
+    fn start_round(&mut self, round_size: usize) {
+        self.round_size = round_size;
+        self.settled = 0;
+    }
+
+    /// Applies `verdict` on link `c`, in candidate order: splits what it refines (within the element
+    /// and link budgets) and pushes the links replacing it to `next`. Returns what an admissible link
+    /// keeps; `None` when the link leaves (refined, or its ends cannot exchange light).
+    fn settle(
+        &mut self,
+        hierarchy: &mut Hierarchy,
+        settings: &RefineSettings,
+        c: Judging,
+        verdict: Verdict,
+    ) -> Option<Admitted> {
+        let outcome = &mut self.outcome;
+        self.settled += 1;
+        outcome.oracle_rays += verdict.rays;
+        outcome.form_factor_rays += verdict.coupling_rays;
+        outcome.shaft_tests += verdict.shaft_tests;
+        outcome.rays_saved += verdict.rays_saved;
+        let mut decision = verdict.decision;
+        let splits_surface = match decision {
+            Decision::Admissible => false,
+            Decision::SubdivideReceiver => !hierarchy.is_cluster(c.receiver),
+            Decision::SubdivideSource => !hierarchy.is_cluster(c.source),
+        };
+        // Every link of this round not settled yet becomes at least one link too.
+        let links =
+            self.kept + self.next.len() + (self.round_size - self.settled) + MAX_NEW_CANDIDATES;
+        if decision != Decision::Admissible
+            && ((splits_surface && hierarchy.elements.len() + 4 > settings.max_elements)
+                || links > settings.max_links)
+        {
+            outcome.refused_by_budget += 1;
+            decision = Decision::Admissible;
+        }
+        let partial = verdict
+            .coupling
+            .as_deref()
+            .or(c.coupling)
+            .map(|k| k.visibility)
+            .filter(|v| *v > 0.0 && *v < 1.0);
+        let shaft = verdict.shaft.or(c.shaft);
+        let inherited = shaft.and_then(ShaftVerdict::inherited);
+        // Children test only the polygons this link's Partial shaft holds (or an ancestor's).
+        let occluders = match verdict.partial_test {
+            _ if inherited.is_some() || decision == Decision::Admissible => c.occluders,
+            Some(test) => {
+                self.partial_tests.push(*test);
+                Some(self.partial_tests.len() as u32 - 1)
+            }
+            None => c.occluders,
+        };
+        let next = &mut self.next;
+        match decision {
+            Decision::Admissible if verdict.no_interaction => return None,
+            Decision::Admissible => {
+                self.kept += 1;
+                return Some(Admitted {
+                    oracle_factor: verdict.oracle_factor,
+                    coupling: verdict.coupling.map(|k| *k),
+                    shaft,
+                });
+            }
+            Decision::SubdivideReceiver if c.receiver == c.source => {
+                // A cluster's self-link: links among its contents, and their own self-links.
+                outcome.refined_links += 1;
+                let children = hierarchy.split(c.receiver);
+                let h = &*hierarchy;
+                let facings: Vec<_> = children.iter().map(|&a| facing_of(h, a)).collect();
+                for (&a, fa) in children.iter().zip(&facings) {
+                    for (&b, fb) in children.iter().zip(&facings) {
+                        if a != b || h.is_cluster(a) {
+                            let ends = ((a, fa.as_ref()), (b, fb.as_ref()));
+                            push_if_interacting(h, next, ends, None, None, None);
+                        }
+                    }
+                }
+            }
+            Decision::SubdivideReceiver => {
+                outcome.refined_links += 1;
+                if hierarchy.element(c.receiver).is_leaf() {
+                    outcome.subdivisions += 1;
+                }
+                let children = hierarchy.split(c.receiver);
+                let h = &*hierarchy;
+                let source = facing_of(h, c.source);
+                for child in children {
+                    let ends = ((child, None), (c.source, source.as_ref()));
+                    push_if_interacting(h, next, ends, partial, inherited, occluders);
+                }
+            }
+            Decision::SubdivideSource => {
+                outcome.refined_links += 1;
+                if hierarchy.element(c.source).is_leaf() {
+                    outcome.subdivisions += 1;
+                }
+                let children = hierarchy.split(c.source);
+                let h = &*hierarchy;
+                let receiver = facing_of(h, c.receiver);
+                for child in children {
+                    let ends = ((c.receiver, receiver.as_ref()), (child, None));
+                    push_if_interacting(h, next, ends, partial, inherited, occluders);
+                }
+            }
+        }
+        None
+    }
 }
 
 /// Admissible candidates coupled per chunk by [`refine_scheduled`]: enough for every thread.
@@ -568,7 +809,7 @@ fn couple_chunk(
                     c.receiver,
                     c.source,
                     &settings.coupling,
-                    c.shaft_prior(partial_tests),
+                    c.judging().shaft_prior(partial_tests),
                 );
                 let cost = Coupled {
                     rays: k.rays,
@@ -716,7 +957,7 @@ fn decide(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
-    c: &Candidate,
+    c: Judging,
     partial_tests: &[ShaftTest],
 ) -> Verdict {
     let h = context.hierarchy;
@@ -746,7 +987,7 @@ fn decide(
             }
             verdict.coupling = Some(Box::new(k.coupling));
         }
-        let coupling = verdict.coupling.as_deref().or(c.coupling.as_ref());
+        let coupling = verdict.coupling.as_deref().or(c.coupling);
         let judgement = coupling
             .and_then(|k| oracle.link_error(context, c.receiver, c.source, k))
             .unwrap_or_default();
@@ -823,7 +1064,7 @@ fn decide(
 fn couple_for_verdict(
     context: &OracleContext,
     settings: &RefineSettings,
-    c: &Candidate,
+    c: Judging,
     partial_tests: &[ShaftTest],
     verdict: &mut Verdict,
 ) -> super::coupling::Coupling {
@@ -852,7 +1093,7 @@ fn with_visibility(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
-    c: &Candidate,
+    c: Judging,
     partial_tests: &[ShaftTest],
     error: f64,
     verdict: &mut Verdict,
@@ -871,7 +1112,7 @@ fn with_visibility(
     let coupling = verdict
         .coupling
         .as_deref()
-        .or(c.coupling.as_ref())
+        .or(c.coupling)
         .expect("a coupling, cached or just computed");
     if coupling.visibility <= 0.0 || coupling.visibility >= 1.0 {
         return error;
@@ -899,7 +1140,7 @@ fn decide_cluster_link(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
-    c: &Candidate,
+    c: Judging,
     splittable: &dyn Fn(ElementId) -> bool,
 ) -> Verdict {
     let h = context.hierarchy;
