@@ -13,6 +13,7 @@ use crate::oracles::smoothness::SmoothnessOracle;
 use crate::oracles::{power::PowerOracle, RefinementOracle};
 use crate::progress::Progress;
 use crate::scene::Scene;
+use crate::geometry::near_field::NearField;
 use crate::solvers::coupling::CouplingSettings;
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};
@@ -149,6 +150,9 @@ pub struct SimulationSettings {
     /// Extra quadtree levels the power oracle's visibility term gives a link whose sampled visibility
     /// is ½ ([`PowerOracle::for_shadow_levels`]); 0: eq. (1) alone.
     pub shadow_levels: f64,
+    /// How the receiver side of links to a near source is integrated (couplings and the power
+    /// oracle's transport, [`crate::geometry::near_field`]).
+    pub near_field: NearField,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
     /// Radiance basis on every element (Bekaert–Willems §2).
@@ -231,6 +235,7 @@ impl Default for SimulationSettings {
             intra_cluster: IntraClusterKind::ItemBuffer,
             eps: 1e-3,
             shadow_levels: 0.0,
+            near_field: NearField::Adaptive,
             min_area: 1e-5,
             basis: BasisKind::Constant,
             cubature_degree: None,
@@ -326,7 +331,10 @@ pub fn make_oracle(
 ) -> Box<dyn RefinementOracle> {
     let samples = settings.oracle_samples;
     match settings.oracle {
-        OracleKind::Power => Box::new(PowerOracle::for_shadow_levels(settings.shadow_levels)),
+        OracleKind::Power => Box::new(PowerOracle {
+            near_field: settings.near_field,
+            ..PowerOracle::for_shadow_levels(settings.shadow_levels)
+        }),
         OracleKind::Smoothness => Box::new(SmoothnessOracle::for_hierarchy(samples, hierarchy)),
         OracleKind::MutualInformation => Box::new(MutualInformationOracle::new(samples)),
         OracleKind::Error => Box::new(LinkErrorOracle {
@@ -334,6 +342,7 @@ pub fn make_oracle(
                 cubature_degree: settings.cubature_degree(),
                 seed: settings.seed,
                 error_storage: settings.error_storage,
+                near_field: settings.near_field,
             },
         }),
     }
@@ -372,6 +381,7 @@ pub fn deterministic_settings(
                 cubature_degree: settings.cubature_degree(),
                 seed: settings.seed,
                 error_storage: settings.error_storage,
+                near_field: settings.near_field,
             },
             seed: settings.seed,
         },

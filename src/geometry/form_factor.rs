@@ -92,6 +92,34 @@ pub fn parallel_rectangles(a: f64, b: f64, c: f64) -> f64 {
     2.0 / (PI * x * y) * (t1 + t2 + t3 - t4)
 }
 
+/// Closed-form form factor between two parallel axis-aligned rectangles in any relative position, from
+/// `[x0, x1] × [y0, y1]` to `[ξ0, ξ1] × [η0, η1]` in planes `z` apart (Howell's catalogue, C-12: the
+/// sixteen-term superposition of `G`); the analytic reference for offset and adjacent plates.
+pub fn parallel_rectangles_offset(from: [f64; 4], to: [f64; 4], z: f64) -> f64 {
+    let [x0, x1, y0, y1] = from;
+    let [xi0, xi1, eta0, eta1] = to;
+    let g = |dx: f64, dy: f64| {
+        let (rx, ry) = ((dx * dx + z * z).sqrt(), (dy * dy + z * z).sqrt());
+        let along_y = if rx > 0.0 { dy * rx * dy.atan2(rx) } else { 0.0 };
+        let along_x = if ry > 0.0 { dx * ry * dx.atan2(ry) } else { 0.0 };
+        let r2 = dx * dx + dy * dy + z * z;
+        let log = if r2 > 0.0 { 0.5 * z * z * r2.ln() } else { 0.0 };
+        (along_y + along_x - log) / (2.0 * PI)
+    };
+    let mut sum = 0.0;
+    for (i, x) in [x0, x1].into_iter().enumerate() {
+        for (j, y) in [y0, y1].into_iter().enumerate() {
+            for (k, eta) in [eta0, eta1].into_iter().enumerate() {
+                for (l, xi) in [xi0, xi1].into_iter().enumerate() {
+                    let sign = if (i + j + k + l) % 2 == 0 { 1.0 } else { -1.0 };
+                    sum += sign * g(x - xi, y - eta);
+                }
+            }
+        }
+    }
+    sum / ((x1 - x0) * (y1 - y0))
+}
+
 /// Closed-form form factor from a rectangle (width `w` along the common edge, depth `h`) to a perpendicular
 /// rectangle (same width, height `l`) sharing that edge (Howell's catalogue, C-14).
 pub fn perpendicular_rectangles(w: f64, h: f64, l: f64) -> f64 {
@@ -114,6 +142,31 @@ mod tests {
     fn analytic_references_match_published_values() {
         assert!((parallel_rectangles(1.0, 1.0, 1.0) - 0.1998).abs() < 1e-4);
         assert!((perpendicular_rectangles(1.0, 1.0, 1.0) - 0.2000).abs() < 1e-4);
+    }
+
+    #[test]
+    fn offset_rectangles_reduce_to_the_coaxial_case_and_obey_reciprocity() {
+        let f = parallel_rectangles_offset([0.0, 1.0, 0.0, 2.0], [0.0, 1.0, 0.0, 2.0], 0.7);
+        assert!((f - parallel_rectangles(1.0, 2.0, 0.7)).abs() < 1e-12, "{f}");
+        let (a, b) = ([0.0, 1.0, 0.0, 1.0], [1.2, 2.0, 0.3, 1.5]);
+        let (ab, ba) = (
+            parallel_rectangles_offset(a, b, 0.5),
+            parallel_rectangles_offset(b, a, 0.5),
+        );
+        assert!((ab * 1.0 - ba * 0.8 * 1.2).abs() < 1e-12, "{ab} {ba}");
+        // Against Lambert's formula integrated by a fine Gauss product over the receiver.
+        let receiver = Shape::Quad([DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y]);
+        let source = Shape::Quad([
+            DVec3::new(1.2, 0.3, 0.5),
+            DVec3::new(1.2, 1.5, 0.5),
+            DVec3::new(2.0, 1.5, 0.5),
+            DVec3::new(2.0, 0.3, 0.5),
+        ]);
+        let lambert: f64 = gauss_nodes(&receiver, 5)
+            .iter()
+            .map(|q| q.weight * point_to_polygon(q.point, DVec3::Z, &source))
+            .sum();
+        assert!((lambert - ab).abs() < 1e-6 * ab, "{lambert} vs {ab}");
     }
 
     #[test]

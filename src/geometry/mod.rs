@@ -7,6 +7,7 @@
 pub mod clip;
 pub mod cubature;
 pub mod form_factor;
+pub mod near_field;
 
 pub use glam::{DVec2, DVec3};
 

@@ -26,6 +26,8 @@
 use super::clustering::couple_cluster;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
+use crate::geometry::near_field::{self, is_near, NearField};
+use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::{ElementId, ErrorStorage, Hierarchy, LinkCoupling};
 use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
@@ -40,7 +42,16 @@ pub struct CouplingSettings {
     pub seed: u64,
     /// How the link error coefficients are stored (`--error-storage`, Bekaert–Willems §4.3).
     pub error_storage: ErrorStorage,
+    /// Integrate the receiver side of near links adaptively where the regular rule misses their light
+    /// (`--near-field`, [`crate::geometry::near_field`]).
+    pub near_field: NearField,
 }
+
+/// Relative difference between the regular receiver rule's unoccluded transfer and the adaptive one
+/// above which a near link's block is integrated with the adaptive rule. Below it the regular rule is
+/// kept: its point factors of a closed scene sum to exactly 1 at every node, which a mix of rules would
+/// break by up to the difference.
+pub const NEAR_FIELD_MISS: f64 = 0.1;
 
 impl Default for CouplingSettings {
     fn default() -> Self {
@@ -48,6 +59,7 @@ impl Default for CouplingSettings {
             cubature_degree: 4,
             seed: 1,
             error_storage: ErrorStorage::Full,
+            near_field: NearField::Adaptive,
         }
     }
 }
@@ -153,66 +165,47 @@ fn couple_in_full(
     let phi_y = basis_values(basis, s_shape, &y_nodes);
 
     let n = x_nodes.len();
-    // Step 2: K_{j,β}(x_k), without ρ_i.
-    let mut inner = vec![0.0; n * size];
-    let (mut unoccluded, mut rays, mut rays_saved) = (0.0, 0u64, 0u64);
-    for (k, x) in x_nodes.iter().enumerate() {
-        let exact = point_to_polygon(x.point, n_r, s_shape);
-        if exact <= 0.0 {
-            continue;
-        }
-        unoccluded += x.weight * exact;
-        let row = &mut inner[k * size..(k + 1) * size];
-        let mut open_sum = 0.0;
-        for (l, y) in y_nodes.iter().enumerate() {
-            // Step 1: the kernel at the node pair, with its transmittance.
-            let g = y.weight * point_to_point(x.point, n_r, y.point, n_s);
-            if g <= 0.0 {
-                continue;
-            }
-            open_sum += g;
-            let t = match shaft {
-                Some(ShaftVerdict::Clear) => {
-                    rays_saved += 1;
-                    1.0
-                }
-                Some(ShaftVerdict::Blocked) => {
-                    rays_saved += 1;
-                    0.0
-                }
-                _ => {
-                    rays += 1;
-                    match occluders {
-                        Some((list, culler)) => {
-                            if culler.segment_occluded_among(list, x.point, y.point) {
-                                0.0
-                            } else {
-                                1.0
-                            }
-                        }
-                        None => visibility.transmittance(x.point, y.point),
-                    }
-                }
-            };
-            if t > 0.0 {
-                for (beta, value) in row.iter_mut().enumerate() {
-                    *value += g * t * phi_y[l * size + beta];
-                }
-            }
-        }
-        if open_sum > 0.0 {
-            let scale = exact / open_sum;
-            row.iter_mut().for_each(|v| *v *= scale);
-        }
-    }
+    let sampler = SourceSampler {
+        visibility,
+        shaft,
+        occluders,
+        n_r,
+        n_s,
+        source: s_shape,
+        y_nodes: &y_nodes,
+        phi_y: &phi_y,
+        size,
+    };
+    // Step 2: K_{j,β}(x_k), without ρ_i, at the receiver's regular nodes (the error coefficients' and
+    // node factors' points).
+    let regular = sampler.rows(&x_nodes);
+    let (mut rays, mut rays_saved) = (regular.rays, regular.rays_saved);
+    // A near source whose light the regular nodes miss: the block, the unoccluded and the visible
+    // transfer come from the adaptive composite rule instead (`geometry::near_field`).
+    let near = (settings.near_field == NearField::Adaptive && is_near(r_shape, s_shape))
+        .then(|| near_field::receiver_integral(r_shape, n_r, s_shape, degree))
+        .filter(|near| (near.value - regular.unoccluded).abs() > NEAR_FIELD_MISS * near.value);
+    let composite = near.map(|near| {
+        let phi = basis_values(basis, r_shape, &near.nodes);
+        let rows = sampler.rows(&near.nodes);
+        rays += rows.rays;
+        rays_saved += rows.rays_saved;
+        (near.nodes, phi, rows)
+    });
+    let (block_nodes, phi_block, block_rows) = match &composite {
+        Some((nodes, phi, rows)) => (nodes.as_slice(), phi.as_slice(), rows),
+        None => (x_nodes.as_slice(), phi_x.as_slice(), &regular),
+    };
+    let inner = &regular.inner;
+    let unoccluded = block_rows.unoccluded;
     // Step 3: the block, divided by A_i (step 4a with O = A_i I).
     let mut block = vec![0.0; size * size];
-    for (k, x) in x_nodes.iter().enumerate() {
+    for (k, x) in block_nodes.iter().enumerate() {
         let w = x.weight / r.area;
         for alpha in 0..size {
-            let wa = w * phi_x[k * size + alpha];
+            let wa = w * phi_block[k * size + alpha];
             for beta in 0..size {
-                block[alpha * size + beta] += wa * inner[k * size + beta];
+                block[alpha * size + beta] += wa * block_rows.inner[k * size + beta];
             }
         }
     }
@@ -231,7 +224,11 @@ fn couple_in_full(
         }
     }
     let node_factors: Vec<f32> = (0..n).map(|k| inner[k * size] as f32).collect();
-    let visible: f64 = (0..n).map(|k| x_nodes[k].weight * inner[k * size]).sum();
+    let visible: f64 = block_nodes
+        .iter()
+        .enumerate()
+        .map(|(k, x)| x.weight * block_rows.inner[k * size])
+        .sum();
     let visibility = visible_fraction(visible, unoccluded);
     Coupling {
         coupling: LinkCoupling::new(
@@ -246,6 +243,90 @@ fn couple_in_full(
         rays,
         shaft,
         rays_saved,
+    }
+}
+
+/// A receiver node set's share of Algorithm 4.1's step 2: `K_{j,β}(x_k)` per node (row-major, node by
+/// β), the unoccluded transfer `Σ_k w_k F(x_k → S)` and the rays it cost.
+struct NodeRows {
+    inner: Vec<f64>,
+    unoccluded: f64,
+    rays: u64,
+    rays_saved: u64,
+}
+
+/// What step 2 needs of the source and of visibility, to evaluate it at any receiver nodes.
+struct SourceSampler<'a> {
+    visibility: &'a dyn Visibility,
+    shaft: Option<ShaftVerdict>,
+    occluders: Option<(&'a [u32], &'a crate::visibility::shaft::ShaftCuller)>,
+    n_r: DVec3,
+    n_s: DVec3,
+    source: &'a Shape,
+    y_nodes: &'a [Node],
+    phi_y: &'a [f64],
+    size: usize,
+}
+
+impl SourceSampler<'_> {
+    /// Step 1 (the kernel at each node pair, with its transmittance) and step 2 at `nodes`.
+    fn rows(&self, nodes: &[Node]) -> NodeRows {
+        let size = self.size;
+        let mut out = NodeRows {
+            inner: vec![0.0; nodes.len() * size],
+            unoccluded: 0.0,
+            rays: 0,
+            rays_saved: 0,
+        };
+        for (k, x) in nodes.iter().enumerate() {
+            let exact = point_to_polygon(x.point, self.n_r, self.source);
+            if exact <= 0.0 {
+                continue;
+            }
+            out.unoccluded += x.weight * exact;
+            let row = &mut out.inner[k * size..(k + 1) * size];
+            let mut open_sum = 0.0;
+            for (l, y) in self.y_nodes.iter().enumerate() {
+                let g = y.weight * point_to_point(x.point, self.n_r, y.point, self.n_s);
+                if g <= 0.0 {
+                    continue;
+                }
+                open_sum += g;
+                let t = match self.shaft {
+                    Some(ShaftVerdict::Clear) => {
+                        out.rays_saved += 1;
+                        1.0
+                    }
+                    Some(ShaftVerdict::Blocked) => {
+                        out.rays_saved += 1;
+                        0.0
+                    }
+                    _ => {
+                        out.rays += 1;
+                        match self.occluders {
+                            Some((list, culler)) => {
+                                if culler.segment_occluded_among(list, x.point, y.point) {
+                                    0.0
+                                } else {
+                                    1.0
+                                }
+                            }
+                            None => self.visibility.transmittance(x.point, y.point),
+                        }
+                    }
+                };
+                if t > 0.0 {
+                    for (beta, value) in row.iter_mut().enumerate() {
+                        *value += g * t * self.phi_y[l * size + beta];
+                    }
+                }
+            }
+            if open_sum > 0.0 {
+                let scale = exact / open_sum;
+                row.iter_mut().for_each(|v| *v *= scale);
+            }
+        }
+        out
     }
 }
 
