@@ -4,6 +4,7 @@
 //! tests share this one path.
 
 use crate::bases::BasisKind;
+use crate::geometry::near_field::NearField;
 use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
 use crate::hierarchy::{ErrorStorage, Hierarchy};
 use crate::memory::MemoryBudget;
@@ -13,7 +14,6 @@ use crate::oracles::smoothness::SmoothnessOracle;
 use crate::oracles::{power::PowerOracle, RefinementOracle};
 use crate::progress::Progress;
 use crate::scene::Scene;
-use crate::geometry::near_field::NearField;
 use crate::solvers::coupling::CouplingSettings;
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};

@@ -88,9 +88,8 @@ fn band_mean(h: &Hierarchy, w: f64) -> f64 {
 fn a_lamp_just_under_a_ceiling_lights_it_as_lamberts_formula_says() {
     for gap in [1e-3, 1e-2, 1e-1] {
         let scene = plate_and_lamp(gap);
-        let exact = |w: f64| {
-            RHO * EMISSION * parallel_rectangles_offset([0.0, w, 0.0, 1.0], LAMP, gap)
-        };
+        let exact =
+            |w: f64| RHO * EMISSION * parallel_rectangles_offset([0.0, w, 0.0, 1.0], LAMP, gap);
         let mut means = Vec::new();
         for near_field in [NearField::Adaptive, NearField::Regular] {
             let settings = SimulationSettings {
@@ -122,7 +121,10 @@ fn a_lamp_just_under_a_ceiling_lights_it_as_lamberts_formula_says() {
         if gap < 1e-2 {
             // Without the adaptive rule the same solve misses most of the light: this test can fail.
             let (plate, _) = means[1];
-            assert!(plate < 0.5, "gap {gap}: the regular rule found {plate:.3} of it");
+            assert!(
+                plate < 0.5,
+                "gap {gap}: the regular rule found {plate:.3} of it"
+            );
         }
     }
 }

@@ -100,8 +100,16 @@ pub fn parallel_rectangles_offset(from: [f64; 4], to: [f64; 4], z: f64) -> f64 {
     let [xi0, xi1, eta0, eta1] = to;
     let g = |dx: f64, dy: f64| {
         let (rx, ry) = ((dx * dx + z * z).sqrt(), (dy * dy + z * z).sqrt());
-        let along_y = if rx > 0.0 { dy * rx * dy.atan2(rx) } else { 0.0 };
-        let along_x = if ry > 0.0 { dx * ry * dx.atan2(ry) } else { 0.0 };
+        let along_y = if rx > 0.0 {
+            dy * rx * dy.atan2(rx)
+        } else {
+            0.0
+        };
+        let along_x = if ry > 0.0 {
+            dx * ry * dx.atan2(ry)
+        } else {
+            0.0
+        };
         let r2 = dx * dx + dy * dy + z * z;
         let log = if r2 > 0.0 { 0.5 * z * z * r2.ln() } else { 0.0 };
         (along_y + along_x - log) / (2.0 * PI)
@@ -147,7 +155,10 @@ mod tests {
     #[test]
     fn offset_rectangles_reduce_to_the_coaxial_case_and_obey_reciprocity() {
         let f = parallel_rectangles_offset([0.0, 1.0, 0.0, 2.0], [0.0, 1.0, 0.0, 2.0], 0.7);
-        assert!((f - parallel_rectangles(1.0, 2.0, 0.7)).abs() < 1e-12, "{f}");
+        assert!(
+            (f - parallel_rectangles(1.0, 2.0, 0.7)).abs() < 1e-12,
+            "{f}"
+        );
         let (a, b) = ([0.0, 1.0, 0.0, 1.0], [1.2, 2.0, 0.3, 1.5]);
         let (ab, ba) = (
             parallel_rectangles_offset(a, b, 0.5),

@@ -35,19 +35,20 @@ pub enum NearField {
     Regular,
 }
 
-/// Relative accuracy [`receiver_integral`] aims at: the sum of the cells' error indicators within 1% of
-/// the integral.
+/// Relative accuracy couplings ask of [`receiver_integral`]: the sum of the cells' error indicators
+/// within 1% of the integral.
 pub const TOLERANCE: f64 = 0.01;
 
 /// Most leaf cells of [`receiver_integral`]; past it the rule stops where it is (a peak along a line is
 /// then resolved to about 2⁻⁶⁰ of the element, one at a point to about 2⁻³⁰).
 pub const MAX_CELLS: usize = 64;
 
-/// Whether the source comes within the receiver's size of it (the receiver's centroid is closer to the
-/// source than the receiver's diameter): only then can `F(x → S)` vary over the receiver faster than its
-/// regular rule resolves (farther away, `1/r²` changes by less than a factor of 4 across it).
+/// Whether the source comes nearer to the receiver than about half the receiver's size (its centroid
+/// is closer to the source than ¾ of its diameter, which holds for every element along a source's
+/// outline): only then can `F(x → S)` vary over the receiver faster than its regular rule resolves
+/// (farther away, `1/r²` changes by less than a factor of 4 between neighbouring nodes).
 pub fn is_near(receiver: &Shape, source: &Shape) -> bool {
-    distance_to_polygon(receiver.centroid(), source) < receiver.diameter()
+    distance_to_polygon(receiver.centroid(), source) < 0.75 * receiver.diameter()
 }
 
 /// The receiver integral `∫_R F(x → S) dA_x` of the exact unoccluded point-to-source factor, with the
@@ -60,6 +61,11 @@ pub struct ReceiverIntegral {
     pub nodes: Vec<Node>,
     /// Leaf cells (1: the receiver whole, bisected once to check it).
     pub cells: usize,
+    /// How unevenly the factor spreads over the receiver: `Σ_c |I_c − F̄ A_c| / Σ_c I_c` over the
+    /// halves `c` of the leaf cells (`I_c` a half's integral, `A_c` its area, `F̄` the mean factor), the
+    /// L¹ deviation from the mean of the factor averaged per cell, relative to the integral: 0 for an
+    /// even factor, toward 2 where a narrow band holds all of it.
+    pub spread: f64,
 }
 
 /// A cell of the receiver's parameter domain (cells are triangles or quads in the `z = 0` plane, so that
@@ -69,18 +75,21 @@ struct Cell {
     coarse: f64,
     halves: [Shape; 2],
     fine: [f64; 2],
+    /// The halves' areas on the receiver.
+    areas: [f64; 2],
 }
 
 impl Cell {
-    fn new(domain: Shape, coarse: f64, integrate: &dyn Fn(&Shape) -> f64) -> Cell {
+    fn new(domain: Shape, coarse: f64, integrate: &dyn Fn(&Shape) -> (f64, f64)) -> Cell {
         bisections(&domain)
             .into_iter()
             .map(|halves| {
-                let fine = halves.map(|h| integrate(&h));
+                let [(f0, a0), (f1, a1)] = halves.map(|h| integrate(&h));
                 Cell {
                     coarse,
                     halves,
-                    fine,
+                    fine: [f0, f1],
+                    areas: [a0, a1],
                 }
             })
             .max_by(|a, b| a.error().total_cmp(&b.error()))
@@ -97,26 +106,32 @@ impl Cell {
 }
 
 /// [`ReceiverIntegral`] of `F(x → source)` over `receiver` (normal `normal`) with rules of `degree`,
-/// refined until the cells' error indicators sum to [`TOLERANCE`] of the integral or [`MAX_CELLS`]
-/// cells are in use.
+/// refined until the cells' error indicators sum to `tolerance` of the integral (couplings:
+/// [`TOLERANCE`]) or [`MAX_CELLS`] cells are in use.
 pub fn receiver_integral(
     receiver: &Shape,
     normal: DVec3,
     source: &Shape,
     degree: usize,
+    tolerance: f64,
 ) -> ReceiverIntegral {
-    let integrate = |domain: &Shape| -> f64 {
+    // A cell's integral and area.
+    let integrate = |domain: &Shape| -> (f64, f64) {
         nodes_in(receiver, domain, degree)
             .iter()
-            .map(|x| x.weight * point_to_polygon(x.point, normal, source))
-            .sum()
+            .fold((0.0, 0.0), |(f, a), x| {
+                (
+                    f + x.weight * point_to_polygon(x.point, normal, source),
+                    a + x.weight,
+                )
+            })
     };
     let whole = parameter_domain(receiver);
-    let mut cells = vec![Cell::new(whole, integrate(&whole), &integrate)];
+    let mut cells = vec![Cell::new(whole, integrate(&whole).0, &integrate)];
     while cells.len() < MAX_CELLS {
         let value: f64 = cells.iter().map(Cell::value).sum();
         let error: f64 = cells.iter().map(Cell::error).sum();
-        if error <= TOLERANCE * value {
+        if error <= tolerance * value {
             break;
         }
         let worst = (0..cells.len())
@@ -127,8 +142,17 @@ pub fn receiver_integral(
             cells.push(Cell::new(half, coarse, &integrate));
         }
     }
+    let value: f64 = cells.iter().map(Cell::value).sum();
+    let area: f64 = cells.iter().flat_map(|c| c.areas).sum();
+    let mean = value / area.max(f64::MIN_POSITIVE);
+    let deviation: f64 = cells
+        .iter()
+        .flat_map(|c| c.fine.into_iter().zip(c.areas))
+        .map(|(f, a)| (f - mean * a).abs())
+        .sum();
     ReceiverIntegral {
-        value: cells.iter().map(Cell::value).sum(),
+        value,
+        spread: if value > 0.0 { deviation / value } else { 0.0 },
         nodes: cells
             .iter()
             .flat_map(|c| c.halves.iter())
@@ -147,8 +171,14 @@ fn bisections(cell: &Shape) -> Vec<[Shape; 2]> {
             let (m01, m32) = (mid(p0, p1), mid(p3, p2));
             let (m03, m12) = (mid(p0, p3), mid(p1, p2));
             vec![
-                [Shape::Quad([p0, m01, m32, p3]), Shape::Quad([m01, p1, p2, m32])],
-                [Shape::Quad([p0, p1, m12, m03]), Shape::Quad([m03, m12, p2, p3])],
+                [
+                    Shape::Quad([p0, m01, m32, p3]),
+                    Shape::Quad([m01, p1, p2, m32]),
+                ],
+                [
+                    Shape::Quad([p0, p1, m12, m03]),
+                    Shape::Quad([m03, m12, p2, p3]),
+                ],
             ]
         }
         Shape::Triangle(v) => (0..3)
@@ -286,8 +316,9 @@ mod tests {
         let plate = square(0.0, 1.0, 0.0, 1.0, 0.0, false);
         for gap in [1e-3, 1e-2, 1e-1] {
             let lamp = square(-0.2, 0.0, 0.0, 1.0, -gap, true);
-            let exact = parallel_rectangles_offset([0.0, 1.0, 0.0, 1.0], [-0.2, 0.0, 0.0, 1.0], gap);
-            let adaptive = receiver_integral(&plate, plate.normal(), &lamp, 4);
+            let exact =
+                parallel_rectangles_offset([0.0, 1.0, 0.0, 1.0], [-0.2, 0.0, 0.0, 1.0], gap);
+            let adaptive = receiver_integral(&plate, plate.normal(), &lamp, 4, TOLERANCE);
             assert!(
                 (adaptive.value - exact).abs() <= 2.0 * TOLERANCE * exact,
                 "gap {gap}: {} vs {exact} ({} cells)",
@@ -304,14 +335,28 @@ mod tests {
             );
             let weights: f64 = adaptive.nodes.iter().map(|n| n.weight).sum();
             assert!((weights - 1.0).abs() < 1e-12);
+            // Most of the light falls on a band of the plate: the factor is far from even.
+            assert!(
+                adaptive.spread > 1.0,
+                "gap {gap}: spread {}",
+                adaptive.spread
+            );
         }
+        // Under a large parallel source the factor is nearly 1 everywhere.
+        let ceiling = square(-10.0, 11.0, -10.0, 11.0, 0.01, false);
+        let floor = square(0.0, 1.0, 0.0, 1.0, 0.0, true);
+        let even = receiver_integral(&floor, floor.normal(), &ceiling, 4, TOLERANCE);
+        assert!(even.spread < 0.01, "spread {}", even.spread);
     }
 
     #[test]
     fn far_sources_are_not_near() {
         let receiver = square(0.0, 1.0, 0.0, 1.0, 0.0, false);
         assert!(!is_near(&receiver, &square(3.0, 4.0, 0.0, 1.0, -0.5, true)));
-        assert!(is_near(&receiver, &square(-0.2, 0.0, 0.0, 1.0, -0.001, true)));
+        assert!(is_near(
+            &receiver,
+            &square(-0.2, 0.0, 0.0, 1.0, -0.001, true)
+        ));
         assert_eq!(
             distance_to_polygon(DVec3::new(0.5, 0.5, 2.0), &receiver),
             2.0

@@ -183,7 +183,9 @@ fn couple_in_full(
     // A near source whose light the regular nodes miss: the block, the unoccluded and the visible
     // transfer come from the adaptive composite rule instead (`geometry::near_field`).
     let near = (settings.near_field == NearField::Adaptive && is_near(r_shape, s_shape))
-        .then(|| near_field::receiver_integral(r_shape, n_r, s_shape, degree))
+        .then(|| {
+            near_field::receiver_integral(r_shape, n_r, s_shape, degree, near_field::TOLERANCE)
+        })
         .filter(|near| (near.value - regular.unoccluded).abs() > NEAR_FIELD_MISS * near.value);
     let composite = near.map(|near| {
         let phi = basis_values(basis, r_shape, &near.nodes);
