@@ -15,8 +15,9 @@
 //! Berntsen–Espelid–Genz 1991). Cells are bisected, each along the direction whose halves change the
 //! integral most (a quad across `u` or `v`, a triangle through one of its edges), so a peak along a
 //! line (a lamp's outline) is followed by one cell per level rather than the 2^level cells of a
-//! quadtree along it. [`is_near`] says when that is worth doing. The result's nodes (with their
-//! parameters on the receiver, for the basis) form a composite rule of the same degree.
+//! quadtree along it. [`is_near`] says when that is worth doing. The cells found with a cheap rule
+//! carry a composite rule of any degree ([`ReceiverIntegral::nodes`], with parameters on the receiver
+//! for its basis).
 
 use super::cubature::{rule, Node};
 use super::form_factor::point_to_polygon;
@@ -39,28 +40,50 @@ pub enum NearField {
 /// within 1% of the integral.
 pub const TOLERANCE: f64 = 0.01;
 
+/// Largest ratio of the factor's values at a receiver's sample points (its regular nodes, or its
+/// corners and centroid: [`varies_over`]) at which the regular rule is trusted without the adaptive
+/// one: a factor that changes less than twofold over the receiver has no peak that its nodes miss.
+pub const EVEN_RATIO: f64 = 2.0;
+
+/// Whether `F(x → source)` changes more than [`EVEN_RATIO`]-fold between the receiver's corners and
+/// its centroid (five point factors: the cheap test before a [`receiver_integral`]).
+pub fn varies_over(receiver: &Shape, normal: DVec3, source: &Shape) -> bool {
+    let (low, high) = receiver
+        .vertices()
+        .iter()
+        .chain([receiver.centroid()].iter())
+        .map(|&x| point_to_polygon(x, normal, source))
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), f| {
+            (lo.min(f), hi.max(f))
+        });
+    high > EVEN_RATIO * low
+}
+
+/// Degree of the rule [`receiver_integral`]'s callers search cells with (2 × 2 nodes on a quad): the
+/// subdivision, not the rule, reaches the tolerance.
+pub const SEARCH_DEGREE: usize = 3;
+
 /// Most leaf cells of [`receiver_integral`]; past it the rule stops where it is (a peak along a line is
 /// then resolved to about 2⁻⁶⁰ of the element, one at a point to about 2⁻³⁰).
 pub const MAX_CELLS: usize = 64;
 
 /// Whether the source comes nearer to the receiver than about half the receiver's size (its centroid
-/// is closer to the source than ¾ of its diameter, which holds for every element along a source's
+/// is closer to the source than half its diameter, which holds for every element along a source's
 /// outline): only then can `F(x → S)` vary over the receiver faster than its regular rule resolves
 /// (farther away, `1/r²` changes by less than a factor of 4 between neighbouring nodes).
 pub fn is_near(receiver: &Shape, source: &Shape) -> bool {
-    distance_to_polygon(receiver.centroid(), source) < 0.75 * receiver.diameter()
+    distance_to_polygon(receiver.centroid(), source) < 0.5 * receiver.diameter()
 }
 
 /// The receiver integral `∫_R F(x → S) dA_x` of the exact unoccluded point-to-source factor, with the
-/// composite rule that reached it.
+/// cells that reached it.
 #[derive(Clone, Debug)]
 pub struct ReceiverIntegral {
     /// `∫_R F(x → S) dA_x` (divide by the receiver's area for the receiver-averaged form factor).
     pub value: f64,
-    /// The composite rule: `rule(degree)` on both halves of every leaf cell, parameters on the receiver.
-    pub nodes: Vec<Node>,
-    /// Leaf cells (1: the receiver whole, bisected once to check it).
-    pub cells: usize,
+    /// The halves of every leaf cell, in the receiver's parameter domain: a composite rule's cells
+    /// ([`ReceiverIntegral::nodes`]).
+    pub cells: Vec<Shape>,
     /// How unevenly the factor spreads over the receiver: `Σ_c |I_c − F̄ A_c| / Σ_c I_c` over the
     /// halves `c` of the leaf cells (`I_c` a half's integral, `A_c` its area, `F̄` the mean factor), the
     /// L¹ deviation from the mean of the factor averaged per cell, relative to the integral: 0 for an
@@ -153,12 +176,18 @@ pub fn receiver_integral(
     ReceiverIntegral {
         value,
         spread: if value > 0.0 { deviation / value } else { 0.0 },
-        nodes: cells
+        cells: cells.iter().flat_map(|c| c.halves).collect(),
+    }
+}
+
+impl ReceiverIntegral {
+    /// The composite rule of `rule(degree)` on every cell, mapped onto `receiver` (the shape integrated),
+    /// with parameters on it for its basis.
+    pub fn nodes(&self, receiver: &Shape, degree: usize) -> Vec<Node> {
+        self.cells
             .iter()
-            .flat_map(|c| c.halves.iter())
-            .flat_map(|half| nodes_in(receiver, half, degree))
-            .collect(),
-        cells: cells.len(),
+            .flat_map(|cell| nodes_in(receiver, cell, degree))
+            .collect()
     }
 }
 
@@ -318,12 +347,13 @@ mod tests {
             let lamp = square(-0.2, 0.0, 0.0, 1.0, -gap, true);
             let exact =
                 parallel_rectangles_offset([0.0, 1.0, 0.0, 1.0], [-0.2, 0.0, 0.0, 1.0], gap);
-            let adaptive = receiver_integral(&plate, plate.normal(), &lamp, 4, TOLERANCE);
+            let adaptive =
+                receiver_integral(&plate, plate.normal(), &lamp, SEARCH_DEGREE, TOLERANCE);
             assert!(
                 (adaptive.value - exact).abs() <= 2.0 * TOLERANCE * exact,
                 "gap {gap}: {} vs {exact} ({} cells)",
                 adaptive.value,
-                adaptive.cells
+                adaptive.cells.len()
             );
             let regular: f64 = nodes_on(&plate, rule(plate.domain(), 4))
                 .iter()
@@ -333,7 +363,7 @@ mod tests {
                 regular < 0.9 * exact,
                 "gap {gap}: regular {regular} vs {exact}"
             );
-            let weights: f64 = adaptive.nodes.iter().map(|n| n.weight).sum();
+            let weights: f64 = adaptive.nodes(&plate, 6).iter().map(|n| n.weight).sum();
             assert!((weights - 1.0).abs() < 1e-12);
             // Most of the light falls on a band of the plate: the factor is far from even.
             assert!(

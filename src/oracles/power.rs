@@ -27,10 +27,6 @@ use crate::geometry::near_field::{self, NearField};
 use crate::hierarchy::ElementId;
 use rand_pcg::Pcg64Mcg;
 
-/// Degree of the cells' rules in the adaptive transport of near pairs (2 × 2 nodes on a quad): the
-/// adaptivity, not the rule, reaches the integral's tolerance.
-const TRANSPORT_DEGREE: usize = 3;
-
 /// Relative accuracy of the adaptive transport: an oracle estimate need not be closer than this (eq. (1)
 /// compares it with ε, and the spread only has to tell an even factor from one held in a band).
 const TRANSPORT_TOLERANCE: f64 = 0.1;
@@ -85,12 +81,13 @@ impl RefinementOracle for PowerOracle {
         let normal = h.patch_of(receiver).normal;
         let transport = if self.near_field == NearField::Adaptive
             && near_field::is_near(r.shape(), s.shape())
+            && near_field::varies_over(r.shape(), normal, s.shape())
         {
             let near = near_field::receiver_integral(
                 r.shape(),
                 normal,
                 s.shape(),
-                TRANSPORT_DEGREE,
+                near_field::SEARCH_DEGREE,
                 TRANSPORT_TOLERANCE,
             );
             near.value * (self.shadow_gain * near.spread).max(1.0)

@@ -181,18 +181,29 @@ fn couple_in_full(
     let regular = sampler.rows(&x_nodes);
     let (mut rays, mut rays_saved) = (regular.rays, regular.rays_saved);
     // A near source whose light the regular nodes miss: the block, the unoccluded and the visible
-    // transfer come from the adaptive composite rule instead (`geometry::near_field`).
-    let near = (settings.near_field == NearField::Adaptive && is_near(r_shape, s_shape))
-        .then(|| {
-            near_field::receiver_integral(r_shape, n_r, s_shape, degree, near_field::TOLERANCE)
-        })
-        .filter(|near| (near.value - regular.unoccluded).abs() > NEAR_FIELD_MISS * near.value);
+    // transfer come from the adaptive composite rule instead (`geometry::near_field`). Where the
+    // factor is nearly even over the nodes the regular rule is trusted without looking.
+    let (low, high) = regular.factor_range;
+    let near = (settings.near_field == NearField::Adaptive
+        && high > near_field::EVEN_RATIO * low
+        && is_near(r_shape, s_shape))
+    .then(|| {
+        near_field::receiver_integral(
+            r_shape,
+            n_r,
+            s_shape,
+            near_field::SEARCH_DEGREE,
+            near_field::TOLERANCE,
+        )
+    })
+    .filter(|near| (near.value - regular.unoccluded).abs() > NEAR_FIELD_MISS * near.value);
     let composite = near.map(|near| {
-        let phi = basis_values(basis, r_shape, &near.nodes);
-        let rows = sampler.rows(&near.nodes);
+        let nodes = near.nodes(r_shape, degree);
+        let phi = basis_values(basis, r_shape, &nodes);
+        let rows = sampler.rows(&nodes);
         rays += rows.rays;
         rays_saved += rows.rays_saved;
-        (near.nodes, phi, rows)
+        (nodes, phi, rows)
     });
     let (block_nodes, phi_block, block_rows) = match &composite {
         Some((nodes, phi, rows)) => (nodes.as_slice(), phi.as_slice(), rows),
@@ -253,6 +264,8 @@ fn couple_in_full(
 struct NodeRows {
     inner: Vec<f64>,
     unoccluded: f64,
+    /// The smallest and largest `F(x_k → S)` over the nodes.
+    factor_range: (f64, f64),
     rays: u64,
     rays_saved: u64,
 }
@@ -277,11 +290,13 @@ impl SourceSampler<'_> {
         let mut out = NodeRows {
             inner: vec![0.0; nodes.len() * size],
             unoccluded: 0.0,
+            factor_range: (f64::INFINITY, 0.0),
             rays: 0,
             rays_saved: 0,
         };
         for (k, x) in nodes.iter().enumerate() {
             let exact = point_to_polygon(x.point, self.n_r, self.source);
+            out.factor_range = (out.factor_range.0.min(exact), out.factor_range.1.max(exact));
             if exact <= 0.0 {
                 continue;
             }
