@@ -457,3 +457,53 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
     );
     assert!(png.exists());
 }
+
+/// A reference path traced once (`probe --reference --json`) is compared with later solutions at the
+/// same points (`probe --against`): the same error summary as a fresh reference gives, and a clear
+/// error when the points are not the same.
+#[test]
+fn probe_compares_with_a_stored_reference_at_the_same_points() {
+    let dir = temp_dir("against");
+    let common = ["probe", "-q", "--random", "30", "--eps", "1e-3"];
+    let fresh = radiosity(&[&common[..], &["--reference", "--spp", "64"]].concat());
+    assert!(
+        fresh.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fresh.stderr)
+    );
+    let stored = radiosity(&[&common[..], &["--reference", "--spp", "64", "--json"]].concat());
+    assert!(stored.status.success());
+    let path = dir.join("ref.json");
+    std::fs::write(&path, &stored.stdout).unwrap();
+    let against = radiosity(&[&common[..], &["--against", path.to_str().unwrap()]].concat());
+    assert!(
+        against.status.success(),
+        "{}",
+        String::from_utf8_lossy(&against.stderr)
+    );
+    let summary = |out: &std::process::Output| -> Vec<String> {
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter(|l| l.starts_with("# luminance error") || l.starts_with("# |error|"))
+            .map(str::to_owned)
+            .collect()
+    };
+    assert_eq!(
+        summary(&against).len(),
+        2,
+        "{}",
+        String::from_utf8_lossy(&against.stdout)
+    );
+    // The same seed draws the same paths: the stored reference is the fresh one.
+    assert_eq!(summary(&against), summary(&fresh));
+    let other = radiosity(
+        &[
+            &common[..],
+            &["--seed", "7", "--against", path.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(!other.status.success());
+    let stderr = String::from_utf8_lossy(&other.stderr);
+    assert!(stderr.contains("ref.json: point 1 is"), "{stderr}");
+}

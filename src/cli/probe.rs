@@ -4,9 +4,12 @@
 use super::args::{SceneArgs, SolveArgs};
 use crate::color::Units;
 use crate::measures::illuminance::{probe_photometry, GatherSettings, IrradianceGather};
+use crate::measures::point_errors::{point_errors, LIT_FRACTION};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
-use crate::reference::probe::{probe_points, random_points, read_points, ProbeReference};
+use crate::reference::probe::{
+    attach_stored_reference, probe_points, random_points, read_points, ProbeReference,
+};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -28,6 +31,10 @@ pub struct ProbeCommand {
     /// Also estimate the radiance by unbiased path tracing, with its standard error.
     #[arg(long)]
     pub reference: bool,
+    /// A stored reference: the JSON of an earlier `probe --reference --json` at the same points (same
+    /// scene, --points or --random N, and --seed), compared instead of path tracing anew.
+    #[arg(long, value_name = "REF.json", conflicts_with = "reference")]
+    pub against: Option<PathBuf>,
     /// Paths per point for `--reference` (rounded up to a multiple of 16).
     #[arg(long, default_value_t = 16384, value_name = "N", value_parser = super::args::count(0, 1 << 24))]
     pub spp: usize,
@@ -61,7 +68,7 @@ impl ProbeCommand {
             spp: self.spp,
             seed,
         });
-        let results = probe_points(
+        let mut results = probe_points(
             &scene,
             solution.visibility.as_ref(),
             &solution.hierarchy,
@@ -69,6 +76,10 @@ impl ProbeCommand {
             reference,
             &file,
         )?;
+        if let Some(path) = &self.against {
+            attach_stored_reference(&mut results, path)?;
+        }
+        let compared = self.reference || self.against.is_some();
         if self.units == Units::Photometric {
             let gather = IrradianceGather::new(
                 &solution.hierarchy,
@@ -98,7 +109,7 @@ impl ProbeCommand {
                 "illuminance",
                 "± error"
             )?;
-            if self.reference {
+            if compared {
                 out!(" {:>12} {:>10}", "reference", "stderr")?;
             }
             outln!()?;
@@ -132,7 +143,7 @@ impl ProbeCommand {
             "poly",
             "radiosity (r g b)"
         )?;
-        if self.reference {
+        if compared {
             out!(
                 " {:>35} {:>35} {:>6}",
                 "reference (r g b)",
@@ -174,7 +185,7 @@ impl ProbeCommand {
             }
             outln!()?;
         }
-        if let (true, Some(accuracy)) = (self.reference, solution.report.error.accuracy) {
+        if let (true, Some(accuracy)) = (compared, solution.report.error.accuracy) {
             let within = results
                 .iter()
                 .filter(|r| {
@@ -186,6 +197,31 @@ impl ProbeCommand {
                 "# {within} of {} points within the accuracy {accuracy:.4} W/m²sr (largest channel, \
                  allowing two standard errors of the reference); Bekaert–Willems promise at least 95%",
                 results.len()
+            )?;
+        }
+        let pairs = results
+            .iter()
+            .filter_map(|r| r.reference.map(|e| (r.radiosity, e.mean)));
+        if let Some(e) = point_errors(pairs) {
+            outln!(
+                "# luminance error at {} lit points (reference above {:.0}% of the mean {:.4e}): RMS \
+                 {:.2}%, median {:.2}%, 90th percentile {:.2}%, largest {:.1}%, mean signed {:+.2}%",
+                e.lit_points,
+                100.0 * LIT_FRACTION,
+                e.mean_reference,
+                100.0 * e.relative_rms,
+                100.0 * e.relative_median,
+                100.0 * e.relative_p90,
+                100.0 * e.relative_max,
+                100.0 * e.relative_mean_signed
+            )?;
+            outln!(
+                "# |error| / mean reference over {} points: RMS {:.2}%, 95th percentile {:.2}%, \
+                 largest {:.1}% (the reference's noise not removed)",
+                e.points,
+                100.0 * e.absolute_rms,
+                100.0 * e.absolute_p95,
+                100.0 * e.absolute_max
             )?;
         }
         Ok(())

@@ -6,4 +6,5 @@ pub mod illuminance;
 pub mod image_metrics;
 pub mod information;
 pub mod morphology;
+pub mod point_errors;
 pub mod stats;

@@ -89,7 +89,7 @@ impl Default for ReferenceSettings {
 
 /// A Monte Carlo estimate per channel: the mean and its standard error (the standard deviation of the
 /// independent batch means over √batches).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Estimate {
     pub mean: Rgb,
     pub stderr: Rgb,

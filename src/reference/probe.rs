@@ -7,6 +7,7 @@ use crate::geometry::{convex_contains, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::scene::{Diagnostic, Scene};
 use crate::visibility::Visibility;
+use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 /// A point with the normal of the surface side it probes, from line `line` of the points file.
@@ -266,6 +267,56 @@ pub struct ProbeResult {
     pub estimated_error: f64,
     /// Unbiased path-traced radiance with its standard error, when asked for.
     pub reference: Option<Estimate>,
+}
+
+/// Puts on `results` the reference estimates of an earlier `probe --reference --json` run at the same
+/// points, read from `path` (`probe --against`): a reference is path traced once and compared with
+/// many solutions. Every entry's point must be the result's (same scene, points and seed).
+pub fn attach_stored_reference(results: &mut [ProbeResult], path: &Path) -> anyhow::Result<()> {
+    #[derive(serde::Deserialize)]
+    struct Stored {
+        point: [f64; 3],
+        reference: Option<Estimate>,
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the stored reference {}", path.display()))?;
+    let stored: Vec<Stored> = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: not the JSON of `radiosity probe --reference --json`",
+            path.display()
+        )
+    })?;
+    anyhow::ensure!(
+        stored.len() == results.len(),
+        "{}: {} points, this run has {} (same scene, points and --seed?)",
+        path.display(),
+        stored.len(),
+        results.len()
+    );
+    for (k, (result, entry)) in results.iter_mut().zip(stored).enumerate() {
+        let scale = 1.0 + result.point.iter().map(|c| c.abs()).fold(0.0, f64::max);
+        let same = result
+            .point
+            .iter()
+            .zip(entry.point)
+            .all(|(a, b)| (a - b).abs() <= 1e-9 * scale);
+        anyhow::ensure!(
+            same,
+            "{}: point {} is {:?}, this run's is {:?} (same scene, points and --seed?)",
+            path.display(),
+            k + 1,
+            entry.point,
+            result.point
+        );
+        result.reference = Some(entry.reference.with_context(|| {
+            format!(
+                "{}: point {} has no reference estimate (made without --reference)",
+                path.display(),
+                k + 1
+            )
+        })?);
+    }
+    Ok(())
 }
 
 /// How many paths per probe point the reference estimate uses, and their seed.
