@@ -140,14 +140,12 @@ pub fn receiver_integral(
 ) -> ReceiverIntegral {
     // A cell's integral and area.
     let integrate = |domain: &Shape| -> (f64, f64) {
-        nodes_in(receiver, domain, degree)
-            .iter()
-            .fold((0.0, 0.0), |(f, a), x| {
-                (
-                    f + x.weight * point_to_polygon(x.point, normal, source),
-                    a + x.weight,
-                )
-            })
+        nodes_in(receiver, domain, degree).fold((0.0, 0.0), |(f, a), x| {
+            (
+                f + x.weight * point_to_polygon(x.point, normal, source),
+                a + x.weight,
+            )
+        })
     };
     let whole = parameter_domain(receiver);
     let mut cells = vec![Cell::new(whole, integrate(&whole).0, &integrate)];
@@ -240,11 +238,15 @@ fn parameter_domain(shape: &Shape) -> Shape {
 
 /// `rule(degree)` mapped into the parameter cell `domain` and on to `shape` (weights: the rule's times
 /// the cell's Jacobian times the shape's, so that they sum to the area of the cell's image).
-fn nodes_in(shape: &Shape, domain: &Shape, degree: usize) -> Vec<Node> {
+fn nodes_in<'a>(
+    shape: &'a Shape,
+    domain: &'a Shape,
+    degree: usize,
+) -> impl Iterator<Item = Node> + 'a {
     rule(shape.domain(), degree)
         .nodes
         .iter()
-        .map(|&(st, w)| {
+        .map(move |&(st, w)| {
             let p = domain.point_at(st);
             let uv = DVec2::new(p.x, p.y);
             Node {
@@ -253,7 +255,6 @@ fn nodes_in(shape: &Shape, domain: &Shape, degree: usize) -> Vec<Node> {
                 weight: w * domain.jacobian(st) * shape.jacobian(uv),
             }
         })
-        .collect()
 }
 
 /// Distance from `p` to the convex planar polygon `shape`.
@@ -318,7 +319,7 @@ mod tests {
                 .subdivide()
                 .iter()
                 .flat_map(|c| c.subdivide())
-                .flat_map(|c| nodes_in(&shape, &c, 4))
+                .flat_map(|c| nodes_in(&shape, &c, 4).collect::<Vec<_>>())
                 .collect();
             let area: f64 = nodes.iter().map(|n| n.weight).sum();
             assert!((area - shape.area()).abs() < 1e-12 * shape.area());
