@@ -5,21 +5,23 @@
 //! Hanrahan et al. the transported power A_i F_ij is estimated from both ends (A_i F̃_ij and A_j F̃_ji,
 //! equal by reciprocity for exact form factors) and the larger is kept: a centre-only estimate is zero
 //! when that centre lies behind the other element's plane although part of the element does not.
-//!
-//! Both centres miss the light of a source nearer to the receiver than the receiver is large when it
-//! arrives in a strip along their outlines (a lamp a millimetre under a ceiling lights the ceiling in
-//! a strip as wide as the gap: the centre estimate was 80× too small on office3, so the link was never
-//! refined). With [`NearField::Adaptive`] such pairs ([`near_field::is_near`]) take `A_i F_ij` from the
-//! adaptive receiver integral of the same exact point factor ([`near_field::receiver_integral`]),
-//! still without rays. Once found, that light must not be spread over the whole receiver either: a
-//! link whose power is below ε but sits in a band of its receiver would light the rest of it (cube.mgf's
-//! ceiling, half a metre from its lamp, came out 30% too bright). So the uneven spread of the factor
-//! over the receiver weighs like the visibility's: `P · max(1, g s)`, with `s` the factor's L¹
-//! deviation from its mean ([`near_field::ReceiverIntegral::spread`]).
 //! Taking the largest value over the element's vertices as well was tried: it costs five times more and
 //! does not cure the known weakness of eq. (1) (coarse links whose power is pushed evenly over a receiver
 //! across which the kernel varies strongly: corner elements of a closed furnace box stay 10-20% off; see
 //! BENCHMARKS.md), which is what the smoothness and MI oracles address.
+//!
+//! Both centres miss the light of a source nearer to the receiver than the receiver is large when it
+//! arrives in a strip along their outlines (a lamp a millimetre under a ceiling lights the ceiling in
+//! a strip as wide as the gap: the centre estimate was 80× too small on office3, so the link was never
+//! refined). With [`NearField::Adaptive`] such pairs ([`near_field::is_near`], where the factor varies
+//! more than twofold over the receiver's corners and centre, [`near_field::varies_over`]) take
+//! `A_i F_ij` from the adaptive receiver integral of the same exact point factor
+//! ([`near_field::receiver_integral`]), still without rays. Once found, that light must not be spread
+//! over the whole receiver either: a link whose power is below ε but sits in a band of its receiver
+//! lights the rest of it. So the uneven spread of the factor over the receiver weighs like the
+//! visibility's: `P · max(1, g s)`, with `s` the factor's L¹ deviation from its mean
+//! ([`near_field::ReceiverIntegral::spread`]). It helps without curing: cube.mgf's ceiling 20 and 30 cm
+//! from its lamp reads 31% and 56% too bright without the term, 12% and 36% with it (BENCHMARKS.md).
 
 use super::{reflected_source_radiance, Estimate, OracleContext, RefinementOracle};
 use crate::geometry::form_factor::point_to_polygon;
