@@ -59,15 +59,20 @@ use super::coupling::{basis_values, visible_fraction, Coupling, CouplingSettings
 use super::link_rng;
 use crate::color::Rgb;
 use crate::geometry::cubature::{nodes_on, rule};
+use crate::geometry::Shape;
 use crate::geometry::{DVec2, DVec3};
-use crate::hierarchy::clusters::ClusteringKind;
+use crate::hierarchy::clusters::{ClusteringKind, Facing, Orientation};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
-use crate::visibility::item_buffer::{bucket_direction, direction_bucket, ItemBuffers};
+use crate::visibility::item_buffer::{
+    bucket_direction, direction_bucket, visible_fractions, ItemBuffers,
+};
 use crate::visibility::Visibility;
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 use std::f64::consts::PI;
+use std::ops::Deref;
+use std::sync::Arc;
 
 /// Visibility samples per receiver node of a cluster link (per link for a cluster receiver: twice this).
 pub const CLUSTER_VISIBILITY_SAMPLES: usize = 4;
@@ -89,34 +94,71 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
             0.25
         }
         ElementKind::Cluster(_) if e.area <= 0.0 => 0.0,
-        ElementKind::Cluster(c) if h.item_buffers.is_none() => {
-            c.orientation.projected_area(toward) / e.area
-        }
-        ElementKind::Cluster(_) => projected_areas(h, id, toward).iter().sum::<f64>() / e.area,
+        ElementKind::Cluster(_) => groups_toward(h, id, toward).projected_area(toward) / e.area,
     }
 }
 
-/// The projected area of each patch of cluster `id` toward the point `toward`, `A_k max(0, n_k · d_k)`
-/// (Smits et al. 1994), times, with intra-cluster visibility on, the patch's visible fraction in the
-/// cluster's item buffer along the direction from its centre to `toward` (Sillion–Drettakis §6.1: "the
-/// projected area of each patch visible from the direction of the source").
-pub fn projected_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> {
-    let contents = h.contents(h.cluster(id).expect("a cluster"));
-    let fractions = h.item_buffers.as_ref().map(|buffers| {
-        buffers.fractions(id, bucket_toward(h, id, toward), || {
-            contents.iter().map(|&s| *h.element(s).shape()).collect()
-        })
-    });
-    contents
-        .iter()
-        .enumerate()
-        .map(|(k, &s)| {
-            let surface = h.element(s);
-            let d = (toward - surface.shape().centroid()).normalize_or_zero();
-            let visible = fractions.as_ref().map_or(1.0, |f| f64::from(f[k]));
-            surface.area * h.patch_of(s).normal.dot(d).max(0.0) * visible
-        })
-        .collect()
+/// The normal groups ([`Orientation`]) of a cluster that the other end of a link sees: the cluster's
+/// own, or with item buffers the copy of the direction bucket toward the other end, whose areas are
+/// the patches' visible areas (cached, [`ItemBuffers`]).
+pub enum Groups<'a> {
+    Own(&'a Orientation),
+    Visible(Arc<Orientation>),
+}
+
+impl Deref for Groups<'_> {
+    type Target = Orientation;
+    fn deref(&self) -> &Orientation {
+        match self {
+            Groups::Own(groups) => groups,
+            Groups::Visible(groups) => groups,
+        }
+    }
+}
+
+/// The normal groups of cluster `id` seen from the point `toward` (see [`Groups`]). With item buffers
+/// a group's projected area `Σ_k A_k f_k max(0, n̄ · d)` (visible areas, the visible-area-weighted
+/// normal `n̄` and centroid) stands for the sum over its patches with each patch's own direction
+/// `d_k` to `toward` (Smits et al. 1994's oriented transfer times §6.1's visible fractions): it is the
+/// same approximation [`Orientation`] makes without item buffers (exact while every member faces
+/// `toward`, up to the parallax of the members about the group's centroid), and what lets a cluster
+/// link cost O(groups) instead of O(patches).
+pub fn groups_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> Groups<'_> {
+    let cluster = h.cluster(id).expect("a cluster");
+    match &h.item_buffers {
+        None => Groups::Own(&cluster.orientation),
+        Some(buffers) => {
+            Groups::Visible(visible_groups(h, buffers, id, bucket_toward(h, id, toward)))
+        }
+    }
+}
+
+/// Cluster `id`'s normal groups weighted by each patch's visible fraction `f_k` in its item buffer
+/// along direction bucket `bucket` (Sillion–Drettakis §6.1: "the projected area of each patch visible
+/// from the direction of the source"), drawn once per (cluster, bucket) and cached.
+fn visible_groups(
+    h: &Hierarchy,
+    buffers: &ItemBuffers,
+    id: ElementId,
+    bucket: u16,
+) -> Arc<Orientation> {
+    buffers.visible_groups(id, bucket, |along| {
+        let cluster = h.cluster(id).expect("a cluster");
+        let contents = h.contents(cluster);
+        let shapes: Vec<Shape> = contents.iter().map(|&s| *h.element(s).shape()).collect();
+        let fractions = visible_fractions(&shapes, along);
+        let facings: Vec<Facing> = contents
+            .iter()
+            .zip(&shapes)
+            .zip(&fractions)
+            .map(|((&s, shape), &f)| Facing {
+                normal: h.patch_of(s).normal,
+                area: h.element(s).area * f64::from(f),
+                centroid: shape.centroid(),
+            })
+            .collect();
+        cluster.orientation.regrouped(&facings)
+    })
 }
 
 /// The transport `A_i F_ij` a link can carry (per unit source radiance, in the power oracle's units of
@@ -186,16 +228,16 @@ pub fn cluster_can_interact(h: &Hierarchy, receiver: ElementId, source: ElementI
 
 /// Where visibility samples of a link end are drawn: uniformly on a surface, or on a cluster's patches
 /// with probability proportional to their projected area toward the other end (`A_k max(0, cos_k)`:
-/// by normal group, then by area within the group; with item buffers per patch, times its visible
-/// fraction, [`projected_areas`]), so that what the mean cosine already discounts (back faces, patches
-/// hidden by the cluster's own contents) is not counted a second time as occluded.
+/// by normal group, then by area within the group; with item buffers the visible areas `A_k f_k` of
+/// the bucket toward the other end, [`groups_toward`]), so that what the mean cosine already discounts
+/// (back faces, patches hidden by the cluster's own contents) is not counted a second time as
+/// occluded.
 enum SampleEnd<'a> {
     Surface(&'a crate::geometry::Shape),
     Cluster {
         surfaces: &'a [ElementId],
-        /// The cluster's normal groups when `cumulative` runs over groups; `None` when it runs over
-        /// the patches themselves (item buffers: each patch has its own visible fraction).
-        orientation: Option<&'a crate::hierarchy::clusters::Orientation>,
+        groups: Groups<'a>,
+        /// Running projected area over the groups.
         cumulative: Vec<f64>,
     },
 }
@@ -205,24 +247,18 @@ impl<'a> SampleEnd<'a> {
         match &h.element(id).kind {
             ElementKind::Surface(s) => SampleEnd::Surface(&s.shape),
             ElementKind::Cluster(c) => {
-                let (orientation, weights): (_, Box<dyn Iterator<Item = f64>>) =
-                    if h.item_buffers.is_some() {
-                        (None, Box::new(projected_areas(h, id, toward).into_iter()))
-                    } else {
-                        (
-                            Some(&c.orientation),
-                            Box::new(c.orientation.projected_areas(toward)),
-                        )
-                    };
+                let groups = groups_toward(h, id, toward);
+                let cumulative = groups
+                    .projected_areas(toward)
+                    .scan(0.0, |sum, a| {
+                        *sum += a;
+                        Some(*sum)
+                    })
+                    .collect();
                 SampleEnd::Cluster {
                     surfaces: h.contents(c),
-                    orientation,
-                    cumulative: weights
-                        .scan(0.0, |sum, a| {
-                            *sum += a;
-                            Some(*sum)
-                        })
-                        .collect(),
+                    groups,
+                    cumulative,
                 }
             }
         }
@@ -241,7 +277,7 @@ impl<'a> SampleEnd<'a> {
         let area = h.element(id).area;
         match self {
             SampleEnd::Cluster {
-                orientation: None,
+                groups: Groups::Visible(_),
                 cumulative,
                 ..
             } if area > 0.0 => cumulative.last().copied().unwrap_or(0.0) / area,
@@ -256,7 +292,7 @@ impl<'a> SampleEnd<'a> {
             SampleEnd::Surface(shape) => Some(shape.sample_uniform(uv)),
             SampleEnd::Cluster {
                 surfaces,
-                orientation,
+                groups,
                 cumulative,
             } => {
                 let total = *cumulative.last()?;
@@ -267,10 +303,7 @@ impl<'a> SampleEnd<'a> {
                 let index = cumulative
                     .partition_point(|&p| p <= target)
                     .min(cumulative.len() - 1);
-                let member = match orientation {
-                    Some(groups) => groups.member_at(index, rng.random()),
-                    None => index as u32,
-                };
+                let member = groups.member_at(index, rng.random());
                 Some(
                     h.element(surfaces[member as usize])
                         .shape()
@@ -441,9 +474,9 @@ fn near_coupling(
 
 /// The visible projected area of each patch of cluster `id` seen along the centre direction `d` of
 /// direction bucket `bucket` (the one its item buffer is drawn along), `w_k = A_k max(0, n_k · d) f_k`,
-/// with `f_k` its visible fraction in the cluster's item buffer of that bucket (Sillion–Drettakis
-/// §6.1): every link in the bucket shares one set of weights; [`projected_areas`] (couplings) takes
-/// each patch's own direction to a point instead.
+/// in content order, with `A_k f_k` its visible area in the cluster's item buffer of that bucket
+/// (Sillion–Drettakis §6.1, [`visible_groups`]): every link in the bucket shares one set of weights;
+/// couplings take the groups' directions to a point instead ([`groups_toward`]).
 fn visible_areas_along(
     h: &Hierarchy,
     buffers: &ItemBuffers,
@@ -452,14 +485,12 @@ fn visible_areas_along(
 ) -> Vec<f64> {
     let along = bucket_direction(bucket);
     let contents = h.contents(h.cluster(id).expect("a cluster"));
-    let fractions = buffers.fractions(id, bucket, || {
-        contents.iter().map(|&s| *h.element(s).shape()).collect()
-    });
-    contents
-        .iter()
-        .zip(fractions.iter())
-        .map(|(&s, &f)| h.element(s).area * h.patch_of(s).normal.dot(along).max(0.0) * f64::from(f))
-        .collect()
+    let mut areas = vec![0.0; contents.len()];
+    for (k, visible) in visible_groups(h, buffers, id, bucket).member_areas() {
+        let normal = h.patch_of(contents[k as usize]).normal;
+        areas[k as usize] = visible * normal.dot(along).max(0.0);
+    }
+    areas
 }
 
 /// What the clusters exchange in one gathering sweep, computed once per sweep so that a cluster link
@@ -590,12 +621,16 @@ impl ClusterSweep {
                                 continue;
                             }
                             // Nothing visible faces the bucket's centre direction, yet the couplings
-                            // (exact directions) may have carried light: shared per link by exact
-                            // directions, so that no delivered power is lost.
+                            // (directions to the source) may have carried light: shared per link by
+                            // the visible groups' directions to its source, as the coupling took
+                            // them, so that no delivered power is lost.
+                            let groups = visible_groups(h, buffers, id, run[0].0);
+                            let mut group_share = vec![Rgb::BLACK; groups.groups.len()];
                             for &(_, source, g) in run {
-                                let areas = projected_areas(h, id, h.center_of(source));
-                                share_by_areas(h, contents, e.area, g, &areas, &mut share);
+                                let target = h.center_of(source);
+                                share_by_groups(&groups, e.area, g, target, &mut group_share);
                             }
+                            spread_to_members(h, contents, &groups, &group_share, &mut share);
                         }
                     }
                     (None, ClusteringKind::Isotropic) => {
@@ -607,26 +642,17 @@ impl ClusterSweep {
                         let orientation = &cluster.orientation;
                         let mut group_share = vec![Rgb::BLACK; orientation.groups.len()];
                         for link in &e.links {
-                            let g = gathered(link);
                             let target = h.center_of(link.source);
-                            let projected: Vec<f64> = orientation.projected_areas(target).collect();
-                            let total: f64 = projected.iter().sum();
-                            if total > 0.0 {
-                                for (s, p) in group_share.iter_mut().zip(&projected) {
-                                    *s += g * (e.area * p / total);
-                                }
-                            }
+                            share_by_groups(
+                                orientation,
+                                e.area,
+                                gathered(link),
+                                target,
+                                &mut group_share,
+                            );
                         }
-                        for (g, s) in orientation.groups.iter().zip(&group_share) {
-                            if g.area <= 0.0 {
-                                continue;
-                            }
-                            let per_area = *s / g.area;
-                            let members = g.members.start as usize..g.members.end as usize;
-                            for &m in &orientation.members[members] {
-                                share[m as usize] += per_area;
-                            }
-                        }
+                        let contents = h.contents(cluster);
+                        spread_to_members(h, contents, orientation, &group_share, &mut share);
                     }
                 }
                 (id, share)
@@ -692,6 +718,50 @@ fn share_by_areas(
         let area = h.element(p).area;
         if area > 0.0 {
             *s += gathered * (cluster_area * w / (area * total));
+        }
+    }
+}
+
+/// Adds irradiance `gathered` at a cluster of area `cluster_area` to its normal groups' `group_share`
+/// (power over π, `H A_cluster p_g / Σ p`), each by its projected area `p_g` toward the point `toward`.
+fn share_by_groups(
+    groups: &Orientation,
+    cluster_area: f64,
+    gathered: Rgb,
+    toward: DVec3,
+    group_share: &mut [Rgb],
+) {
+    let projected: Vec<f64> = groups.projected_areas(toward).collect();
+    let total: f64 = projected.iter().sum();
+    if total > 0.0 {
+        for (s, p) in group_share.iter_mut().zip(&projected) {
+            *s += gathered * (cluster_area * p / total);
+        }
+    }
+}
+
+/// Adds each group's `group_share` (power over π) to its members' irradiance `share`, by their areas
+/// in `groups` (visible areas `a_k` for a visible copy): `H_k = s_g a_k / (A_g A_k)`, so that the
+/// members receive what the group did.
+fn spread_to_members(
+    h: &Hierarchy,
+    contents: &[ElementId],
+    groups: &Orientation,
+    group_share: &[Rgb],
+    share: &mut [Rgb],
+) {
+    let mut members = groups.member_areas();
+    for (g, s) in groups.groups.iter().zip(group_share) {
+        let in_group = members.by_ref().take(g.members.len());
+        if g.area <= 0.0 {
+            in_group.for_each(drop);
+            continue;
+        }
+        for (k, a) in in_group {
+            let area = h.element(contents[k as usize]).area;
+            if area > 0.0 {
+                share[k as usize] += *s * (a / (g.area * area));
+            }
         }
     }
 }
