@@ -318,11 +318,11 @@ fn without_item_buffer_extinction_creates_energy_in_a_cluster() {
 /// The visible area `A_k f_k` of each patch of cluster `id` (content order) in its item buffer of the
 /// direction bucket toward `toward`.
 fn visible_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> {
-    let mut areas = vec![0.0; h.contents(h.cluster(id).expect("cluster")).len()];
-    for (k, a) in groups_toward(h, id, toward).member_areas() {
-        areas[k as usize] = a;
-    }
-    areas
+    let groups = groups_toward(h, id, toward);
+    let contents = h.contents(h.cluster(id).expect("cluster"));
+    (0..contents.len() as u32)
+        .map(|k| h.element(contents[k as usize]).area * f64::from(groups.fraction(k)))
+        .collect()
 }
 
 /// The visible projected area of each patch of cluster `id` toward `toward`, with the patch's own

@@ -632,16 +632,11 @@ pub const NORMAL_CELLS: u32 = 32;
 /// `n̄ = Σ A_k n_k / A` and centroid: `A max(0, n̄ · d)` equals the group's projected area exactly while
 /// every member faces `d`, and it is what the push distributes by, so the push conserves the power a
 /// link delivers whatever the grouping.
-///
-/// With intra-cluster visibility each (cluster, direction bucket) has its own copy
-/// ([`Orientation::regrouped`]) whose areas are the patches' *visible* areas `A_k f_k` in the bucket's
-/// item buffer: the same groups and members, so one cached value per (cluster, bucket) makes a cluster
-/// link's projected area and sampling O(groups), not O(patches).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Orientation {
     pub groups: Vec<NormalGroup>,
-    /// Positions in the cluster's contents, group after group (shared by the visible copies).
-    pub members: Arc<[u32]>,
+    /// Positions in the cluster's contents, group after group.
+    pub members: Box<[u32]>,
     /// Running area over `members` (inclusive), to sample a member by area within its group.
     pub cumulative_area: Box<[f64]>,
 }
@@ -676,63 +671,41 @@ impl Orientation {
             .map(|(k, p)| (octahedral_cell(p.normal), k as u32))
             .collect();
         order.sort_unstable();
-        let mut ranges: Vec<std::ops::Range<u32>> = Vec::new();
-        for (position, pair) in order.iter().enumerate() {
-            match ranges.last_mut() {
-                Some(r) if order[r.start as usize].0 == pair.0 => r.end += 1,
-                _ => ranges.push(position as u32..position as u32 + 1),
-            }
-        }
-        let members = order.into_iter().map(|(_, k)| k).collect();
-        Self::grouped(patches, members, ranges.into_iter())
-    }
-
-    /// The same groups and members with the patches' areas, normals and centroids taken from
-    /// `patches` (in content order): the visible copy of one direction bucket when each area is
-    /// `A_k f_k`. Patches of area 0 stay members but are never sampled and weigh nothing.
-    pub fn regrouped(&self, patches: &[Facing]) -> Self {
-        Self::grouped(
-            patches,
-            self.members.clone(),
-            self.groups.iter().map(|g| g.members.clone()),
-        )
-    }
-
-    fn grouped(
-        patches: &[Facing],
-        members: Arc<[u32]>,
-        ranges: impl Iterator<Item = std::ops::Range<u32>>,
-    ) -> Self {
-        let mut cumulative = Vec::with_capacity(members.len());
+        let mut groups: Vec<NormalGroup> = Vec::new();
+        let mut cumulative = Vec::with_capacity(order.len());
         let mut running = 0.0;
-        let groups = ranges
-            .map(|range| {
-                let mut g = NormalGroup {
+        let mut previous = None;
+        for (position, &(cell, k)) in order.iter().enumerate() {
+            let p = &patches[k as usize];
+            if previous != Some(cell) {
+                groups.push(NormalGroup {
                     normal: DVec3::ZERO,
                     area: 0.0,
                     centroid: DVec3::ZERO,
-                    members: range.clone(),
-                };
-                for &k in &members[range.start as usize..range.end as usize] {
-                    let p = &patches[k as usize];
-                    g.normal += p.normal * p.area;
-                    g.centroid += p.centroid * p.area;
-                    g.area += p.area;
-                    running += p.area;
-                    cumulative.push(running);
-                }
-                if g.area > 0.0 {
-                    g.normal /= g.area;
-                    g.centroid /= g.area;
-                } else {
-                    g.centroid = patches[members[range.start as usize] as usize].centroid;
-                }
-                g
-            })
-            .collect();
+                    members: position as u32..position as u32,
+                });
+                previous = Some(cell);
+            }
+            let g = groups.last_mut().expect("a group was just pushed");
+            g.normal += p.normal * p.area;
+            g.centroid += p.centroid * p.area;
+            g.area += p.area;
+            g.members.end += 1;
+            running += p.area;
+            cumulative.push(running);
+        }
+        for g in &mut groups {
+            if g.area > 0.0 {
+                g.normal /= g.area;
+                g.centroid /= g.area;
+            } else {
+                let first = &patches[order[g.members.start as usize].1 as usize];
+                g.centroid = first.centroid;
+            }
+        }
         Orientation {
             groups,
-            members,
+            members: order.into_iter().map(|(_, k)| k).collect(),
             cumulative_area: cumulative.into(),
         }
     }
@@ -740,30 +713,26 @@ impl Orientation {
     /// Projected area of each group toward the point `toward`: `A max(0, n̄ · d)`, `d` the unit
     /// direction from the group's centroid.
     pub fn projected_areas(&self, toward: DVec3) -> impl Iterator<Item = f64> + '_ {
-        self.groups.iter().map(move |g| {
+        self.projected_areas_with(self.groups.iter().map(|g| g.area), toward)
+    }
+
+    /// Projected area of each group toward `toward` with `areas` (one per group: their visible areas,
+    /// [`VisibleAreas`]) in place of the groups' own, `A' max(0, n̄ · d)`: exact while every member
+    /// faces `d`, up to the parallax of the visible members about the group's centroid.
+    pub fn projected_areas_with<'a>(
+        &'a self,
+        areas: impl Iterator<Item = f64> + 'a,
+        toward: DVec3,
+    ) -> impl Iterator<Item = f64> + 'a {
+        self.groups.iter().zip(areas).map(move |(g, area)| {
             let d = (toward - g.centroid).normalize_or_zero();
-            g.area * g.normal.dot(d).max(0.0)
+            area * g.normal.dot(d).max(0.0)
         })
     }
 
     /// Total projected area toward `toward`.
     pub fn projected_area(&self, toward: DVec3) -> f64 {
         self.projected_areas(toward).sum()
-    }
-
-    /// Each member (a position in the cluster's contents) with its area, group after group: the
-    /// differences of the running area, so a visible copy gives each patch's visible area `A_k f_k`.
-    pub fn member_areas(&self) -> impl Iterator<Item = (u32, f64)> + '_ {
-        let previous = std::iter::once(0.0).chain(self.cumulative_area.iter().copied());
-        self.members
-            .iter()
-            .zip(self.cumulative_area.iter().zip(previous))
-            .map(|(&m, (&c, p))| (m, c - p))
-    }
-
-    /// Bytes this value holds on the heap besides the shared members.
-    pub fn own_bytes(&self) -> usize {
-        self.groups.len() * std::mem::size_of::<NormalGroup>() + 8 * self.cumulative_area.len()
     }
 
     /// The member (a position in the cluster's contents) of group `group` at `fraction` ∈ [0, 1) of
@@ -796,4 +765,49 @@ fn octahedral_cell(n: DVec3) -> u32 {
     }
     let cell = |t: f64| (((t + 1.0) * 0.5 * NORMAL_CELLS as f64) as u32).min(NORMAL_CELLS - 1);
     cell(u) * NORMAL_CELLS + cell(v)
+}
+
+/// What one direction bucket's item buffer leaves visible of a cluster (Sillion–Drettakis §6.1): each
+/// patch's visible fraction `f_k` (content order) and each normal group's visible area `Σ_k A_k f_k`
+/// ([`Orientation`]'s group order), so that a link finds the cluster's visible projected area toward
+/// its other end in O(groups) instead of a walk over every patch. Both live in one shared `f32`
+/// allocation, the fractions first: a cached bucket costs little more than its bare fractions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VisibleAreas {
+    values: Arc<[f32]>,
+    patches: usize,
+}
+
+impl VisibleAreas {
+    /// The visible areas of a cluster grouped by `orientation` whose patches (content order) have
+    /// areas `areas` and visible fractions `fractions`.
+    pub fn new(orientation: &Orientation, areas: &[f64], fractions: &[f32]) -> Self {
+        let groups = orientation.groups.iter().map(|g| {
+            let members = &orientation.members[g.members.start as usize..g.members.end as usize];
+            let visible: f64 = members
+                .iter()
+                .map(|&k| areas[k as usize] * f64::from(fractions[k as usize]))
+                .sum();
+            visible as f32
+        });
+        VisibleAreas {
+            values: fractions.iter().copied().chain(groups).collect(),
+            patches: fractions.len(),
+        }
+    }
+
+    /// Visible fraction of each patch, in content order.
+    pub fn fractions(&self) -> &[f32] {
+        &self.values[..self.patches]
+    }
+
+    /// Visible area of each normal group, in the [`Orientation`]'s group order.
+    pub fn group_areas(&self) -> &[f32] {
+        &self.values[self.patches..]
+    }
+
+    /// Bytes of the shared allocation.
+    pub fn bytes(&self) -> usize {
+        16 + 4 * self.values.len()
+    }
 }

@@ -61,7 +61,7 @@ use crate::color::Rgb;
 use crate::geometry::cubature::{nodes_on, rule};
 use crate::geometry::Shape;
 use crate::geometry::{DVec2, DVec3};
-use crate::hierarchy::clusters::{ClusteringKind, Facing, Orientation};
+use crate::hierarchy::clusters::{ClusteringKind, Orientation, VisibleAreas};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
 use crate::visibility::item_buffer::{
     bucket_direction, direction_bucket, visible_fractions, ItemBuffers,
@@ -71,8 +71,6 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 use std::f64::consts::PI;
-use std::ops::Deref;
-use std::sync::Arc;
 
 /// Visibility samples per receiver node of a cluster link (per link for a cluster receiver: twice this).
 pub const CLUSTER_VISIBILITY_SAMPLES: usize = 4;
@@ -94,70 +92,119 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
             0.25
         }
         ElementKind::Cluster(_) if e.area <= 0.0 => 0.0,
-        ElementKind::Cluster(_) => groups_toward(h, id, toward).projected_area(toward) / e.area,
+        ElementKind::Cluster(_) => {
+            groups_toward(h, id, toward)
+                .projected_areas(toward)
+                .sum::<f64>()
+                / e.area
+        }
     }
 }
 
-/// The normal groups ([`Orientation`]) of a cluster that the other end of a link sees: the cluster's
-/// own, or with item buffers the copy of the direction bucket toward the other end, whose areas are
-/// the patches' visible areas (cached, [`ItemBuffers`]).
-pub enum Groups<'a> {
-    Own(&'a Orientation),
-    Visible(Arc<Orientation>),
+/// The normal groups ([`Orientation`]) of a cluster as the other end of a link sees them: with item
+/// buffers, by what the direction bucket toward the other end leaves visible of each group (cached,
+/// [`ItemBuffers`]).
+pub struct Groups<'a> {
+    pub orientation: &'a Orientation,
+    pub visible: Option<VisibleAreas>,
 }
 
-impl Deref for Groups<'_> {
-    type Target = Orientation;
-    fn deref(&self) -> &Orientation {
-        match self {
-            Groups::Own(groups) => groups,
-            Groups::Visible(groups) => groups,
+/// Draws by area within a group before a visible-area draw of a group walks its members (each draw is
+/// kept with the patch's visible fraction as probability).
+const REJECTION_TRIES: usize = 32;
+
+impl Groups<'_> {
+    /// The area of group `g` the other end can see: its visible area, or without item buffers all of it.
+    fn area(&self, g: usize) -> f64 {
+        match &self.visible {
+            Some(visible) => f64::from(visible.group_areas()[g]),
+            None => self.orientation.groups[g].area,
         }
+    }
+
+    /// Visible fraction of the patch at position `k` of the cluster's contents (1 without item
+    /// buffers).
+    pub fn fraction(&self, k: u32) -> f32 {
+        self.visible
+            .as_ref()
+            .map_or(1.0, |visible| visible.fractions()[k as usize])
+    }
+
+    /// Projected area of each group toward the point `toward`, of its visible area with item buffers
+    /// ([`Orientation::projected_areas_with`]).
+    pub fn projected_areas(&self, toward: DVec3) -> impl Iterator<Item = f64> + '_ {
+        let areas = (0..self.orientation.groups.len()).map(|g| self.area(g));
+        self.orientation.projected_areas_with(areas, toward)
+    }
+
+    /// A member (a position in the cluster's contents) of group `group` drawn with probability
+    /// proportional to its visible area `A_k f_k`: drawn by area and kept with probability `f_k`,
+    /// which takes `A_g / Σ_k A_k f_k` draws on average, or after [`REJECTION_TRIES`] failures
+    /// (a group nearly all hidden) found by walking the group's running visible area.
+    fn sample_member(&self, group: usize, rng: &mut Pcg64Mcg) -> u32 {
+        let Some(visible) = &self.visible else {
+            return self.orientation.member_at(group, rng.random());
+        };
+        let fractions = visible.fractions();
+        for _ in 0..REJECTION_TRIES {
+            let k = self.orientation.member_at(group, rng.random());
+            if rng.random::<f32>() < fractions[k as usize] {
+                return k;
+            }
+        }
+        let o = self.orientation;
+        let range = o.groups[group].members.start as usize..o.groups[group].members.end as usize;
+        let visible_area = |i: usize| {
+            let before = if i == 0 {
+                0.0
+            } else {
+                o.cumulative_area[i - 1]
+            };
+            (o.cumulative_area[i] - before) * f64::from(fractions[o.members[i] as usize])
+        };
+        let target = rng.random::<f64>() * range.clone().map(visible_area).sum::<f64>();
+        let mut running = 0.0;
+        for i in range.clone() {
+            running += visible_area(i);
+            if running > target {
+                return o.members[i];
+            }
+        }
+        o.members[range.end - 1]
     }
 }
 
 /// The normal groups of cluster `id` seen from the point `toward` (see [`Groups`]). With item buffers
-/// a group's projected area `Σ_k A_k f_k max(0, n̄ · d)` (visible areas, the visible-area-weighted
-/// normal `n̄` and centroid) stands for the sum over its patches with each patch's own direction
-/// `d_k` to `toward` (Smits et al. 1994's oriented transfer times §6.1's visible fractions): it is the
-/// same approximation [`Orientation`] makes without item buffers (exact while every member faces
-/// `toward`, up to the parallax of the members about the group's centroid), and what lets a cluster
-/// link cost O(groups) instead of O(patches).
+/// a group's projected area is `Σ_k A_k f_k max(0, n̄ · d)` (its visible area, its own mean normal
+/// `n̄` and the direction `d` from its centroid), standing for the sum over its patches with each
+/// patch's own normal and direction to `toward` (Smits et al. 1994's oriented transfer times §6.1's
+/// visible fractions): the approximation [`Orientation`] makes without item buffers (exact while every
+/// member faces `toward`, up to the parallax of the visible members about the group's centroid), and
+/// what lets a cluster link cost O(groups) instead of O(patches).
 pub fn groups_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> Groups<'_> {
-    let cluster = h.cluster(id).expect("a cluster");
-    match &h.item_buffers {
-        None => Groups::Own(&cluster.orientation),
-        Some(buffers) => {
-            Groups::Visible(visible_groups(h, buffers, id, bucket_toward(h, id, toward)))
-        }
+    let orientation = &h.cluster(id).expect("a cluster").orientation;
+    let visible = h
+        .item_buffers
+        .as_ref()
+        .map(|buffers| visible_areas(h, buffers, id, bucket_toward(h, id, toward)));
+    Groups {
+        orientation,
+        visible,
     }
 }
 
-/// Cluster `id`'s normal groups weighted by each patch's visible fraction `f_k` in its item buffer
-/// along direction bucket `bucket` (Sillion–Drettakis §6.1: "the projected area of each patch visible
-/// from the direction of the source"), drawn once per (cluster, bucket) and cached.
-fn visible_groups(
-    h: &Hierarchy,
-    buffers: &ItemBuffers,
-    id: ElementId,
-    bucket: u16,
-) -> Arc<Orientation> {
-    buffers.visible_groups(id, bucket, |along| {
+/// What the item buffer of cluster `id` along direction bucket `bucket` leaves visible: each patch's
+/// visible fraction `f_k` (Sillion–Drettakis §6.1: "the projected area of each patch visible from the
+/// direction of the source") and each normal group's visible area, drawn once per (cluster, bucket)
+/// and cached.
+fn visible_areas(h: &Hierarchy, buffers: &ItemBuffers, id: ElementId, bucket: u16) -> VisibleAreas {
+    buffers.visible_areas(id, bucket, |along| {
         let cluster = h.cluster(id).expect("a cluster");
         let contents = h.contents(cluster);
         let shapes: Vec<Shape> = contents.iter().map(|&s| *h.element(s).shape()).collect();
+        let areas: Vec<f64> = contents.iter().map(|&s| h.element(s).area).collect();
         let fractions = visible_fractions(&shapes, along);
-        let facings: Vec<Facing> = contents
-            .iter()
-            .zip(&shapes)
-            .zip(&fractions)
-            .map(|((&s, shape), &f)| Facing {
-                normal: h.patch_of(s).normal,
-                area: h.element(s).area * f64::from(f),
-                centroid: shape.centroid(),
-            })
-            .collect();
-        cluster.orientation.regrouped(&facings)
+        VisibleAreas::new(&cluster.orientation, &areas, &fractions)
     })
 }
 
@@ -277,7 +324,9 @@ impl<'a> SampleEnd<'a> {
         let area = h.element(id).area;
         match self {
             SampleEnd::Cluster {
-                groups: Groups::Visible(_),
+                groups: Groups {
+                    visible: Some(_), ..
+                },
                 cumulative,
                 ..
             } if area > 0.0 => cumulative.last().copied().unwrap_or(0.0) / area,
@@ -303,7 +352,7 @@ impl<'a> SampleEnd<'a> {
                 let index = cumulative
                     .partition_point(|&p| p <= target)
                     .min(cumulative.len() - 1);
-                let member = groups.member_at(index, rng.random());
+                let member = groups.sample_member(index, rng);
                 Some(
                     h.element(surfaces[member as usize])
                         .shape()
@@ -474,9 +523,9 @@ fn near_coupling(
 
 /// The visible projected area of each patch of cluster `id` seen along the centre direction `d` of
 /// direction bucket `bucket` (the one its item buffer is drawn along), `w_k = A_k max(0, n_k · d) f_k`,
-/// in content order, with `A_k f_k` its visible area in the cluster's item buffer of that bucket
-/// (Sillion–Drettakis §6.1, [`visible_groups`]): every link in the bucket shares one set of weights;
-/// couplings take the groups' directions to a point instead ([`groups_toward`]).
+/// with `f_k` its visible fraction in the cluster's item buffer of that bucket (Sillion–Drettakis
+/// §6.1): every link in the bucket shares one set of weights; couplings take the groups' directions
+/// to a point instead ([`groups_toward`]).
 fn visible_areas_along(
     h: &Hierarchy,
     buffers: &ItemBuffers,
@@ -485,12 +534,12 @@ fn visible_areas_along(
 ) -> Vec<f64> {
     let along = bucket_direction(bucket);
     let contents = h.contents(h.cluster(id).expect("a cluster"));
-    let mut areas = vec![0.0; contents.len()];
-    for (k, visible) in visible_groups(h, buffers, id, bucket).member_areas() {
-        let normal = h.patch_of(contents[k as usize]).normal;
-        areas[k as usize] = visible * normal.dot(along).max(0.0);
-    }
-    areas
+    let visible = visible_areas(h, buffers, id, bucket);
+    contents
+        .iter()
+        .zip(visible.fractions())
+        .map(|(&s, &f)| h.element(s).area * h.patch_of(s).normal.dot(along).max(0.0) * f64::from(f))
+        .collect()
 }
 
 /// What the clusters exchange in one gathering sweep, computed once per sweep so that a cluster link
@@ -624,8 +673,12 @@ impl ClusterSweep {
                             // (directions to the source) may have carried light: shared per link by
                             // the visible groups' directions to its source, as the coupling took
                             // them, so that no delivered power is lost.
-                            let groups = visible_groups(h, buffers, id, run[0].0);
-                            let mut group_share = vec![Rgb::BLACK; groups.groups.len()];
+                            let groups = Groups {
+                                orientation: &cluster.orientation,
+                                visible: Some(visible_areas(h, buffers, id, run[0].0)),
+                            };
+                            let mut group_share =
+                                vec![Rgb::BLACK; cluster.orientation.groups.len()];
                             for &(_, source, g) in run {
                                 let target = h.center_of(source);
                                 share_by_groups(&groups, e.area, g, target, &mut group_share);
@@ -639,12 +692,15 @@ impl ClusterSweep {
                     }
                     (None, _) => {
                         // H_s = H A_cluster cos_s / Σ_k A_k cos_k by normal group.
-                        let orientation = &cluster.orientation;
-                        let mut group_share = vec![Rgb::BLACK; orientation.groups.len()];
+                        let groups = Groups {
+                            orientation: &cluster.orientation,
+                            visible: None,
+                        };
+                        let mut group_share = vec![Rgb::BLACK; cluster.orientation.groups.len()];
                         for link in &e.links {
                             let target = h.center_of(link.source);
                             share_by_groups(
-                                orientation,
+                                &groups,
                                 e.area,
                                 gathered(link),
                                 target,
@@ -652,7 +708,7 @@ impl ClusterSweep {
                             );
                         }
                         let contents = h.contents(cluster);
-                        spread_to_members(h, contents, orientation, &group_share, &mut share);
+                        spread_to_members(h, contents, &groups, &group_share, &mut share);
                     }
                 }
                 (id, share)
@@ -723,9 +779,10 @@ fn share_by_areas(
 }
 
 /// Adds irradiance `gathered` at a cluster of area `cluster_area` to its normal groups' `group_share`
-/// (power over π, `H A_cluster p_g / Σ p`), each by its projected area `p_g` toward the point `toward`.
+/// (power over π, `H A_cluster p_g / Σ p`), each by its (visible) projected area `p_g` toward the
+/// point `toward`.
 fn share_by_groups(
-    groups: &Orientation,
+    groups: &Groups,
     cluster_area: f64,
     gathered: Rgb,
     toward: DVec3,
@@ -740,28 +797,32 @@ fn share_by_groups(
     }
 }
 
-/// Adds each group's `group_share` (power over π) to its members' irradiance `share`, by their areas
-/// in `groups` (visible areas `a_k` for a visible copy): `H_k = s_g a_k / (A_g A_k)`, so that the
-/// members receive what the group did.
+/// Adds each group's `group_share` (power over π) to its members' irradiance `share` (content order
+/// of `contents`) by their visible areas `A_k f_k`: `H_k = s_g f_k / Σ_{k in g} A_k f_k` (`s_g / A_g`
+/// without item buffers), so that the members receive what the group did (the visible sum is taken
+/// again here in `f64`, so that the power is conserved to rounding, not to the cached `f32` area).
 fn spread_to_members(
     h: &Hierarchy,
     contents: &[ElementId],
-    groups: &Orientation,
+    groups: &Groups,
     group_share: &[Rgb],
     share: &mut [Rgb],
 ) {
-    let mut members = groups.member_areas();
-    for (g, s) in groups.groups.iter().zip(group_share) {
-        let in_group = members.by_ref().take(g.members.len());
-        if g.area <= 0.0 {
-            in_group.for_each(drop);
+    let o = groups.orientation;
+    for (group, s) in o.groups.iter().zip(group_share) {
+        let members = &o.members[group.members.start as usize..group.members.end as usize];
+        let area = match groups.visible {
+            Some(_) => members
+                .iter()
+                .map(|&k| h.element(contents[k as usize]).area * f64::from(groups.fraction(k)))
+                .sum(),
+            None => group.area,
+        };
+        if area <= 0.0 {
             continue;
         }
-        for (k, a) in in_group {
-            let area = h.element(contents[k as usize]).area;
-            if area > 0.0 {
-                share[k as usize] += *s * (a / (g.area * area));
-            }
+        for &k in members {
+            share[k as usize] += *s * f64::from(groups.fraction(k)) / area;
         }
     }
 }
