@@ -730,11 +730,6 @@ impl Orientation {
         })
     }
 
-    /// Total projected area toward `toward`.
-    pub fn projected_area(&self, toward: DVec3) -> f64 {
-        self.projected_areas(toward).sum()
-    }
-
     /// The member (a position in the cluster's contents) of group `group` at `fraction` ∈ [0, 1) of
     /// the group's area.
     pub fn member_at(&self, group: usize, fraction: f64) -> u32 {

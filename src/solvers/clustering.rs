@@ -105,8 +105,8 @@ pub fn mean_cosine(h: &Hierarchy, id: ElementId, toward: DVec3, kind: Clustering
 /// buffers, by what the direction bucket toward the other end leaves visible of each group (cached,
 /// [`ItemBuffers`]).
 pub struct Groups<'a> {
-    pub orientation: &'a Orientation,
-    pub visible: Option<VisibleAreas>,
+    orientation: &'a Orientation,
+    visible: Option<VisibleAreas>,
 }
 
 /// Draws by area within a group before a visible-area draw of a group walks its members (each draw is
