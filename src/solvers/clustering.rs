@@ -64,13 +64,15 @@ use crate::geometry::{DVec2, DVec3};
 use crate::hierarchy::clusters::{ClusteringKind, Orientation, VisibleAreas};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
 use crate::visibility::item_buffer::{
-    bucket_direction, direction_bucket, visible_fractions, ItemBuffers,
+    bucket_direction, direction_bucket, visible_fractions, ItemBuffers, KeyHasher,
 };
 use crate::visibility::Visibility;
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
+use std::collections::HashMap;
 use std::f64::consts::PI;
+use std::hash::BuildHasherDefault;
 
 /// Visibility samples per receiver node of a cluster link (per link for a cluster receiver: twice this).
 pub const CLUSTER_VISIBILITY_SAMPLES: usize = 4;
@@ -567,9 +569,10 @@ fn visible_areas_along(
 /// the result does not depend on the thread count. Gauss–Seidel and Southwell read it as of the start
 /// of the sweep, as they already read a cluster's pulled-up average radiance.
 pub struct ClusterSweep {
-    /// (source cluster, direction bucket) in use by links, sorted, with the radiance sent along it;
-    /// empty without item buffers.
-    sent: Vec<((ElementId, u16), Rgb)>,
+    /// Radiance sent along each (source cluster, direction bucket) in use by links; empty without
+    /// item buffers. A hash map: every cluster link looks its source up once or twice per sweep, and a
+    /// binary search over the sorted keys cost a cache miss per step on large scenes.
+    sent: HashMap<(ElementId, u16), Rgb, BuildHasherDefault<KeyHasher>>,
     /// Irradiance pushed from the clusters to each patch root, by the root's element id (patch roots
     /// are the first elements); empty without clusters.
     pushed: Vec<Rgb>,
@@ -579,7 +582,7 @@ impl ClusterSweep {
     /// The exchange for the hierarchy's current radiances and links.
     pub fn new(h: &Hierarchy) -> Self {
         let mut sweep = ClusterSweep {
-            sent: Vec::new(),
+            sent: HashMap::default(),
             pushed: Vec::new(),
         };
         if h.root_cluster.is_none() {
@@ -598,12 +601,13 @@ impl ClusterSweep {
                 .collect();
             keys.par_sort_unstable();
             keys.dedup();
-            sweep.sent = keys
+            let sent: Vec<((ElementId, u16), Rgb)> = keys
                 .into_par_iter()
                 .map(|(cluster, bucket)| {
                     ((cluster, bucket), sent_along(h, buffers, cluster, bucket))
                 })
                 .collect();
+            sweep.sent = sent.into_iter().collect();
         }
         sweep.pushed = sweep.push_from_clusters(h);
         sweep
@@ -617,13 +621,10 @@ impl ClusterSweep {
             return average;
         };
         let bucket = bucket_toward(h, source, toward);
-        match self
-            .sent
-            .binary_search_by_key(&(source, bucket), |&(key, _)| key)
-        {
-            Ok(k) => self.sent[k].1,
+        match self.sent.get(&(source, bucket)) {
+            Some(&sent) => sent,
             // Not asked for by any link when the sweep began: computed on the spot, the same value.
-            Err(_) => sent_along(h, buffers, source, bucket),
+            None => sent_along(h, buffers, source, bucket),
         }
     }
 

@@ -320,9 +320,10 @@ struct Cache {
 
 /// Hashes a cache key by one rotation and multiplication per field (as rustc's Fx hash): the keys are
 /// small integers chosen by the program, and SipHash was most of the cost of a cache hit (sweeps ask
-/// for cached buffers over a million times on the classroom).
+/// for cached buffers over a million times on the classroom). Also the hasher of the per-sweep map of
+/// what clusters send by (cluster, bucket), [`crate::solvers::clustering::ClusterSweep`].
 #[derive(Debug, Default)]
-struct KeyHasher(u64);
+pub struct KeyHasher(u64);
 
 impl KeyHasher {
     fn add(&mut self, x: u64) {
