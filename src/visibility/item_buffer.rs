@@ -320,10 +320,9 @@ struct Cache {
 
 /// Hashes a cache key by one rotation and multiplication per field (as rustc's Fx hash): the keys are
 /// small integers chosen by the program, and SipHash was most of the cost of a cache hit (sweeps ask
-/// for cached buffers over a million times on the classroom). Also the hasher of the per-sweep map of
-/// what clusters send by (cluster, bucket), [`crate::solvers::clustering::ClusterSweep`].
+/// for cached buffers over a million times on the classroom).
 #[derive(Debug, Default)]
-pub struct KeyHasher(u64);
+struct KeyHasher(u64);
 
 impl KeyHasher {
     fn add(&mut self, x: u64) {
