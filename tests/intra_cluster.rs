@@ -11,7 +11,7 @@ use radiosity::hierarchy::clusters::ClusteringKind;
 use radiosity::hierarchy::{ElementId, Hierarchy};
 use radiosity::pipeline::{simulate, SimulationSettings, VisibilityKind};
 use radiosity::scene::{generators, Material, Polygon, Scene};
-use radiosity::solvers::clustering::{projected_areas, ClusterSweep};
+use radiosity::solvers::clustering::{groups_toward, ClusterSweep};
 use radiosity::visibility::extinction::Extinction;
 use radiosity::visibility::item_buffer::{bucket_direction, direction_bucket, IntraClusterKind};
 use radiosity::visibility::Visibility;
@@ -315,6 +315,30 @@ fn without_item_buffer_extinction_creates_energy_in_a_cluster() {
     );
 }
 
+/// The visible area `A_k f_k` of each patch of cluster `id` (content order) in its item buffer of the
+/// direction bucket toward `toward`.
+fn visible_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> {
+    let groups = groups_toward(h, id, toward);
+    let contents = h.contents(h.cluster(id).expect("cluster"));
+    (0..contents.len() as u32)
+        .map(|k| h.element(contents[k as usize]).area * f64::from(groups.fraction(k)))
+        .collect()
+}
+
+/// The visible projected area of each patch of cluster `id` toward `toward`, with the patch's own
+/// direction `d_k` to it: `A_k f_k max(0, n_k · d_k)` (Sillion–Drettakis §6.1).
+fn projected_areas(h: &Hierarchy, id: ElementId, toward: DVec3) -> Vec<f64> {
+    let contents = h.contents(h.cluster(id).expect("cluster"));
+    contents
+        .iter()
+        .zip(visible_areas(h, id, toward))
+        .map(|(&s, a)| {
+            let d = (toward - h.element(s).shape().centroid()).normalize_or_zero();
+            a * h.patch_of(s).normal.dot(d).max(0.0)
+        })
+        .collect()
+}
+
 /// The per-link exchange of a cluster with item buffers that [`ClusterSweep`] stands for: the radiance
 /// `source` sends toward `toward`, averaged over its patches' visible projected areas with each
 /// patch's own direction to `toward`, [`projected_areas`]; its average radiance when none is visible.
@@ -338,21 +362,14 @@ fn per_link_radiance(h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
 /// visible fraction in both), so `Σ_k |w_k − w'_k| / Σ_k w_k` is at most what this returns (infinite
 /// when no patch is visible toward `toward`).
 fn bucket_weight_change(h: &Hierarchy, id: ElementId, toward: DVec3) -> f64 {
-    let offset = toward - h.center_of(id);
-    let bucket = direction_bucket(offset);
-    let along = bucket_direction(bucket);
+    let along = bucket_direction(direction_bucket(toward - h.center_of(id)));
     let contents = h.contents(h.cluster(id).expect("cluster"));
-    let buffers = h.item_buffers.as_ref().expect("item buffers");
-    let fractions = buffers.fractions(id, bucket, || {
-        contents.iter().map(|&s| *h.element(s).shape()).collect()
-    });
     let change: f64 = contents
         .iter()
-        .zip(fractions.iter())
-        .map(|(&s, &f)| {
-            let e = h.element(s);
-            let d = (toward - e.shape().centroid()).normalize_or_zero();
-            e.area * f64::from(f) * (d - along).length()
+        .zip(visible_areas(h, id, toward))
+        .map(|(&s, a)| {
+            let d = (toward - h.element(s).shape().centroid()).normalize_or_zero();
+            a * (d - along).length()
         })
         .sum();
     let total: f64 = projected_areas(h, id, toward).iter().sum();

@@ -7,6 +7,7 @@
 //! Every construction is deterministic: ties are broken by object index, never by hashing or threads.
 
 use crate::geometry::{Aabb, DVec3};
+use std::sync::Arc;
 
 /// How the cluster tree is built (`--hierarchy`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -712,15 +713,21 @@ impl Orientation {
     /// Projected area of each group toward the point `toward`: `A max(0, n̄ · d)`, `d` the unit
     /// direction from the group's centroid.
     pub fn projected_areas(&self, toward: DVec3) -> impl Iterator<Item = f64> + '_ {
-        self.groups.iter().map(move |g| {
-            let d = (toward - g.centroid).normalize_or_zero();
-            g.area * g.normal.dot(d).max(0.0)
-        })
+        self.projected_areas_with(self.groups.iter().map(|g| g.area), toward)
     }
 
-    /// Total projected area toward `toward`.
-    pub fn projected_area(&self, toward: DVec3) -> f64 {
-        self.projected_areas(toward).sum()
+    /// Projected area of each group toward `toward` with `areas` (one per group: their visible areas,
+    /// [`VisibleAreas`]) in place of the groups' own, `A' max(0, n̄ · d)`: exact while every member
+    /// faces `d`, up to the parallax of the visible members about the group's centroid.
+    pub fn projected_areas_with<'a>(
+        &'a self,
+        areas: impl Iterator<Item = f64> + 'a,
+        toward: DVec3,
+    ) -> impl Iterator<Item = f64> + 'a {
+        self.groups.iter().zip(areas).map(move |(g, area)| {
+            let d = (toward - g.centroid).normalize_or_zero();
+            area * g.normal.dot(d).max(0.0)
+        })
     }
 
     /// The member (a position in the cluster's contents) of group `group` at `fraction` ∈ [0, 1) of
@@ -753,4 +760,49 @@ fn octahedral_cell(n: DVec3) -> u32 {
     }
     let cell = |t: f64| (((t + 1.0) * 0.5 * NORMAL_CELLS as f64) as u32).min(NORMAL_CELLS - 1);
     cell(u) * NORMAL_CELLS + cell(v)
+}
+
+/// What one direction bucket's item buffer leaves visible of a cluster (Sillion–Drettakis §6.1): each
+/// patch's visible fraction `f_k` (content order) and each normal group's visible area `Σ_k A_k f_k`
+/// ([`Orientation`]'s group order), so that a link finds the cluster's visible projected area toward
+/// its other end in O(groups) instead of a walk over every patch. Both live in one shared `f32`
+/// allocation, the fractions first: a cached bucket costs little more than its bare fractions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VisibleAreas {
+    values: Arc<[f32]>,
+    patches: usize,
+}
+
+impl VisibleAreas {
+    /// The visible areas of a cluster grouped by `orientation` whose patches (content order) have
+    /// areas `areas` and visible fractions `fractions`.
+    pub fn new(orientation: &Orientation, areas: &[f64], fractions: &[f32]) -> Self {
+        let groups = orientation.groups.iter().map(|g| {
+            let members = &orientation.members[g.members.start as usize..g.members.end as usize];
+            let visible: f64 = members
+                .iter()
+                .map(|&k| areas[k as usize] * f64::from(fractions[k as usize]))
+                .sum();
+            visible as f32
+        });
+        VisibleAreas {
+            values: fractions.iter().copied().chain(groups).collect(),
+            patches: fractions.len(),
+        }
+    }
+
+    /// Visible fraction of each patch, in content order.
+    pub fn fractions(&self) -> &[f32] {
+        &self.values[..self.patches]
+    }
+
+    /// Visible area of each normal group, in the [`Orientation`]'s group order.
+    pub fn group_areas(&self) -> &[f32] {
+        &self.values[self.patches..]
+    }
+
+    /// Bytes of the shared allocation.
+    pub fn bytes(&self) -> usize {
+        16 + 4 * self.values.len()
+    }
 }

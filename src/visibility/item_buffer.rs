@@ -14,16 +14,18 @@
 //! the depth test over pixels it covers), so an unoccluded item gets exactly 1 whatever the aliasing, and
 //! the caller multiplies it by the item's exact projected area.
 //!
-//! Buffers are cached per (cluster, direction bucket): directions are quantised on a cube map of
-//! `6 ×` [`BUCKETS_PER_FACE`]² cells and each buffer is drawn along its cell's centre direction, so the
-//! answer is a pure function of the cluster and the bucket and does not depend on which thread (or in
-//! which order) first asked for it.
+//! Buffers are cached per (cluster, direction bucket) ([`ItemBuffers`], with each normal group's
+//! visible area beside the fractions): directions are quantised on a cube map of `6 ×` [`BUCKETS_PER_FACE`]²
+//! cells and each buffer is drawn along its cell's centre direction, so the answer is a pure function
+//! of the cluster and the bucket and does not depend on which thread (or in which order) first asked
+//! for it.
 
 use crate::geometry::{DVec2, DVec3, Shape};
+use crate::hierarchy::clusters::VisibleAreas;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 use std::ops::Range;
-use std::sync::{Arc, RwLock};
+use std::sync::RwLock;
 
 /// Pixels across the smallest object of a buffer.
 pub const PIXELS_ACROSS_SMALLEST: f64 = 4.0;
@@ -309,10 +311,10 @@ fn spans_inside(corners: &[DVec2], nx: usize, ny: usize, out: &mut Vec<(usize, R
     }
 }
 
-/// Visible fractions by (cluster, direction bucket), and the bytes they hold.
+/// Visible areas by (cluster, direction bucket), and the bytes they hold.
 #[derive(Debug, Default)]
 struct Cache {
-    buffers: HashMap<(u32, u16), Arc<[f32]>, BuildHasherDefault<KeyHasher>>,
+    buffers: HashMap<(u32, u16), VisibleAreas, BuildHasherDefault<KeyHasher>>,
     bytes: usize,
 }
 
@@ -343,17 +345,21 @@ impl Hasher for KeyHasher {
     }
 }
 
-/// Item buffers of clusters, cached per (cluster, direction bucket) up to a number of bytes (a share of
-/// `--max-memory`, [`crate::memory::MemoryBudget`]); past it buffers are drawn again on every request,
-/// with the same answer. Shared between threads.
+/// What clusters keep of their item buffers, cached per (cluster, direction bucket) up to a number of
+/// bytes (a share of `--max-memory`, [`crate::memory::MemoryBudget`]); past it buffers are drawn again
+/// on every request, with the same answer. Shared between threads.
+///
+/// A buffer's answer is kept with each normal group's visible area beside the patches' fractions
+/// ([`VisibleAreas`]): a link then finds its cluster end's visible projected area in O(groups), where
+/// the bare fractions cost a walk over every patch of the cluster for every link.
 #[derive(Debug)]
 pub struct ItemBuffers {
     cache: RwLock<Cache>,
     max_bytes: usize,
 }
 
-/// Bytes one cached entry holds besides its fractions: the `Arc`'s counts, the map's key, pointer and
-/// control byte at its load factor, and the allocator's rounding.
+/// Bytes one cached entry holds besides its values' allocation ([`VisibleAreas::bytes`]): the map's
+/// key, value and control byte at its load factor, and the allocator's rounding.
 const ENTRY_OVERHEAD: usize = 80;
 
 impl ItemBuffers {
@@ -365,14 +371,15 @@ impl ItemBuffers {
         }
     }
 
-    /// Visible fractions of `cluster`'s contents (drawn by `contents` when not cached) seen along
-    /// direction bucket `bucket` ([`direction_bucket`]).
-    pub fn fractions(
+    /// The visible areas of `cluster` seen along direction bucket `bucket` ([`direction_bucket`]);
+    /// when not cached, `draw` makes them from the item buffer along the bucket's centre direction
+    /// (its argument, [`bucket_direction`]).
+    pub fn visible_areas(
         &self,
         cluster: u32,
         bucket: u16,
-        contents: impl FnOnce() -> Vec<Shape>,
-    ) -> Arc<[f32]> {
+        draw: impl FnOnce(DVec3) -> VisibleAreas,
+    ) -> VisibleAreas {
         let key = (cluster, bucket);
         if let Some(hit) = self
             .cache
@@ -383,14 +390,14 @@ impl ItemBuffers {
         {
             return hit.clone();
         }
-        let fractions: Arc<[f32]> = visible_fractions(&contents(), bucket_direction(bucket)).into();
+        let visible = draw(bucket_direction(bucket));
         let mut cache = self.cache.write().expect("item buffer cache");
-        let bytes = ENTRY_OVERHEAD + 4 * fractions.len();
+        let bytes = ENTRY_OVERHEAD + visible.bytes();
         if cache.bytes + bytes <= self.max_bytes && !cache.buffers.contains_key(&key) {
             cache.bytes += bytes;
-            cache.buffers.insert(key, fractions.clone());
+            cache.buffers.insert(key, visible.clone());
         }
-        fractions
+        visible
     }
 }
 
