@@ -5,7 +5,7 @@
 //! else, so the plate's radiance is exactly ρ E F(x → lamp), and its mean over any rectangle
 //! [0, w] × [0, 1] is ρ E times the closed-form factor of parallel offset rectangles (C-12).
 //!
-//! Error model: a coupling integrates a near link's receiver side adaptively to 1%
+//! Error model: a coupling integrates a near link's receiver side adaptively to 3%
 //! (`near_field::TOLERANCE`) wherever its regular rule misses more than `NEAR_FIELD_MISS` (10%) of the
 //! light, and keeps the regular rule, within 10%, otherwise; the solution's mean over the plate or over
 //! a band of whole elements is a sum of such link transfers (the basis's constant coefficient is the
