@@ -11,6 +11,7 @@ use radiosity::visibility::item_buffer::IntraClusterKind;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
+#[allow(dead_code)] // each test file uses part of the shared module
 mod common;
 use common::{furnace_with_cubes, mean_radiance_of, quiet, with_threads};
 

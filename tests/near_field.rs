@@ -17,50 +17,33 @@ use radiosity::bases::BasisKind;
 use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::parallel_rectangles_offset;
 use radiosity::geometry::near_field::NearField;
-use radiosity::geometry::{DVec3, Shape};
+use radiosity::geometry::DVec3;
 use radiosity::hierarchy::Hierarchy;
 use radiosity::pipeline::{simulate, SimulationSettings};
 use radiosity::progress::Progress;
-use radiosity::scene::{Material, Object, Polygon, Scene};
+use radiosity::scene::{Material, Scene};
+
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
+use common::{one_polygon_per_material, rectangle};
 use radiosity::solvers::coupling::NEAR_FIELD_MISS;
 
 const RHO: f64 = 0.5;
 const EMISSION: f64 = 1.0;
 const LAMP: [f64; 4] = [-0.2, 0.0, 0.0, 1.0];
 
-fn rectangle([x0, x1, y0, y1]: [f64; 4], z: f64, up: bool) -> Shape {
-    let p = |x, y| DVec3::new(x, y, z);
-    if up {
-        Shape::Quad([p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)])
-    } else {
-        Shape::Quad([p(x0, y0), p(x0, y1), p(x1, y1), p(x1, y0)])
-    }
-}
-
 fn plate_and_lamp(gap: f64) -> Scene {
-    let mut scene = Scene {
-        materials: vec![
+    one_polygon_per_material(
+        vec![
             Material::diffuse("plate", Rgb::splat(RHO)),
             Material::emitter("lamp", Rgb::BLACK, Rgb::splat(EMISSION)),
         ],
-        ..Default::default()
-    };
-    let shapes = [
-        rectangle([0.0, 1.0, 0.0, 1.0], 0.0, false),
-        rectangle(LAMP, -gap, true),
-    ];
-    for (material, shape) in shapes.into_iter().enumerate() {
-        scene.objects.push(Object {
-            name: scene.materials[material].name.clone(),
-        });
-        scene.polygons.push(Polygon {
-            shape,
-            material,
-            object: material,
-            two_sided: false,
-        });
-    }
-    scene
+        [
+            rectangle([0.0, 1.0, 0.0, 1.0], 0.0, false),
+            rectangle(LAMP, -gap, true),
+        ],
+        |_| false,
+    )
 }
 
 /// The solution's mean radiance over the plate's band [0, w] × [0, 1] (midpoint rule, 64 points

@@ -9,11 +9,15 @@
 
 use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::point_to_polygon;
-use radiosity::geometry::{DVec3, Shape};
+use radiosity::geometry::DVec3;
 use radiosity::hierarchy::Hierarchy;
 use radiosity::pipeline::{simulate, SimulationSettings};
 use radiosity::progress::Progress;
-use radiosity::scene::{Material, Object, Polygon, Scene};
+use radiosity::scene::{Material, Scene};
+
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
+use common::{one_polygon_per_material, rectangle};
 
 /// The blocker's edge, the emitter's height, centre and half-width, the receiver's reflectance, the
 /// emitted radiance.
@@ -24,41 +28,20 @@ const W: f64 = 0.15;
 const RHO: f64 = 0.5;
 const EMISSION: f64 = 1.0;
 
-fn square(x0: f64, x1: f64, y0: f64, y1: f64, z: f64, up: bool) -> Shape {
-    let p = |x, y| DVec3::new(x, y, z);
-    if up {
-        Shape::Quad([p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)])
-    } else {
-        Shape::Quad([p(x0, y0), p(x0, y1), p(x1, y1), p(x1, y0)])
-    }
-}
-
 fn penumbra_scene() -> Scene {
-    let mut scene = Scene {
-        materials: vec![
+    one_polygon_per_material(
+        vec![
             Material::diffuse("receiver", Rgb::splat(RHO)),
             Material::emitter("emitter", Rgb::BLACK, Rgb::splat(EMISSION)),
             Material::diffuse("blocker", Rgb::BLACK),
         ],
-        ..Default::default()
-    };
-    let shapes = [
-        square(0.0, 1.0, 0.0, 1.0, 0.0, true),
-        square(C - W, C + W, C - W, C + W, HEIGHT, false),
-        square(-1.0, A, -1.0, 2.0, HEIGHT / 2.0, true),
-    ];
-    for (material, shape) in shapes.into_iter().enumerate() {
-        scene.objects.push(Object {
-            name: scene.materials[material].name.clone(),
-        });
-        scene.polygons.push(Polygon {
-            shape,
-            material,
-            object: material,
-            two_sided: material == 2,
-        });
-    }
-    scene
+        [
+            rectangle([0.0, 1.0, 0.0, 1.0], 0.0, true),
+            rectangle([C - W, C + W, C - W, C + W], HEIGHT, false),
+            rectangle([-1.0, A, -1.0, 2.0], HEIGHT / 2.0, true),
+        ],
+        |material| material == 2,
+    )
 }
 
 /// The exact radiance at receiver point (x, y).
@@ -67,7 +50,7 @@ fn exact(x: f64, y: f64) -> f64 {
     if u0 >= C + W {
         return 0.0;
     }
-    let visible = square(u0, C + W, C - W, C + W, HEIGHT, false);
+    let visible = rectangle([u0, C + W, C - W, C + W], HEIGHT, false);
     RHO * EMISSION * point_to_polygon(DVec3::new(x, y, 0.0), DVec3::Z, &visible)
 }
 

@@ -1,9 +1,9 @@
-//! Scenes and measures shared by the clustering tests.
+//! Scenes and measures shared by the test suites (each uses part of it).
 
 use radiosity::geometry::{DVec3, Shape};
 use radiosity::hierarchy::Hierarchy;
 use radiosity::progress::Progress;
-use radiosity::scene::{generators, Polygon, Scene};
+use radiosity::scene::{generators, Material, Object, Polygon, Scene};
 
 pub fn quiet() -> Progress {
     Progress::new(true)
@@ -61,4 +61,39 @@ pub fn mean_radiance_of(h: &Hierarchy, which: impl Fn(usize) -> bool) -> f64 {
         area += e.area;
     }
     sum / area
+}
+
+/// The axis-aligned rectangle `[x0, x1] × [y0, y1]` in the plane `z`, facing `+z` if `up`, else `−z`.
+pub fn rectangle([x0, x1, y0, y1]: [f64; 4], z: f64, up: bool) -> Shape {
+    let p = |x, y| DVec3::new(x, y, z);
+    if up {
+        Shape::Quad([p(x0, y0), p(x1, y0), p(x1, y1), p(x0, y1)])
+    } else {
+        Shape::Quad([p(x0, y0), p(x0, y1), p(x1, y1), p(x1, y0)])
+    }
+}
+
+/// A scene of one polygon per material: polygon `k` is `shapes[k]`, of material `k` and its own
+/// object, two-sided where `two_sided(k)`.
+pub fn one_polygon_per_material(
+    materials: Vec<Material>,
+    shapes: impl IntoIterator<Item = Shape>,
+    two_sided: impl Fn(usize) -> bool,
+) -> Scene {
+    let mut scene = Scene {
+        materials,
+        ..Default::default()
+    };
+    for (material, shape) in shapes.into_iter().enumerate() {
+        scene.objects.push(Object {
+            name: scene.materials[material].name.clone(),
+        });
+        scene.polygons.push(Polygon {
+            shape,
+            material,
+            object: material,
+            two_sided: two_sided(material),
+        });
+    }
+    scene
 }
