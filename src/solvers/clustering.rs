@@ -537,18 +537,57 @@ fn near_coupling(
 /// to a point instead ([`groups_toward`]).
 fn visible_areas_along(
     h: &Hierarchy,
+    contents: &Contents,
     buffers: &ItemBuffers,
     id: ElementId,
     bucket: u16,
 ) -> Vec<f64> {
     let along = bucket_direction(bucket);
-    let contents = h.contents(h.cluster(id).expect("a cluster"));
     let visible = visible_areas(h, buffers, id, bucket);
     contents
+        .of(h, id)
         .iter()
         .zip(visible.fractions())
-        .map(|(&s, &f)| h.element(s).area * h.patch_of(s).normal.dot(along).max(0.0) * f64::from(f))
+        .map(|(&(normal, area), &f)| area * normal.dot(along).max(0.0) * f64::from(f))
         .collect()
+}
+
+/// What a sweep reads of the clusters' patch roots, by position in
+/// [`Hierarchy::cluster_surfaces`] (each cluster's contents are a range of it): their normals and
+/// areas, and their radiances as the sweep begins. Walking a cluster's contents then reads these
+/// dense arrays in order instead of an element record per patch scattered over the hierarchy (most
+/// of a sweep's cost on office3).
+struct Contents {
+    geometry: Vec<(DVec3, f64)>,
+    radiance: Vec<Rgb>,
+}
+
+impl Contents {
+    fn new(h: &Hierarchy) -> Self {
+        Contents {
+            geometry: h
+                .cluster_surfaces
+                .iter()
+                .map(|&s| (h.patch_of(s).normal, h.element(s).area))
+                .collect(),
+            radiance: h
+                .cluster_surfaces
+                .iter()
+                .map(|&s| h.element(s).radiance[0])
+                .collect(),
+        }
+    }
+
+    /// The range of [`Hierarchy::cluster_surfaces`] that cluster `id` holds.
+    fn range(h: &Hierarchy, id: ElementId) -> std::ops::Range<usize> {
+        let contents = &h.cluster(id).expect("a cluster").contents;
+        contents.start as usize..contents.end as usize
+    }
+
+    /// Normal and area of each patch of cluster `id`, in content order.
+    fn of(&self, h: &Hierarchy, id: ElementId) -> &[(DVec3, f64)] {
+        &self.geometry[Self::range(h, id)]
+    }
 }
 
 /// What the clusters exchange in one gathering sweep, computed once per sweep so that a cluster link
@@ -587,6 +626,8 @@ pub struct ClusterSweep {
     /// Irradiance pushed from the clusters to each patch root, by the root's element id (patch roots
     /// are the first elements); empty without clusters.
     pushed: Vec<Rgb>,
+    /// The patch roots' geometry and radiances in content order; empty without item buffers.
+    contents: Contents,
 }
 
 impl ClusterSweep {
@@ -596,11 +637,16 @@ impl ClusterSweep {
             sent: Vec::new(),
             first: Vec::new(),
             pushed: Vec::new(),
+            contents: Contents {
+                geometry: Vec::new(),
+                radiance: Vec::new(),
+            },
         };
         let Some(root) = h.root_cluster else {
             return sweep;
         };
         if let Some(buffers) = &h.item_buffers {
+            sweep.contents = Contents::new(h);
             let mut keys: Vec<(ElementId, u16)> = (0..h.elements.len() as ElementId)
                 .into_par_iter()
                 .flat_map_iter(|id| {
@@ -622,10 +668,12 @@ impl ClusterSweep {
                 first[k] += first[k - 1];
             }
             sweep.first = first;
+            let contents = &sweep.contents;
             sweep.sent = keys
                 .into_par_iter()
                 .map(|(cluster, bucket)| {
-                    ((cluster, bucket), sent_along(h, buffers, cluster, bucket))
+                    let sent = sent_along(h, contents, buffers, cluster, bucket);
+                    ((cluster, bucket), sent)
                 })
                 .collect();
         }
@@ -649,7 +697,7 @@ impl ClusterSweep {
         match own.binary_search_by_key(&bucket, |&((_, b), _)| b) {
             Ok(k) => own[k].1,
             // Not asked for by any link when the sweep began: computed on the spot, the same value.
-            Err(_) => sent_along(h, buffers, source, bucket),
+            Err(_) => sent_along(h, &self.contents, buffers, source, bucket),
         }
     }
 
@@ -689,10 +737,12 @@ impl ClusterSweep {
                         // Stable: equal buckets keep link order, so the sums below do too.
                         by_bucket.sort_by_key(|&(bucket, _, _)| bucket);
                         for run in by_bucket.chunk_by(|a, b| a.0 == b.0) {
-                            let areas = visible_areas_along(h, buffers, id, run[0].0);
+                            let areas =
+                                visible_areas_along(h, &self.contents, buffers, id, run[0].0);
                             if areas.iter().sum::<f64>() > 0.0 {
                                 let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
-                                share_by_areas(h, contents, e.area, total, &areas, &mut share);
+                                let geometry = self.contents.of(h, id);
+                                share_by_areas(geometry, e.area, total, &areas, &mut share);
                                 continue;
                             }
                             // Nothing visible faces the bucket's centre direction, yet the couplings
@@ -767,17 +817,22 @@ fn bucket_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> u16 {
 /// Radiance cluster `id` sends along the centre direction of bucket `bucket`: its patches' radiances
 /// averaged over their visible projected areas along it; its average radiance when nothing faces that
 /// way.
-fn sent_along(h: &Hierarchy, buffers: &ItemBuffers, id: ElementId, bucket: u16) -> Rgb {
-    let areas = visible_areas_along(h, buffers, id, bucket);
+fn sent_along(
+    h: &Hierarchy,
+    contents: &Contents,
+    buffers: &ItemBuffers,
+    id: ElementId,
+    bucket: u16,
+) -> Rgb {
+    let areas = visible_areas_along(h, contents, buffers, id, bucket);
     let total: f64 = areas.iter().sum();
     if total <= 0.0 {
         return h.element(id).radiance[0];
     }
-    let contents = h.contents(h.cluster(id).expect("a cluster"));
-    contents
+    contents.radiance[Contents::range(h, id)]
         .iter()
         .zip(&areas)
-        .map(|(&s, &w)| h.element(s).radiance[0] * (w / total))
+        .map(|(&radiance, &w)| radiance * (w / total))
         .sum()
 }
 
@@ -785,8 +840,7 @@ fn sent_along(h: &Hierarchy, buffers: &ItemBuffers, id: ElementId, bucket: u16) 
 /// projected area `areas[k]`: `H_k = H A_cluster w_k / (A_k Σ w)`, so that the patches receive the
 /// power `π H A_cluster` the links delivered.
 fn share_by_areas(
-    h: &Hierarchy,
-    contents: &[ElementId],
+    geometry: &[(DVec3, f64)],
     cluster_area: f64,
     gathered: Rgb,
     areas: &[f64],
@@ -796,8 +850,7 @@ fn share_by_areas(
     if total <= 0.0 {
         return;
     }
-    for ((s, &w), &p) in share.iter_mut().zip(areas).zip(contents) {
-        let area = h.element(p).area;
+    for ((s, &w), &(_, area)) in share.iter_mut().zip(areas).zip(geometry) {
         if area > 0.0 {
             *s += gathered * (cluster_area * w / (area * total));
         }
