@@ -330,7 +330,7 @@ const AMBIGUOUS: f64 = 1e-9;
 /// Whether `x` (pixel units) may lie on the other side of a pixel centre than rounding made it.
 fn near_a_centre(x: f64) -> bool {
     let t = x - 0.5;
-    if !(t.abs() < 1e15) {
+    if t.is_nan() || t.abs() >= 1e15 {
         return true;
     }
     // Nearest integer, written out (`f64::round` is a library call on the baseline target).
