@@ -431,6 +431,72 @@ fn auto_splits_only_where_emitted_light_enters_a_gap() {
     }
 }
 
+/// `gaps` cuts, beyond `auto`, along reflecting lids that hang across a real gap under a surface
+/// several times their size: the grey 0.4 m panel 5 mm under the ceiling (two-sided, or one-sided
+/// facing it); not along a one-sided panel facing away, a panel over a black ceiling, or a strip nearly
+/// as large as the ceiling (a layer, not a lid). On the classroom it cuts the ceiling over the lamp
+/// housings, which `auto` leaves whole, and the cut pieces tile what they replace.
+#[test]
+fn gaps_also_splits_along_reflecting_lids() {
+    let grey = Material::diffuse("grey", Rgb::splat(0.5));
+    let black = Material::diffuse("black", Rgb::BLACK);
+    let cases = [
+        (
+            "two-sided lid",
+            ceiling_and_panel(grey.clone(), true, false, grey.clone()),
+            1,
+        ),
+        (
+            "one-sided lid facing up",
+            ceiling_and_panel(grey.clone(), false, true, grey.clone()),
+            1,
+        ),
+        (
+            "one-sided, facing away",
+            ceiling_and_panel(grey.clone(), false, false, grey.clone()),
+            0,
+        ),
+        (
+            "black ceiling",
+            ceiling_and_panel(grey.clone(), true, false, black),
+            0,
+        ),
+        (
+            "a layer, not a lid",
+            ceiling_and_strip(grey.clone(), true, false, grey.clone(), 1.0, 0.005),
+            0,
+        ),
+    ];
+    for (name, mut scene, split) in cases {
+        let report = split_contacts(&mut scene, SplitContacts::Gaps, DEFAULT_CONTACT_GAP);
+        assert_eq!(report.polygons_split, split, "{name}: {report}");
+    }
+    let classroom = renderpark("salon/classroom.mgf");
+    let ceiling = |scene: &Scene| {
+        let polygons = scene.polygons.iter();
+        let on_ceiling: Vec<_> = polygons
+            .filter(|p| p.shape.vertices().iter().all(|v| (v.z - 3.5).abs() < 1e-9))
+            .collect();
+        let area: f64 = on_ceiling.iter().map(|p| p.shape.area()).sum();
+        (on_ceiling.len(), area)
+    };
+    let mut auto = classroom.clone();
+    split_contacts(&mut auto, SplitContacts::Auto, DEFAULT_CONTACT_GAP);
+    let mut gaps = classroom.clone();
+    split_contacts(&mut gaps, SplitContacts::Gaps, DEFAULT_CONTACT_GAP);
+    let (whole, cut) = (ceiling(&auto), ceiling(&gaps));
+    assert_eq!(
+        whole.0,
+        ceiling(&classroom).0,
+        "auto leaves the ceiling whole"
+    );
+    assert!(cut.0 > whole.0, "gaps cuts the ceiling over the housings");
+    assert!(
+        (cut.1 - whole.1).abs() < 1e-9 * whole.1,
+        "{cut:?} vs {whole:?}"
+    );
+}
+
 /// Mean luminance of `image` over the pixels `kept`.
 fn masked_mean(image: &Image, kept: &[bool]) -> f64 {
     let values = image.pixels.iter().zip(kept).filter(|(_, &k)| k);
