@@ -341,7 +341,13 @@ fn farthest(distances: &[f64]) -> f64 {
 /// tubes 2 cm under their housings (side openings 34% of the cavity) left the floor 10% and the desks
 /// 6% too bright unsplit (BENCHMARKS.md, "Reference images and probes").
 fn shines_into_gap(region: &Region, p: &Face, offset: f64) -> bool {
-    offset.abs() > SNAP * p.diameter && region.shines_toward(-offset * p.normal)
+    real_gap(p, offset) && region.shines_toward(-offset * p.normal)
+}
+
+/// Whether a polygon lying on P at signed distance `offset` leaves a gap light can enter (not
+/// coplanar with P, within [`SNAP`]).
+fn real_gap(p: &Face, offset: f64) -> bool {
+    offset.abs() > SNAP * p.diameter
 }
 
 /// Whether polygon `j` (Q) lies on polygon `i` (P) across a real gap with a reflecting surface toward
@@ -379,7 +385,7 @@ fn reflects_into_gap(
         return false;
     };
     let toward_p = -offset * p.normal;
-    offset.abs() > SNAP * p.diameter && (polygon.two_sided || q.normal.dot(toward_p) > 0.0)
+    real_gap(p, offset) && (polygon.two_sided || q.normal.dot(toward_p) > 0.0)
 }
 
 /// Convex hulls, in P's plane, of the chains of contact edges of one object that join end to end (within

@@ -557,6 +557,7 @@ fn visible_areas_along(
 /// areas, and their radiances as the sweep begins. Walking a cluster's contents then reads these
 /// dense arrays in order instead of an element record per patch scattered over the hierarchy (most
 /// of a sweep's cost on office3).
+#[derive(Default)]
 struct Contents {
     geometry: Vec<(DVec3, f64)>,
     radiance: Vec<Rgb>,
@@ -637,10 +638,7 @@ impl ClusterSweep {
             sent: Vec::new(),
             first: Vec::new(),
             pushed: Vec::new(),
-            contents: Contents {
-                geometry: Vec::new(),
-                radiance: Vec::new(),
-            },
+            contents: Contents::default(),
         };
         let Some(root) = h.root_cluster else {
             return sweep;
