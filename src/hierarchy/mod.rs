@@ -680,6 +680,25 @@ impl Hierarchy {
         }
     }
 
+    /// Whether a side of `polygon` is in the contents of cluster `cluster`, at any depth: a walk up
+    /// from the side's patch root (clusters are stored after everything they hold, so the walk stops
+    /// at the first ancestor past `cluster`).
+    pub fn cluster_holds_polygon(&self, cluster: ElementId, polygon: usize) -> bool {
+        self.polygon_patches[polygon]
+            .iter()
+            .flatten()
+            .any(|&patch| {
+                let mut id = self.patches[patch as usize].root;
+                while let Some(parent) = self.elements[id as usize].parent {
+                    if parent >= cluster {
+                        return parent == cluster;
+                    }
+                    id = parent;
+                }
+                false
+            })
+    }
+
     /// The patch roots inside cluster `id`.
     pub fn contents(&self, cluster: &Cluster) -> &[ElementId] {
         &self.cluster_surfaces[cluster.contents.start as usize..cluster.contents.end as usize]

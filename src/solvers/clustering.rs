@@ -45,8 +45,10 @@
 //! the cluster seen from the other end ([`crate::visibility::item_buffer`]) scales each patch's
 //! projected area by its visible fraction. Those visible projected areas are then the cluster's
 //! projected area in the kernel (`c = Σ_k w_k / A`, for either transfer kind: the isotropic 1/4 is
-//! only an estimate of it), the weights of its visibility samples (so that `v` only counts occluders
-//! outside the cluster's own contents), and, taken along the item buffer's direction bucket once per
+//! only an estimate of it), the weights of its visibility samples, whose rays pass the end clusters'
+//! own contents ([`Visibility::transmittance_past`]: a point drawn on a partly hidden patch would
+//! otherwise count its hiding twice, darkening furniture by ~2% on a chair's own parts), so that `v`
+//! only counts occluders outside them; and, taken along the item buffer's direction bucket once per
 //! sweep ([`ClusterSweep`]), the shares of received irradiance (hidden patches get none) and the
 //! weights of the radiance it sends (hidden patches send none).
 //!
@@ -393,12 +395,22 @@ pub fn couple_cluster(
         SampleEnd::new(h, receiver, s_centre),
         SampleEnd::new(h, source, r_centre),
     );
+    // With item buffers the end clusters' own contents are transparent to the link's rays: how much of
+    // each patch the others hide is what the buffers weigh the sample points by (§6.1), and a ray from
+    // a point of a partly hidden patch must not count that hiding again. Without them the rays are
+    // all that sees the contents' mutual occlusion.
+    let inside_an_end = |polygon: usize| {
+        h.item_buffers.is_some()
+            && [receiver, source]
+                .into_iter()
+                .any(|end| h.is_cluster(end) && h.cluster_holds_polygon(end, polygon))
+    };
     let mut sample_visibility = |x: Option<DVec3>, samples: usize, rng: &mut Pcg64Mcg| {
         let mut total = 0.0;
         for _ in 0..samples {
             let from = x.or_else(|| receiver_end.sample(h, rng));
             if let (Some(from), Some(to)) = (from, source_end.sample(h, rng)) {
-                total += visibility.transmittance(from, to);
+                total += visibility.transmittance_past(from, to, &inside_an_end);
                 rays += 1;
             }
         }

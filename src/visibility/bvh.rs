@@ -491,25 +491,31 @@ impl Bvh {
 
     /// Whether any lane of block `index` blocks the ray in `(t_min, t_max)`: the filter `K` first, the
     /// exact test for the lanes it keeps. For occlusion a quad's two triangles are independent (the
-    /// reference's quad hits iff either does).
+    /// reference's quad hits iff either does). Polygons `transparent` accepts block nothing.
     #[inline(always)]
     fn block_occludes<K: Simd>(
         &self,
         index: usize,
         ray: &Ray,
         filter: &FilterRay,
-        t_min: f64,
-        t_max: f64,
+        (t_min, t_max): (f64, f64),
+        transparent: &impl Fn(usize) -> bool,
     ) -> bool {
         let lanes = K::filter(filter, &self.blocks[index]);
-        if lanes.sure != 0 {
-            return true;
+        let opaque = |k: usize| !transparent(self.lanes[index].polygon[k] as usize);
+        let mut sure = lanes.sure;
+        while sure != 0 {
+            let k = sure.trailing_zeros() as usize;
+            sure &= sure - 1;
+            if opaque(k) {
+                return true;
+            }
         }
         let mut lanes = lanes.maybe;
         while lanes != 0 {
             let k = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            if self.hit(index, k, ray, t_min, t_max).is_some() {
+            if self.hit(index, k, ray, t_min, t_max).is_some() && opaque(k) {
                 return true;
             }
         }
@@ -565,15 +571,22 @@ impl Bvh {
         Some(trav)
     }
 
-    /// Any-hit traversal with kernels `K`.
+    /// Any-hit traversal with kernels `K`, past the polygons `transparent` accepts (monomorphised:
+    /// plain occlusion passes `|_| false`, which compiles away).
     #[inline(always)]
-    fn occluded_with<K: Simd>(&self, ray: &Ray, t_min: f64, t_max: f64) -> bool {
+    fn occluded_with<K: Simd>(
+        &self,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+        transparent: &impl Fn(usize) -> bool,
+    ) -> bool {
         let Some(trav) = self.setup(ray, t_min, t_max) else {
             return false;
         };
         let filter = FilterRay::new(ray, t_min, t_max);
         if self.nodes.is_empty() {
-            return self.block_occludes::<K>(0, ray, &filter, t_min, t_max);
+            return self.block_occludes::<K>(0, ray, &filter, (t_min, t_max), transparent);
         }
         let mut stack = Stack::new();
         let mut current = 0u32;
@@ -617,7 +630,8 @@ impl Bvh {
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                if self.block_occludes::<K>(node.child[k] as usize, ray, &filter, t_min, t_max) {
+                let block = node.child[k] as usize;
+                if self.block_occludes::<K>(block, ray, &filter, (t_min, t_max), transparent) {
                     return true;
                 }
             }
@@ -1070,8 +1084,14 @@ impl Kernel {
 /// fuses a multiply and an add on its own).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn occluded_avx2(bvh: &Bvh, ray: &Ray, t_min: f64, t_max: f64) -> bool {
-    bvh.occluded_with::<Avx2>(ray, t_min, t_max)
+fn occluded_avx2(
+    bvh: &Bvh,
+    ray: &Ray,
+    t_min: f64,
+    t_max: f64,
+    transparent: &impl Fn(usize) -> bool,
+) -> bool {
+    bvh.occluded_with::<Avx2>(ray, t_min, t_max, transparent)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1510,8 +1530,25 @@ impl Visibility for Bvh {
         match self.kernel {
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx2 => unsafe { occluded_avx2(self, ray, t_min, t_max) },
-            Kernel::Portable => self.occluded_with::<Portable>(ray, t_min, t_max),
+            Kernel::Avx2 => unsafe { occluded_avx2(self, ray, t_min, t_max, &|_| false) },
+            Kernel::Portable => self.occluded_with::<Portable>(ray, t_min, t_max, &|_| false),
+        }
+    }
+
+    /// One any-hit traversal that skips transparent hits, rather than a closest hit per polygon passed.
+    fn occluded_past(
+        &self,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> bool {
+        let transparent = &|polygon| transparent(polygon);
+        match self.kernel {
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2 => unsafe { occluded_avx2(self, ray, t_min, t_max, transparent) },
+            Kernel::Portable => self.occluded_with::<Portable>(ray, t_min, t_max, transparent),
         }
     }
 

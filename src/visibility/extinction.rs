@@ -184,6 +184,15 @@ impl Visibility for Extinction {
         (-self.optical_depth(from, to)).exp()
     }
 
+    fn transmittance_past(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        _transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        self.transmittance(from, to)
+    }
+
     fn name(&self) -> &'static str {
         "extinction"
     }

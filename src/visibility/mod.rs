@@ -58,6 +58,45 @@ pub trait Visibility: Sync + Send {
         }
     }
 
+    /// [`occluded`](Self::occluded) with the polygons `transparent` accepts let through. The default
+    /// steps from closest hit to closest hit; a back end with its own any-hit traversal skips them there.
+    fn occluded_past(
+        &self,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> bool {
+        let mut start = t_min;
+        for _ in 0..MAX_TRANSPARENT_HITS {
+            match self.intersect(ray, start, t_max) {
+                None => return false,
+                Some(hit) if transparent(hit.polygon) => start = hit.t + TRANSPARENT_STEP,
+                Some(_) => return true,
+            }
+        }
+        true
+    }
+
+    /// [`transmittance`](Self::transmittance) with the polygons `transparent` accepts let through: the
+    /// rays of a cluster link, whose end clusters' own contents must not shadow them a second time (their
+    /// mutual occlusion is the item buffers' to count: Sillion–Drettakis §6.1). Exact back ends cast
+    /// [`occluded_past`](Self::occluded_past) rays; the approximate ones (extinction, multi-resolution)
+    /// keep their own model.
+    fn transmittance_past(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        let ray = Ray::new(from, to - from);
+        if self.occluded_past(&ray, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON, transparent) {
+            0.0
+        } else {
+            1.0
+        }
+    }
+
     /// Short name for reports ("bvh", "embree", "brute-force").
     fn name(&self) -> &'static str;
 
@@ -75,3 +114,11 @@ pub trait Visibility: Sync + Send {
 
 /// Relative trim of a segment's ends in [`Visibility::segment_occluded`].
 pub const SEGMENT_EPSILON: f64 = 1e-5;
+
+/// Most transparent polygons the default [`Visibility::occluded_past`] steps past before it calls the
+/// ray blocked (a bound on its work; a cluster's contents rarely stack this deep along one ray).
+pub const MAX_TRANSPARENT_HITS: usize = 64;
+
+/// Step past a transparent hit, in segment parameter: beyond coincident polygons' rounding, well under
+/// [`SEGMENT_EPSILON`].
+const TRANSPARENT_STEP: f64 = 1e-9;

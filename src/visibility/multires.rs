@@ -301,6 +301,15 @@ impl Visibility for Multires {
         self.trace(from, to).transmittance
     }
 
+    fn transmittance_past(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        _transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        self.transmittance(from, to)
+    }
+
     fn name(&self) -> &'static str {
         "multires"
     }

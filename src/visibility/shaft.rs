@@ -495,6 +495,25 @@ impl Visibility for ShaftCulled {
         self.rays.transmittance(from, to)
     }
 
+    fn occluded_past(
+        &self,
+        ray: &Ray,
+        t_min: f64,
+        t_max: f64,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> bool {
+        self.rays.occluded_past(ray, t_min, t_max, transparent)
+    }
+
+    fn transmittance_past(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        self.rays.transmittance_past(from, to, transparent)
+    }
+
     fn name(&self) -> &'static str {
         self.rays.name()
     }
