@@ -206,3 +206,52 @@ fn random_points_of_a_furnished_office_are_found_on_their_planes() {
         );
     }
 }
+
+/// Two coplanar overlapping squares of different objects (z-fighting, as office3's two desk tops): a
+/// probe in the overlap is found on the first object's square whatever the order of the polygons, so
+/// that a solution measured before and after contact splitting renumbers them reads the same surface.
+#[test]
+fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
+    use radiosity::color::Rgb;
+    use radiosity::geometry::Shape;
+    use radiosity::reference::probe::{find_surface, ProbePoint};
+    use radiosity::scene::{Material, Object, Polygon, Scene};
+    let square = |x0: f64| {
+        let p = |x: f64, y: f64| DVec3::new(x, y, 0.0);
+        Shape::Quad([p(x0, 0.0), p(x0 + 1.0, 0.0), p(x0 + 1.0, 1.0), p(x0, 1.0)])
+    };
+    let probe = ProbePoint {
+        line: 1,
+        point: DVec3::new(0.75, 0.5, 0.0),
+        normal: DVec3::Z,
+    };
+    for order in [[0, 1], [1, 0]] {
+        let mut scene = Scene {
+            materials: vec![Material::diffuse("grey", Rgb::splat(0.5))],
+            objects: vec![
+                Object {
+                    name: "first".into(),
+                },
+                Object {
+                    name: "second".into(),
+                },
+            ],
+            ..Default::default()
+        };
+        for object in order {
+            scene.polygons.push(Polygon {
+                shape: square(0.5 * object as f64),
+                material: 0,
+                object,
+                two_sided: false,
+            });
+        }
+        let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+        let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
+        let found = find_surface(&scene, &visibility, &probe).expect("on both squares");
+        assert_eq!(
+            scene.polygons[found.polygon].object, 0,
+            "polygon order {order:?}"
+        );
+    }
+}

@@ -176,7 +176,13 @@ pub fn find_surface(
         .intersect(&ray, 0.0, 2.0 * delta)
         .map(|hit| (hit.polygon, hit.front, ray.at(hit.t)));
     let found = match hit {
-        Some((polygon, front, _)) if side_normal(polygon, front).dot(n) >= NORMAL_AGREEMENT => hit,
+        // Coplanar overlapping polygons at the hit (z-fighting, which the ray settles by chance) are
+        // settled as in `nearest_containing`.
+        Some((polygon, front, at)) if side_normal(polygon, front).dot(n) >= NORMAL_AGREEMENT => {
+            nearest_containing(scene, probe, delta)
+                .filter(|&(_, _, p)| p.distance(at) <= 1e-6 * delta)
+                .or(hit)
+        }
         // Nothing, or another surface crossing the short ray (a steep object standing on the surface
         // within δ of the point): look for the probe's own plane, and report the hit only if there is none.
         _ => nearest_containing(scene, probe, delta).or(hit),
@@ -209,13 +215,17 @@ pub fn find_surface(
 }
 
 /// The polygon nearest to the probe (by plane distance, at most `delta`) containing its projection, with a
-/// normal agreeing with the probe's on either side.
+/// normal agreeing with the probe's on either side. Among coplanar overlapping polygons (a scene's
+/// z-fighting pairs, such as office3's two desk tops), the one of the first object: a choice that does
+/// not change when contact splitting renumbers the polygons (their solutions differ there, as only one
+/// wins each item buffer's depth test).
 fn nearest_containing(
     scene: &Scene,
     probe: &ProbePoint,
     delta: f64,
 ) -> Option<(usize, bool, DVec3)> {
-    let mut best: Option<(f64, usize, bool, DVec3)> = None;
+    let mut best: Option<((f64, usize), usize, bool, DVec3)> = None;
+    let tie = COPLANAR * (1.0 + probe.point.abs().max_element());
     for (index, polygon) in scene.polygons.iter().enumerate() {
         let shape = &polygon.shape;
         let normal = shape.normal();
@@ -224,17 +234,23 @@ fn nearest_containing(
             continue;
         }
         let distance = normal.dot(probe.point - shape.vertices()[0]);
-        if distance.abs() > delta || best.is_some_and(|b| b.0 <= distance.abs()) {
+        // Plane distances within `tie` of each other count as equal.
+        let key = ((distance.abs() / tie).round() * tie, polygon.object);
+        if distance.abs() > delta || best.is_some_and(|b| b.0 <= key) {
             continue;
         }
         let projected = probe.point - distance * normal;
         let uv = shape.parameters_of(projected);
         if convex_contains(shape.parameter_corners(), uv, 1e-9) {
-            best = Some((distance.abs(), index, cos > 0.0, projected));
+            best = Some((key, index, cos > 0.0, projected));
         }
     }
     best.map(|(_, index, front, point)| (index, front, point))
 }
+
+/// Relative difference of plane distances under which [`nearest_containing`] takes two polygons as
+/// coplanar.
+const COPLANAR: f64 = 1e-9;
 
 /// The leaf element containing a surface point; `None` on the back of a one-sided polygon.
 fn solution_leaf(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Option<ElementId> {
