@@ -48,7 +48,8 @@ pub struct SceneArgs {
     #[arg(long, value_enum, default_value_t = scene::contacts::SplitContacts::Auto,
           value_name = "auto|on|off")]
     pub split_contacts: scene::contacts::SplitContacts,
-    /// Largest gap that still counts as a contact, relative to the smaller polygon's diameter.
+    /// Largest gap that still counts as a contact, relative to the smaller polygon's diameter (an
+    /// emitter with nothing between it and the surface: five times that).
     #[arg(long, default_value_t = scene::contacts::DEFAULT_CONTACT_GAP, value_name = "G",
           value_parser = parse_contact_gap)]
     pub contact_gap: f64,
