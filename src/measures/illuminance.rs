@@ -284,7 +284,7 @@ impl<'a> IrradianceGather<'a> {
             let t = self.visibility.transmittance(x, node.point);
             visible_samples += t;
             if t > 0.0 {
-                let radiance = h.radiance_at(piece.element, node.point);
+                let radiance = h.exitant_radiance_at(piece.element, node.point);
                 brightest = brightest.max(radiance.max_channel());
                 seen += k * t;
                 lit += radiance * (k * t);

@@ -139,7 +139,7 @@ impl VertexRadiosity {
                 });
                 let (value, area) = &mut sums[id as usize];
                 // The leaf's own value at this corner (its average with the constant basis).
-                let corner = hierarchy.radiance_at(leaf, element.shape().vertices()[k]);
+                let corner = hierarchy.exitant_radiance_at(leaf, element.shape().vertices()[k]);
                 *value += corner * element.area;
                 *area += element.area;
                 corners[k] = id;

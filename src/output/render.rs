@@ -173,7 +173,7 @@ impl Tracer<'_> {
         }
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
-            (Shading::Basis, _) => self.hierarchy.radiance_at(leaf, p),
+            (Shading::Basis, _) => self.hierarchy.exitant_radiance_at(leaf, p),
             _ => element.radiance[0],
         }
     }

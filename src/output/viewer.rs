@@ -134,7 +134,7 @@ impl ViewerMesh {
                 for &leaf in &leaves {
                     let element = hierarchy.element(leaf);
                     let value = |uv: DVec2| match shading {
-                        Shading::Basis => hierarchy.radiance_at_parameters(leaf, uv),
+                        Shading::Basis => hierarchy.exitant_radiance_at_parameters(leaf, uv),
                         _ => element.radiance[0],
                     };
                     let shape = element.shape();

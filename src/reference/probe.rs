@@ -260,10 +260,10 @@ fn solution_leaf(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Option<Elemen
 }
 
 /// The radiosity solution's radiance at a surface point: the basis expansion of the leaf element
-/// containing it, evaluated there.
+/// containing it, evaluated there and clamped at zero ([`Hierarchy::exitant_radiance_at`]).
 pub fn solution_radiance(hierarchy: &Hierarchy, surface: &SurfacePoint) -> Rgb {
     solution_leaf(hierarchy, surface).map_or(Rgb::BLACK, |leaf| {
-        hierarchy.radiance_at(leaf, surface.point)
+        hierarchy.exitant_radiance_at(leaf, surface.point)
     })
 }
 
