@@ -848,17 +848,12 @@ impl Hierarchy {
     }
 
     /// The radiance leaving surface element `id` at `p` as outputs report it (images, probes, lux
-    /// grids, exported models): [`radiance_at`](Self::radiance_at) with each channel clamped at zero.
+    /// grids, exported models; the viewer page clamps per pixel what it interpolates): [`radiance_at`](Self::radiance_at) with each channel clamped at zero.
     /// A linear or higher expansion undershoots beside steep gradients (1–3% of probe points in dark
     /// corners read below zero, down to −0.7 W/(m² sr) inside examp1's fixture, whose reference is 0),
     /// and no radiance is negative; solver and error estimates keep the expansion itself.
     pub fn exitant_radiance_at(&self, id: ElementId, p: DVec3) -> Rgb {
         self.radiance_at(id, p).map(|c| c.max(0.0))
-    }
-
-    /// [`exitant_radiance_at`](Self::exitant_radiance_at) at parameters `uv` of the element's shape.
-    pub fn exitant_radiance_at_parameters(&self, id: ElementId, uv: DVec2) -> Rgb {
-        self.radiance_at_parameters(id, uv).map(|c| c.max(0.0))
     }
 
     /// Exitant radiance of surface element `id` at the point `p` on it: its basis expansion evaluated

@@ -133,8 +133,10 @@ impl ViewerMesh {
                 mesh.triangles.reserve(count);
                 for &leaf in &leaves {
                     let element = hierarchy.element(leaf);
+                    // The expansion itself, not clamped: the page interpolates these vertex values
+                    // and clamps per pixel, as the PNG render clamps the expansion at each pixel.
                     let value = |uv: DVec2| match shading {
-                        Shading::Basis => hierarchy.exitant_radiance_at_parameters(leaf, uv),
+                        Shading::Basis => hierarchy.radiance_at_parameters(leaf, uv),
                         _ => element.radiance[0],
                     };
                     let shape = element.shape();
