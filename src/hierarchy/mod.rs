@@ -848,8 +848,8 @@ impl Hierarchy {
     }
 
     /// The radiance leaving surface element `id` at `p` as outputs report it (images, probes, lux
-    /// grids, exported models; the viewer page clamps per pixel what it interpolates): [`radiance_at`](Self::radiance_at) with each channel clamped at zero.
-    /// A linear or higher expansion undershoots beside steep gradients (1–3% of probe points in dark
+    /// grids, exported models; the viewer page clamps per pixel what it interpolates):
+    /// [`radiance_at`](Self::radiance_at) with each channel clamped at zero. A linear or higher expansion undershoots beside steep gradients (1–3% of probe points in dark
     /// corners read below zero, down to −0.7 W/(m² sr) inside examp1's fixture, whose reference is 0),
     /// and no radiance is negative; solver and error estimates keep the expansion itself.
     pub fn exitant_radiance_at(&self, id: ElementId, p: DVec3) -> Rgb {

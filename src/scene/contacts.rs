@@ -16,9 +16,9 @@
 //!
 //! Which contacts cut ([`SplitContacts`]): `on` cuts along every one; `auto` (the default) only along
 //! those through which a leak can carry significant light: an *emitter* Q lying on a reflecting P with a
-//! real gap between them and Q's emitting side facing P (within [`EMITTER_GAP_FACTOR`] times the gap
-//! where nothing lies between them: the corridor's lamps 2 cm under its ceiling) (cube.mgf's two-sided lamp, an uplight under a
-//! ceiling, an IES luminaire's opening whose table sends light toward P). An emitter is judged as a
+//! real gap between them and Q's emitting side facing P (cube.mgf's two-sided lamp, an uplight under a
+//! ceiling, an IES luminaire's opening whose table sends light toward P); up to [`EMITTER_GAP_FACTOR`]
+//! times the gap where nothing lies between them (the corridor's lamps 2 cm under its ceiling). An emitter is judged as a
 //! whole: adjacent coplanar polygons emitting toward the same sides form one region (a lamp tessellated
 //! into triangles, a round opening's fan), which lies on P within the gap of its own size and cuts P
 //! along its outline, not along its internal edges ([`regions`]). The light trapped in such a gap is of
@@ -283,13 +283,13 @@ fn contact_outlines(
     let mut outlines = Vec::new();
     for r in emitters.grid.near(&p.bounds, emitter_gap * p.diameter) {
         let region = &emitters.regions[r];
-        let g = emitter_gap * p.diameter.min(region.face.diameter);
-        let Some(offset) = lying(&mut region.corners(), g) else {
+        let size = p.diameter.min(region.face.diameter);
+        let Some(offset) = lying(&mut region.corners(), emitter_gap * size) else {
             continue;
         };
         // Within the contact gap the emitter is in contact; further, up to the emitter gap, only
         // where its light crosses straight to P.
-        let in_contact = offset.abs() <= gap * p.diameter.min(region.face.diameter);
+        let in_contact = offset.abs() <= gap * size;
         if shines_into_gap(region, p, offset) && (in_contact || gap_is_open(scene, grid, i, region))
         {
             outlines.extend(
