@@ -8,7 +8,9 @@
 
 use crate::bases::BasisKind;
 use crate::geometry::{cubature, Domain};
-use crate::hierarchy::{allocated_bytes, Element, ErrorStorage, Hierarchy, Link, Patch};
+use crate::hierarchy::{
+    allocated_bytes, Element, ErrorStorage, Hierarchy, Link, LinkCoupling, Patch,
+};
 use crate::scene::{Polygon, Scene};
 use crate::solvers::refine::Candidate;
 use crate::visibility::Visibility;
@@ -115,8 +117,7 @@ impl MemoryBudget {
 pub fn link_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorage) -> usize {
     let size = basis.size();
     let nodes = cubature::rule(Domain::Square, cubature_degree).nodes.len();
-    std::mem::size_of::<Link>()
-        + allocated_bytes(4 * (size * size + storage.values_after_block(size, nodes)))
+    std::mem::size_of::<Link>() + LinkCoupling::heap_bytes_for(size, nodes, storage)
 }
 
 /// A link's peak cost: [`link_bytes`], one more `Link` for the growth slack of its receiver's list

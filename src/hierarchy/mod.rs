@@ -92,25 +92,32 @@ impl PartialEq for OracleFactor {
 /// that with the averaged-orthonormal bases of [`crate::bases`] the gathered irradiance coefficients are
 /// `H_α = Σ_β block[α·b + β] L_{j,β}` and the constant–constant entry is the form factor F_ij.
 ///
-/// Storage: one `f32` allocation per link holds the block, the error coefficients and the node factors
-/// (`b² + n (b + 1)` values), because links are what a large solve is made of (BENCHMARKS.md, "Scale":
-/// 48 bytes of `Link` plus one heap block, instead of 80 bytes plus three). Single precision keeps a
-/// relative rounding of 6·10⁻⁸ per coefficient, far below the cubature error of the coupling itself
-/// (eq. (12) with a handful of nodes) and the sweeps' tolerance.
+/// Storage: one allocation of 32-bit words per link holds the block in `f32`, then the error
+/// coefficients and the node factors in 16-bit fixed point, each list relative to its own largest
+/// magnitude (two scales in `f32`), because links are what a large solve is made of (BENCHMARKS.md,
+/// "Scale" and "Links in fixed point"). The block keeps single precision (a relative rounding of 6·10⁻⁸
+/// per coefficient, far below the cubature error of the coupling itself, eq. (12) with a handful of
+/// nodes): it carries the light. The error coefficients and node factors only estimate error and
+/// choose what to split; a step of 1/32767 of the link's largest one (3·10⁻⁵) is far below what an
+/// estimate resolves, and halves their bytes (a linear surface link with 9 receiver nodes: 192 → 128
+/// bytes).
 ///
 /// With [`ErrorStorage::Reduced`] (Bekaert–Willems §4.3) the `n × b` error coefficients are replaced by
 /// `n` ratios `Σ_β L_{j,β} δ_{j,β}(x_k) / L_{j,1}` for the source radiance at coupling time, so that the
 /// block is followed by `2n` values instead of `n (b + 1)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkCoupling {
-    /// The block, then the error coefficients (or their reduced form), then the node factors (see the
-    /// accessors).
-    values: Box<[f32]>,
+    /// The block (`f32` bits), the scales of the error coefficients and of the node factors (`f32`
+    /// bits), then the error coefficients (or their reduced form) and the node factors as `i16` steps of
+    /// their scale, two per word (see the accessors).
+    words: Box<[u32]>,
     /// Basis size `b` of both ends.
     size: u8,
     /// Whether the error coefficients are stored one per node: §4.3's reduced form, or the exact
     /// `δ_{j,1}(x_k)` of a [`LinkCoupling::constant_source`] coupling.
     reduced: bool,
+    /// Number of receiver cubature nodes `n`.
+    nodes: u16,
     /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
     pub visibility: f32,
     /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
@@ -121,9 +128,28 @@ pub struct LinkCoupling {
     pub visibility_error: f32,
 }
 
+/// Largest magnitude of a fixed-point step count ([`LinkCoupling`]'s error coefficients and node
+/// factors).
+const STEPS: f32 = i16::MAX as f32;
+
+/// The scale of `values` in fixed point (their largest finite magnitude over [`STEPS`]), and their step
+/// counts (rounded; saturating, NaN to 0).
+fn fixed_point(values: &[f32]) -> (f32, impl Iterator<Item = i16> + '_) {
+    let largest = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.0f32, |m, v| m.max(v.abs()));
+    let scale = largest / STEPS;
+    let inverse = if scale > 0.0 { 1.0 / scale } else { 0.0 };
+    (
+        scale,
+        values.iter().map(move |&v| (v * inverse).round() as i16),
+    )
+}
+
 impl LinkCoupling {
     /// A coupling from its `b × b` block, `n × b` error coefficients and `n` node factors (see the
-    /// accessors), stored in single precision.
+    /// accessors).
     pub fn new(
         block: &[f64],
         errors: &[f32],
@@ -136,8 +162,9 @@ impl LinkCoupling {
             size * size == block.len() && errors.len() == node_factors.len() * size,
             "a coupling block is b × b and there are b error coefficients per node"
         );
+        let block: Vec<f32> = block.iter().map(|&k| k as f32).collect();
         Self::stored(
-            block,
+            &block,
             errors,
             node_factors,
             false,
@@ -150,8 +177,7 @@ impl LinkCoupling {
     /// (`δ_{j,β}(x_k) = 0` for β > 1, as for every link with a cluster at one end, whose source is seen
     /// as a constant): from the `n` coefficients `δ_{j,1}(x_k)`, stored one per node in the layout of
     /// the reduced form, where `δ_j(x_k) = L_{j,1} δ_{j,1}(x_k)` is then exact for any source radiance.
-    /// The `n (b − 1)` zeros are not stored: a cluster link of the linear basis holds 41 values
-    /// instead of 73 (BENCHMARKS.md, "Peak memory of office3 and the classroom").
+    /// The `n (b − 1)` zeros are not stored (BENCHMARKS.md, "Peak memory of office3 and the classroom").
     pub fn constant_source(
         block: &[f64],
         node_errors: &[f32],
@@ -164,8 +190,9 @@ impl LinkCoupling {
             node_factors.len(),
             "one error coefficient per node"
         );
+        let block: Vec<f32> = block.iter().map(|&k| k as f32).collect();
         Self::stored(
-            block,
+            &block,
             node_errors,
             node_factors,
             true,
@@ -174,10 +201,27 @@ impl LinkCoupling {
         )
     }
 
-    /// The single allocation of [`LinkCoupling`]: block, error coefficients (`errors_per_node` per
-    /// node: `b`, or 1 when `reduced`), node factors.
+    /// Words of a coupling's allocation: the `b × b` block, two scales, and `tail` 16-bit values
+    /// (error coefficients and node factors) two per word.
+    fn word_count(block_len: usize, tail: usize) -> usize {
+        block_len + 2 + tail.div_ceil(2)
+    }
+
+    /// Heap bytes of the coupling of a link whose ends have basis size `b` and whose receiver has
+    /// `nodes` cubature nodes, with the error coefficients stored as `storage` says (for
+    /// [`crate::memory`]'s budget).
+    pub fn heap_bytes_for(size: usize, nodes: usize, storage: ErrorStorage) -> usize {
+        let errors_per_node = match storage {
+            ErrorStorage::Full => size,
+            ErrorStorage::Reduced => 1,
+        };
+        allocated_bytes(4 * Self::word_count(size * size, nodes * (errors_per_node + 1)))
+    }
+
+    /// The single allocation of [`LinkCoupling`]: block, scales, error coefficients
+    /// (`errors_per_node` per node: `b`, or 1 when `reduced`) and node factors in fixed point.
     fn stored(
-        block: &[f64],
+        block: &[f32],
         errors: &[f32],
         node_factors: &[f32],
         reduced: bool,
@@ -185,16 +229,24 @@ impl LinkCoupling {
         visibility_error: f32,
     ) -> Self {
         let size = (block.len() as f64).sqrt().round() as usize;
-        let values = block
-            .iter()
-            .map(|&k| k as f32)
-            .chain(errors.iter().copied())
-            .chain(node_factors.iter().copied())
-            .collect();
+        let tail_len = errors.len() + node_factors.len();
+        let mut words = vec![0u32; Self::word_count(block.len(), tail_len)];
+        let (error_scale, error_steps) = fixed_point(errors);
+        let (factor_scale, factor_steps) = fixed_point(node_factors);
+        for (w, &k) in words.iter_mut().zip(block) {
+            *w = k.to_bits();
+        }
+        words[block.len()] = error_scale.to_bits();
+        words[block.len() + 1] = factor_scale.to_bits();
+        let tail: &mut [i16] = bytemuck::cast_slice_mut(&mut words[block.len() + 2..]);
+        for (t, q) in tail.iter_mut().zip(error_steps.chain(factor_steps)) {
+            *t = q;
+        }
         LinkCoupling {
-            values,
+            words: words.into_boxed_slice(),
             size: u8::try_from(size).expect("basis sizes are at most MAX_BASIS_SIZE"),
             reduced,
+            nodes: u16::try_from(node_factors.len()).expect("at most 65535 cubature nodes"),
             visibility,
             visibility_error,
         }
@@ -215,31 +267,30 @@ impl LinkCoupling {
         }
         let size = usize::from(self.size);
         let grey: Vec<f64> = source.iter().map(|c| c.r + c.g + c.b).collect();
-        let ratios = (0..self.node_count()).map(|k| {
-            let deltas = &self.errors()[k * size..(k + 1) * size];
-            if grey[0] > 0.0 {
-                let sum: f64 = grey
-                    .iter()
-                    .zip(deltas)
-                    .map(|(&l, &d)| l * f64::from(d))
-                    .sum();
-                (sum / grey[0]) as f32
-            } else {
-                deltas[0]
-            }
-        });
-        let values = self
-            .block()
-            .iter()
-            .copied()
-            .chain(ratios)
-            .chain(self.node_factors().iter().copied())
+        let ratios: Vec<f32> = (0..self.node_count())
+            .map(|k| {
+                let delta = |beta: usize| self.error(k * size + beta);
+                if grey[0] > 0.0 {
+                    let sum: f64 = grey
+                        .iter()
+                        .enumerate()
+                        .map(|(beta, &l)| l * f64::from(delta(beta)))
+                        .sum();
+                    (sum / grey[0]) as f32
+                } else {
+                    delta(0)
+                }
+            })
             .collect();
-        LinkCoupling {
-            values,
-            reduced: true,
-            ..self
-        }
+        let factors: Vec<f32> = self.node_factors().collect();
+        Self::stored(
+            self.block(),
+            &ratios,
+            &factors,
+            true,
+            self.visibility,
+            self.visibility_error,
+        )
     }
 
     fn block_len(&self) -> usize {
@@ -257,50 +308,60 @@ impl LinkCoupling {
 
     /// Number of receiver cubature nodes `n`.
     pub fn node_count(&self) -> usize {
-        (self.values.len() - self.block_len()) / (self.errors_per_node() + 1)
+        usize::from(self.nodes)
     }
 
     /// `b × b` row-major coupling coefficients `K_{i,α;j,β} / (ρ_i A_i)` (eq. (3)).
     pub fn block(&self) -> &[f32] {
-        &self.values[..self.block_len()]
+        bytemuck::cast_slice(&self.words[..self.block_len()])
     }
 
-    /// `n × b` row-major link error coefficients `δ_{j,β}(x_k) / ρ_i` at the receiver's `n` cubature
-    /// nodes (Algorithm 4.1 step 4b); in the reduced form ([`LinkCoupling::reduced`]), the `n` ratios.
-    fn errors(&self) -> &[f32] {
-        let start = self.block_len();
-        &self.values[start..start + self.node_count() * self.errors_per_node()]
+    /// The fixed-point error coefficients then node factors.
+    fn steps(&self) -> &[i16] {
+        bytemuck::cast_slice(&self.words[self.block_len() + 2..])
+    }
+
+    /// Link error coefficient `i` of the `n × b` row-major `δ_{j,β}(x_k) / ρ_i` at the receiver's `n`
+    /// cubature nodes (Algorithm 4.1 step 4b); in the reduced form ([`LinkCoupling::reduced`]), of the
+    /// `n` ratios.
+    fn error(&self, i: usize) -> f32 {
+        let scale = f32::from_bits(self.words[self.block_len()]);
+        f32::from(self.steps()[i]) * scale
     }
 
     /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
     /// which carry propagated error in eqs. (11) and (13).
-    pub fn node_factors(&self) -> &[f32] {
-        &self.values[self.values.len() - self.node_count()..]
+    pub fn node_factors(&self) -> impl ExactSizeIterator<Item = f32> + '_ {
+        let scale = f32::from_bits(self.words[self.block_len() + 1]);
+        let start = self.node_count() * self.errors_per_node();
+        self.steps()[start..start + self.node_count()]
+            .iter()
+            .map(move |&q| f32::from(q) * scale)
     }
 
     /// The constant–constant entry of the block: the form factor F_ij.
     pub fn form_factor(&self) -> f64 {
-        f64::from(self.values[0])
+        f64::from(self.block()[0])
     }
 
     /// `δ_j(x_k) / ρ_i = Σ_β L_{j,β} δ_{j,β}(x_k)` at receiver node `k`, for the source's radiance
     /// coefficients `source` (Bekaert–Willems §4.2).
     pub fn node_error(&self, k: usize, source: &[Rgb]) -> Rgb {
         if self.reduced {
-            return source[0] * f64::from(self.errors()[k]);
+            return source[0] * f64::from(self.error(k));
         }
         let size = source.len();
         source
             .iter()
-            .zip(&self.errors()[k * size..(k + 1) * size])
-            .map(|(&l, &d)| l * f64::from(d))
+            .enumerate()
+            .map(|(beta, &l)| l * f64::from(self.error(k * size + beta)))
             .sum()
     }
 
     /// Heap bytes held by this coupling, as the allocator hands them out (for memory budgets and
     /// reports).
     pub fn heap_bytes(&self) -> usize {
-        allocated_bytes(self.values.len() * std::mem::size_of::<f32>())
+        allocated_bytes(self.words.len() * std::mem::size_of::<u32>())
     }
 }
 
@@ -314,16 +375,6 @@ pub enum ErrorStorage {
     /// One ratio per receiver node (Bekaert–Willems §4.3), for the source's radiance when the link is
     /// made: `2n` values after the block instead of `n (b + 1)`.
     Reduced,
-}
-
-impl ErrorStorage {
-    /// `f32` values a coupling holds after its `b × b` block, for `n` receiver nodes.
-    pub fn values_after_block(self, size: usize, nodes: usize) -> usize {
-        match self {
-            ErrorStorage::Full => nodes * (size + 1),
-            ErrorStorage::Reduced => 2 * nodes,
-        }
-    }
 }
 
 /// Bytes an allocation of `requested` bytes occupies: glibc's malloc adds an 8-byte header and rounds up
@@ -964,6 +1015,41 @@ mod tests {
         LinkCoupling::new(&block, &errors, &factors, 0.5, 0.01)
     }
 
+    /// The fixed-point error coefficients and node factors come back within half a step (1/65534) of
+    /// their list's largest magnitude, whatever their range (here ten decades and both signs), the
+    /// largest one exactly; the block stays the `f32` of its value.
+    #[test]
+    fn couplings_keep_errors_and_factors_to_half_a_step() {
+        let n = 9;
+        let block: Vec<f64> = (0..9).map(|i| 1e-7 * (i as f64 + 1.0)).collect();
+        let errors: Vec<f32> = (0..3 * n)
+            .map(|i| (-1.0f32).powi(i as i32) * 10f32.powi(-(i as i32 % 11)) * 3e-2)
+            .collect();
+        let factors: Vec<f32> = (0..n).map(|k| 0.5 * 0.3f32.powi(k as i32)).collect();
+        let c = LinkCoupling::new(&block, &errors, &factors, 0.5, 0.01);
+        assert!(c.block().iter().zip(&block).all(|(&a, &b)| a == b as f32));
+        let half_step =
+            |list: &[f32]| list.iter().fold(0.0f32, |m, v| m.max(v.abs())) * 0.5 / STEPS;
+        for (i, &e) in errors.iter().enumerate() {
+            assert!(
+                (c.error(i) - e).abs() <= half_step(&errors) * 1.0001,
+                "error {i}"
+            );
+        }
+        for (k, (f, &expected)) in c.node_factors().zip(&factors).enumerate() {
+            assert!(
+                (f - expected).abs() <= half_step(&factors) * 1.0001,
+                "factor {k}"
+            );
+        }
+        assert_eq!(c.error(0), errors[0]);
+        assert_eq!(c.node_factors().next(), Some(factors[0]));
+        assert_eq!(
+            c.heap_bytes(),
+            LinkCoupling::heap_bytes_for(3, n, ErrorStorage::Full)
+        );
+    }
+
     /// §4.3: "When this coefficient is multiplied with `L_{j,1}` the exact `δ_j(x_k)` is recovered",
     /// for the source radiance the ratio was taken with (channels of one shape), to f32 rounding; the
     /// block and node factors are untouched and the error storage shrinks from `n (b + 1)` to `2n`.
@@ -979,13 +1065,19 @@ mod tests {
         let reduced = full.clone().reduced(&source);
         assert_eq!(reduced.node_count(), n);
         assert_eq!(reduced.block(), full.block());
-        assert_eq!(reduced.node_factors(), full.node_factors());
-        assert_eq!(reduced.values.len(), 9 + 2 * n);
+        assert!(reduced.node_factors().eq(full.node_factors()));
+        // Block, two scales, and n ratios and n factors two per word.
+        assert_eq!(reduced.words.len(), 9 + 2 + n);
+        // The ratios are stored in fixed point: within half a step of the largest one, per channel
+        // times that channel's L_{j,1}.
+        let largest = (0..n)
+            .map(|k| full.node_error(k, &source).g.abs())
+            .fold(0.0, f64::max);
         for k in 0..n {
             let (a, b) = (full.node_error(k, &source), reduced.node_error(k, &source));
             for (x, y) in [(a.r, b.r), (a.g, b.g), (a.b, b.b)] {
                 assert!(
-                    (x - y).abs() <= 1e-6 * (1.0 + x.abs()),
+                    (x - y).abs() <= 2.0 * largest * (0.5 / f64::from(STEPS) + 1e-7),
                     "node {k}: {x} vs {y}"
                 );
             }
@@ -1012,8 +1104,8 @@ mod tests {
         let compact = LinkCoupling::constant_source(&block, &deltas, &factors, 0.5, 0.01);
         assert_eq!(compact.node_count(), n);
         assert_eq!(compact.block(), full.block());
-        assert_eq!(compact.node_factors(), full.node_factors());
-        assert_eq!(compact.values.len(), 9 + 2 * n);
+        assert!(compact.node_factors().eq(full.node_factors()));
+        assert_eq!(compact.words.len(), 9 + 2 + n);
         let source = [
             Rgb::new(2.0, 1.0, 0.5),
             Rgb::new(-0.4, 0.2, 0.1),
@@ -1030,7 +1122,7 @@ mod tests {
     fn constant_basis_couplings_are_already_reduced() {
         let full = LinkCoupling::new(&[0.2], &[0.01, -0.02, 0.03, 0.0], &[0.1; 4], 1.0, 0.0);
         let reduced = full.clone().reduced(&[Rgb::splat(0.7)]);
-        assert_eq!(reduced.values, full.values);
+        assert_eq!(reduced.words, full.words);
     }
 
     /// An expansion that undershoots (mean 0.25, a steep first-order term) reads its own values in the

@@ -72,7 +72,7 @@ impl RefinementOracle for LinkErrorOracle {
         let radiance = &source_element.radiance;
         let propagated_error = source_element.error;
         let (mut own, mut propagated, mut total) = (0.0f64, 0.0f64, 0.0f64);
-        for (k, &factor) in coupling.node_factors().iter().enumerate() {
+        for (k, factor) in coupling.node_factors().enumerate() {
             let delta = coupling.node_error(k, radiance);
             for (rho_c, delta_c) in [(rho.r, delta.r), (rho.g, delta.g), (rho.b, delta.b)] {
                 let d = rho_c * delta_c.abs();

@@ -128,7 +128,7 @@ impl Groups<'_> {
     /// The area of group `g` the other end can see: its visible area, or without item buffers all of it.
     fn area(&self, g: usize) -> f64 {
         match &self.visible {
-            Some(visible) => f64::from(visible.group_areas()[g]),
+            Some(visible) => f64::from(visible.group_area(g)),
             None => self.orientation.groups[g].area,
         }
     }
@@ -138,7 +138,7 @@ impl Groups<'_> {
     pub fn fraction(&self, k: u32) -> f32 {
         self.visible
             .as_ref()
-            .map_or(1.0, |visible| visible.fractions()[k as usize])
+            .map_or(1.0, |visible| visible.fraction(k as usize))
     }
 
     /// Projected area of each group toward the point `toward`, of its visible area with item buffers
@@ -156,10 +156,9 @@ impl Groups<'_> {
         let Some(visible) = &self.visible else {
             return self.orientation.member_at(group, rng.random());
         };
-        let fractions = visible.fractions();
         for _ in 0..REJECTION_TRIES {
             let k = self.orientation.member_at(group, rng.random());
-            if rng.random::<f32>() < fractions[k as usize] {
+            if rng.random::<f32>() < visible.fraction(k as usize) {
                 return k;
             }
         }
@@ -171,7 +170,7 @@ impl Groups<'_> {
             } else {
                 o.cumulative_area[i - 1]
             };
-            (o.cumulative_area[i] - before) * f64::from(fractions[o.members[i] as usize])
+            (o.cumulative_area[i] - before) * f64::from(visible.fraction(o.members[i] as usize))
         };
         let target = rng.random::<f64>() * range.clone().map(visible_area).sum::<f64>();
         let mut running = 0.0;
@@ -560,7 +559,7 @@ fn visible_areas_along(
         .of(h, id)
         .iter()
         .zip(visible.fractions())
-        .map(|(&(normal, area), &f)| area * normal.dot(along).max(0.0) * f64::from(f))
+        .map(|(&(normal, area), f)| area * normal.dot(along).max(0.0) * f64::from(f))
         .collect()
 }
 

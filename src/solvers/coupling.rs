@@ -394,7 +394,7 @@ pub fn visibility_spread(
     let source = hierarchy.element(source).shape();
     let v = f64::from(coupling.visibility);
     let (mut spread, mut total) = (0.0, 0.0);
-    for (x, &visible) in nodes.iter().zip(coupling.node_factors()) {
+    for (x, visible) in nodes.iter().zip(coupling.node_factors()) {
         let unoccluded = x.weight * point_to_polygon(x.point, normal, source);
         if unoccluded > 0.0 {
             let v_k = (x.weight * f64::from(visible) / unoccluded).clamp(0.0, 1.0);

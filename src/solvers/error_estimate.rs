@@ -241,7 +241,7 @@ fn own_sums(h: &Hierarchy, id: ElementId, propagated: Option<&[f64]>) -> Option<
         }
         if let Some(bounds) = propagated {
             let bound = bounds[link.source as usize];
-            for (s, &factor) in sums.spread.iter_mut().zip(link.coupling.node_factors()) {
+            for (s, factor) in sums.spread.iter_mut().zip(link.coupling.node_factors()) {
                 *s += rho * (bound * f64::from(factor));
             }
         }

@@ -25,7 +25,9 @@ use rayon::prelude::*;
 pub struct Candidate {
     pub receiver: ElementId,
     pub source: ElementId,
-    pub coupling: Option<LinkCoupling>,
+    /// The coupling computed while judging it (link error oracle; boxed: most candidates have none,
+    /// and a pass holds many candidates).
+    pub coupling: Option<Box<LinkCoupling>>,
     pub oracle_factor: OracleFactor,
     /// Visibility `v` of the parent link when that link was partially occluded: a link between
     /// sub-elements whose own node pairs all agree (all open or all blocked) may have sampled a
@@ -64,7 +66,7 @@ impl Candidate {
         Judging {
             receiver: self.receiver,
             source: self.source,
-            coupling: self.coupling.as_ref(),
+            coupling: self.coupling.as_deref(),
             oracle_factor: self.oracle_factor,
             inherited_visibility: self.inherited_visibility,
             shaft: self.shaft,
@@ -507,14 +509,59 @@ pub fn refine_scheduled(
 /// The first round of a later pass ([`Start::StoredLinks`]): every stored link judged where it is, in
 /// element order, then settled in that order as a candidate list would be; admissible links stay in
 /// their lists (with what judging them cached), refined ones leave them, and their replacements wait
-/// in `pass.next`.
+/// in `pass.next`. Without a schedule the elements are judged and settled a run of about
+/// [`STORED_CHUNK`] links at a time, so that the verdicts of every stored link are never held at once
+/// (they were office3's largest block after the couplings: 37 MB); a schedule ranks the whole
+/// round's verdicts, so it gets them together.
 fn refine_stored_links(
     hierarchy: &mut Hierarchy,
     visibility: &dyn Visibility,
     oracle: &dyn RefinementOracle,
     settings: &RefineSettings,
     pass: &mut Pass,
+    mut schedule: Option<&mut (dyn RefinementSchedule + '_)>,
+) {
+    pass.start_round(hierarchy.link_count());
+    let chunk = if schedule.is_some() {
+        usize::MAX
+    } else {
+        STORED_CHUNK
+    };
+    // Elements that splits add on the way have no links yet.
+    let stored = hierarchy.elements.len();
+    let mut start = 0;
+    while start < stored {
+        let mut end = start;
+        let mut links = 0;
+        while end < stored && links < chunk {
+            links += hierarchy.elements[end].links.len();
+            end += 1;
+        }
+        judge_and_settle_stored(
+            hierarchy,
+            visibility,
+            oracle,
+            settings,
+            pass,
+            schedule.as_deref_mut(),
+            start..end,
+        );
+        start = end;
+    }
+}
+
+/// Stored links judged and settled per run of elements ([`refine_stored_links`]).
+const STORED_CHUNK: usize = 1 << 16;
+
+/// [`refine_stored_links`] for the elements `range`.
+fn judge_and_settle_stored(
+    hierarchy: &mut Hierarchy,
+    visibility: &dyn Visibility,
+    oracle: &dyn RefinementOracle,
+    settings: &RefineSettings,
+    pass: &mut Pass,
     schedule: Option<&mut (dyn RefinementSchedule + '_)>,
+    range: std::ops::Range<usize>,
 ) {
     // One list of verdicts per element, each of its exact size (a flattened parallel collect would
     // gather pieces of unknown length and copy them, holding the verdicts more than twice).
@@ -524,11 +571,10 @@ fn refine_stored_links(
             visibility,
         };
         let tests = &pass.partial_tests;
-        hierarchy
-            .elements
+        hierarchy.elements[range.clone()]
             .par_iter()
-            .enumerate()
-            .map(|(id, e)| {
+            .zip(range.clone())
+            .map(|(e, id)| {
                 e.links
                     .iter()
                     .map(|link| {
@@ -540,16 +586,14 @@ fn refine_stored_links(
             .collect()
     };
     if let Some(schedule) = schedule {
-        let judged = stored_links(hierarchy).zip(verdicts.iter().flatten());
+        let judged = stored_links(hierarchy, range.clone()).zip(verdicts.iter().flatten());
         let selection = select(schedule, 1, hierarchy, judged);
         keep_unselected_admissible(verdicts.iter_mut().flatten(), selection);
     }
-    let judged = stored_links(hierarchy).zip(verdicts.iter().flatten());
+    let judged = stored_links(hierarchy, range.clone()).zip(verdicts.iter().flatten());
     let leaves = leaves_split(hierarchy, judged);
     hierarchy.reserve_splits(leaves);
-    pass.start_round(verdicts.iter().map(Vec::len).sum());
-    // Elements that splits add on the way have no links yet.
-    for (id, element_verdicts) in verdicts.into_iter().enumerate() {
+    for (id, element_verdicts) in range.zip(verdicts) {
         if element_verdicts.is_empty() {
             continue;
         }
@@ -567,7 +611,7 @@ fn refine_stored_links(
                 Some(admitted) => {
                     link.oracle_factor = admitted.oracle_factor;
                     if let Some(coupling) = admitted.coupling {
-                        link.coupling = coupling;
+                        link.coupling = *coupling;
                     }
                     link.shaft = admitted.shaft;
                     true
@@ -579,13 +623,16 @@ fn refine_stored_links(
     }
 }
 
-/// Every link stored in `h`, in element order, as the oracle judges it.
-fn stored_links(h: &Hierarchy) -> impl Iterator<Item = Judging<'_>> {
-    h.elements.iter().enumerate().flat_map(|(id, e)| {
-        e.links
-            .iter()
-            .map(move |link| Judging::stored(id as ElementId, link))
-    })
+/// The links stored at the elements `range`, in element order, as the oracle judges them.
+fn stored_links(h: &Hierarchy, range: std::ops::Range<usize>) -> impl Iterator<Item = Judging<'_>> {
+    h.elements[range.clone()]
+        .iter()
+        .zip(range)
+        .flat_map(|(e, id)| {
+            e.links
+                .iter()
+                .map(move |link| Judging::stored(id as ElementId, link))
+        })
 }
 
 /// Passes one round's verdicts on its links (`judged`, in order) through `schedule`; returns its
@@ -598,7 +645,7 @@ fn select<'a>(
 ) -> Vec<Judged> {
     let mut selection: Vec<Judged> = judged
         .map(|(c, v)| Judged {
-            error: v.error,
+            error: f64::from(v.error),
             refine: v.decision != Decision::Admissible,
             cost: links_created(hierarchy, c.receiver, c.source, v.decision),
         })
@@ -642,7 +689,7 @@ fn leaves_split<'a>(
 struct Admitted {
     oracle_factor: OracleFactor,
     /// The coupling computed to judge it, if it had none.
-    coupling: Option<LinkCoupling>,
+    coupling: Option<Box<LinkCoupling>>,
     shaft: Option<ShaftVerdict>,
 }
 
@@ -679,10 +726,10 @@ impl Pass {
     ) -> Option<Admitted> {
         let outcome = &mut self.outcome;
         self.settled += 1;
-        outcome.oracle_rays += verdict.rays;
-        outcome.form_factor_rays += verdict.coupling_rays;
-        outcome.shaft_tests += verdict.shaft_tests;
-        outcome.rays_saved += verdict.rays_saved;
+        outcome.oracle_rays += u64::from(verdict.rays);
+        outcome.form_factor_rays += u64::from(verdict.coupling_rays);
+        outcome.shaft_tests += u64::from(verdict.shaft_tests);
+        outcome.rays_saved += u64::from(verdict.rays_saved);
         let mut decision = verdict.decision;
         let splits_surface = match decision {
             Decision::Admissible => false,
@@ -723,7 +770,7 @@ impl Pass {
                 self.kept += 1;
                 return Some(Admitted {
                     oracle_factor: verdict.oracle_factor,
-                    coupling: verdict.coupling.map(|k| *k),
+                    coupling: verdict.coupling,
                     shaft,
                 });
             }
@@ -795,7 +842,7 @@ fn couple_chunk(
                     c.receiver,
                     Link {
                         source: c.source,
-                        coupling,
+                        coupling: *coupling,
                         oracle_factor: c.oracle_factor,
                         shaft: c.shaft,
                     },
@@ -903,17 +950,18 @@ fn push_if_interacting(
     }
 }
 
-/// An oracle verdict on one candidate.
+/// An oracle verdict on one candidate (one per stored link while a pass judges them: its counters of
+/// one link's rays and tests are 32-bit, [`ray_count`]).
 struct Verdict {
     decision: Decision,
     /// Rays cast by the oracle's own samples.
-    rays: u64,
+    rays: u32,
     /// Radiance-independent factor of the estimate, to cache on the link.
     oracle_factor: OracleFactor,
     /// The coupling computed to judge the link (link error oracle), to keep on it (boxed: other
     /// oracles leave it empty, and a round holds a verdict per candidate).
     coupling: Option<Box<LinkCoupling>>,
-    coupling_rays: u64,
+    coupling_rays: u32,
     /// The elements cannot exchange light at all (drop the link).
     no_interaction: bool,
     /// The shaft verdict found while judging (a coupling's, or the test of a link to be refined, which
@@ -922,14 +970,21 @@ struct Verdict {
     /// The Partial test of a link to be refined, when its occluder list is complete (boxed: few
     /// verdicts carry one).
     partial_test: Option<Box<ShaftTest>>,
-    shaft_tests: u64,
-    rays_saved: u64,
-    /// The error estimate compared with the threshold (for a [`RefinementSchedule`]).
-    error: f64,
+    shaft_tests: u32,
+    rays_saved: u32,
+    /// The error estimate compared with the threshold (for a [`RefinementSchedule`]'s histogram:
+    /// single precision, as the verdicts of a pass are held together).
+    error: f32,
 }
 
 // `memory::link_peak_bytes` counts a verdict as at most a candidate's size.
 const _: () = assert!(std::mem::size_of::<Verdict>() <= std::mem::size_of::<Candidate>());
+
+/// One link's count of rays in a [`Verdict`] (a link casts at most its node pairs' and the oracle's
+/// samples' rays, far below `u32::MAX`; saturating all the same).
+fn ray_count(rays: u64) -> u32 {
+    u32::try_from(rays).unwrap_or(u32::MAX)
+}
 
 impl Verdict {
     fn admissible(oracle_factor: OracleFactor) -> Self {
@@ -964,7 +1019,7 @@ fn decide(
     if c.receiver == c.source {
         return Verdict {
             decision: Decision::SubdivideReceiver,
-            error: f64::INFINITY,
+            error: f32::INFINITY,
             ..Verdict::admissible(OracleFactor::NONE)
         };
     }
@@ -1006,7 +1061,7 @@ fn decide(
             None => {
                 let mut rng = link_rng(settings.seed, c.receiver, c.source, ORACLE_STREAM);
                 let estimate = oracle.estimate(context, c.receiver, c.source, &mut rng);
-                verdict.rays = estimate.rays;
+                verdict.rays = ray_count(estimate.rays);
                 verdict.oracle_factor = (weight > 0.0).then(|| estimate.error / weight).into();
                 estimate.error
             }
@@ -1028,7 +1083,7 @@ fn decide(
             (seen, settings.threshold, Some(Decision::SubdivideReceiver))
         }
     };
-    verdict.error = error;
+    verdict.error = error as f32;
     if error <= threshold || verdict.no_interaction {
         return verdict;
     }
@@ -1054,7 +1109,7 @@ fn decide(
         };
         let test = shaft_test(h, context.visibility, c.receiver, c.source, among);
         verdict.shaft = test.map(|t| t.verdict);
-        verdict.shaft_tests = u64::from(test.is_some());
+        verdict.shaft_tests = u32::from(test.is_some());
         verdict.partial_test = test.filter(|t| t.occluders().is_some()).map(Box::new);
     }
     verdict
@@ -1077,9 +1132,9 @@ fn couple_for_verdict(
         c.shaft_prior(partial_tests),
     );
     verdict.shaft = k.shaft;
-    verdict.shaft_tests = u64::from(c.shaft.is_none() && k.shaft.is_some());
-    verdict.rays_saved = k.rays_saved;
-    verdict.coupling_rays = k.rays;
+    verdict.shaft_tests = u32::from(c.shaft.is_none() && k.shaft.is_some());
+    verdict.rays_saved = ray_count(k.rays_saved);
+    verdict.coupling_rays = ray_count(k.rays);
     verdict.no_interaction = k.unoccluded <= 0.0;
     k
 }
@@ -1157,7 +1212,7 @@ fn decide_cluster_link(
         (weight * bound, settings.threshold)
     };
     let mut verdict = Verdict {
-        error,
+        error: error as f32,
         ..Verdict::admissible(OracleFactor::NONE)
     };
     if error <= threshold {
