@@ -54,6 +54,11 @@ pub struct Link {
     pub shaft: Option<crate::visibility::shaft::ShaftVerdict>,
 }
 
+// Links are what a large solve is made of: 40 bytes each besides their coupling's words
+// (BENCHMARKS.md, "Links in fixed point").
+#[cfg(target_pointer_width = "64")]
+const _: () = assert!(std::mem::size_of::<Link>() == 40);
+
 impl Link {
     /// Receiver-area-averaged form factor F_ij (visibility included): the constant–constant entry.
     pub fn form_factor(&self) -> f64 {
@@ -107,8 +112,9 @@ impl PartialEq for OracleFactor {
 /// block is followed by `2n` values instead of `n (b + 1)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkCoupling {
-    /// The block (`f32` bits), the scales of the error coefficients and of the node factors (`f32`
-    /// bits), then the error coefficients (or their reduced form) and the node factors as `i16` steps of
+    /// The block (`f32` bits), the scales of the error coefficients and of the node factors and the
+    /// visibility error (`f32` bits, [`LinkCoupling::visibility_error`]; kept here rather than beside
+    /// `visibility`, so that a `Link` is 40 bytes, not 48), then the error coefficients (or their reduced form) and the node factors as `i16` steps of
     /// their scale, two per word (see the accessors).
     words: Box<[u32]>,
     /// Basis size `b` of both ends.
@@ -120,13 +126,10 @@ pub struct LinkCoupling {
     nodes: u16,
     /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
     pub visibility: f32,
-    /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
-    /// standard deviation of a visibility `v` sampled with `m` source nodes (the `sqrt(v(1 − v))` form of
-    /// Sillion–Drettakis Appendix A). It is the "term describing visibility error" that Bekaert–Willems
-    /// §7 proposes to add to eq. (5): δ_j cannot see a partial occlusion that the node pairs sample
-    /// wrongly.
-    pub visibility_error: f32,
 }
+
+/// Words between a coupling's block and its fixed-point values: two scales and the visibility error.
+const HEADER_WORDS: usize = 3;
 
 /// Largest magnitude of a fixed-point step count ([`LinkCoupling`]'s error coefficients and node
 /// factors).
@@ -204,7 +207,7 @@ impl LinkCoupling {
     /// Words of a coupling's allocation: the `b × b` block, two scales, and `tail` 16-bit values
     /// (error coefficients and node factors) two per word.
     fn word_count(block_len: usize, tail: usize) -> usize {
-        block_len + 2 + tail.div_ceil(2)
+        block_len + HEADER_WORDS + tail.div_ceil(2)
     }
 
     /// Heap bytes of the coupling of a link whose ends have basis size `b` and whose receiver has
@@ -238,7 +241,8 @@ impl LinkCoupling {
         }
         words[block.len()] = error_scale.to_bits();
         words[block.len() + 1] = factor_scale.to_bits();
-        let tail: &mut [i16] = bytemuck::cast_slice_mut(&mut words[block.len() + 2..]);
+        words[block.len() + 2] = visibility_error.to_bits();
+        let tail: &mut [i16] = bytemuck::cast_slice_mut(&mut words[block.len() + HEADER_WORDS..]);
         for (t, q) in tail.iter_mut().zip(error_steps.chain(factor_steps)) {
             *t = q;
         }
@@ -248,7 +252,6 @@ impl LinkCoupling {
             reduced,
             nodes: u16::try_from(node_factors.len()).expect("at most 65535 cubature nodes"),
             visibility,
-            visibility_error,
         }
     }
 
@@ -289,7 +292,7 @@ impl LinkCoupling {
             &factors,
             true,
             self.visibility,
-            self.visibility_error,
+            self.visibility_error(),
         )
     }
 
@@ -318,7 +321,7 @@ impl LinkCoupling {
 
     /// The fixed-point error coefficients then node factors.
     fn steps(&self) -> &[i16] {
-        bytemuck::cast_slice(&self.words[self.block_len() + 2..])
+        bytemuck::cast_slice(&self.words[self.block_len() + HEADER_WORDS..])
     }
 
     /// Link error coefficient `i` of the `n × b` row-major `δ_{j,β}(x_k) / ρ_i` at the receiver's `n`
@@ -337,6 +340,21 @@ impl LinkCoupling {
         self.steps()[start..start + self.node_count()]
             .iter()
             .map(move |&q| f32::from(q) * scale)
+    }
+
+    /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
+    /// standard deviation of a visibility `v` sampled with `m` source nodes (the `sqrt(v(1 − v))` form of
+    /// Sillion–Drettakis Appendix A). It is the "term describing visibility error" that Bekaert–Willems
+    /// §7 proposes to add to eq. (5): δ_j cannot see a partial occlusion that the node pairs sample
+    /// wrongly.
+    pub fn visibility_error(&self) -> f32 {
+        f32::from_bits(self.words[self.block_len() + 2])
+    }
+
+    /// Replaces [`LinkCoupling::visibility_error`].
+    pub fn set_visibility_error(&mut self, error: f32) {
+        let at = self.block_len() + 2;
+        self.words[at] = error.to_bits();
     }
 
     /// The constant–constant entry of the block: the form factor F_ij.
@@ -1048,6 +1066,13 @@ mod tests {
             c.heap_bytes(),
             LinkCoupling::heap_bytes_for(3, n, ErrorStorage::Full)
         );
+        // The visibility error lives among the words, beside the scales, and leaves them alone.
+        assert_eq!(c.visibility_error(), 0.01);
+        let mut changed = c.clone();
+        changed.set_visibility_error(0.25);
+        assert_eq!(changed.visibility_error(), 0.25);
+        assert!(changed.node_factors().eq(c.node_factors()));
+        assert!((0..3 * n).all(|i| changed.error(i) == c.error(i)));
     }
 
     /// §4.3: "When this coefficient is multiplied with `L_{j,1}` the exact `δ_j(x_k)` is recovered",
@@ -1066,8 +1091,8 @@ mod tests {
         assert_eq!(reduced.node_count(), n);
         assert_eq!(reduced.block(), full.block());
         assert!(reduced.node_factors().eq(full.node_factors()));
-        // Block, two scales, and n ratios and n factors two per word.
-        assert_eq!(reduced.words.len(), 9 + 2 + n);
+        // Block, header, and n ratios and n factors two per word.
+        assert_eq!(reduced.words.len(), 9 + HEADER_WORDS + n);
         // The ratios are stored in fixed point: within half a step of the largest one, per channel
         // times that channel's L_{j,1}.
         let largest = (0..n)
@@ -1105,7 +1130,7 @@ mod tests {
         assert_eq!(compact.node_count(), n);
         assert_eq!(compact.block(), full.block());
         assert!(compact.node_factors().eq(full.node_factors()));
-        assert_eq!(compact.words.len(), 9 + 2 + n);
+        assert_eq!(compact.words.len(), 9 + HEADER_WORDS + n);
         let source = [
             Rgb::new(2.0, 1.0, 0.5),
             Rgb::new(-0.4, 0.2, 0.1),

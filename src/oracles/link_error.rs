@@ -84,9 +84,9 @@ impl RefinementOracle for LinkErrorOracle {
         }
         let visibility = rho.max_channel()
             * source_element.average_radiance().max_channel().abs()
-            * f64::from(coupling.visibility_error);
+            * f64::from(coupling.visibility_error());
         let (r_area, s_area) = (h.element(receiver).area, source_element.area);
-        let partially_visible = coupling.visibility_error > 0.0;
+        let partially_visible = coupling.visibility_error() > 0.0;
         let split = if partially_visible && s_area > r_area {
             // The receiver's own error then comes mostly from the coarse sampling of the occlusion by
             // the source's nodes (steps of 1/m across the receiver), which only a finer source removes.

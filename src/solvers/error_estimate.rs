@@ -258,7 +258,7 @@ fn visibility_squared(h: &Hierarchy, id: ElementId) -> f64 {
         .iter()
         .map(|l| {
             (rho * h.element(l.source).average_radiance().max_channel()
-                * f64::from(l.coupling.visibility_error))
+                * f64::from(l.coupling.visibility_error()))
             .powi(2)
         })
         .sum()

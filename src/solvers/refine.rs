@@ -1036,8 +1036,11 @@ fn decide(
             let mut k = couple_for_verdict(context, settings, c, partial_tests, &mut verdict);
             if let Some(v) = c.inherited_visibility {
                 if k.coupling.visibility == 0.0 || k.coupling.visibility == 1.0 {
-                    k.coupling.visibility_error =
-                        visibility_error(k.unoccluded, f64::from(v), k.source_nodes);
+                    k.coupling.set_visibility_error(visibility_error(
+                        k.unoccluded,
+                        f64::from(v),
+                        k.source_nodes,
+                    ));
                 }
             }
             verdict.coupling = Some(Box::new(k.coupling));
