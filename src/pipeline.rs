@@ -23,7 +23,7 @@ use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
 use crate::visibility::item_buffer::{IntraClusterKind, ItemBuffers};
-use crate::visibility::multires::Multires;
+use crate::visibility::multires::{Averaging, Multires};
 use crate::visibility::shaft::{ShaftCulled, ShaftCuller, VisibilityReuse};
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::sync::Arc;
@@ -143,6 +143,8 @@ pub struct SimulationSettings {
     /// Multi-resolution visibility: the smallest shadow feature (world units on the receiver) computed
     /// exactly; 0 is exact visibility, ∞ extinction.
     pub feature_size: f64,
+    /// Multi-resolution visibility: how a cluster it does not descend into attenuates.
+    pub multires_averaging: Averaging,
     /// Intra-cluster visibility (Sillion–Drettakis §6.1) when clustering is on.
     pub intra_cluster: IntraClusterKind,
     /// Refinement threshold relative to the scene's total emission Σ A max(E) (radiance × area).
@@ -232,6 +234,7 @@ impl Default for SimulationSettings {
             clustering: ClusteringKind::None,
             cluster_tree: ClusterTreeKind::Grid,
             feature_size: 0.0,
+            multires_averaging: Averaging::default(),
             intra_cluster: IntraClusterKind::ItemBuffer,
             eps: 1e-3,
             shadow_levels: 0.0,
@@ -308,6 +311,7 @@ pub fn build_visibility_for(
                 &shapes,
                 settings.cluster_tree,
                 settings.feature_size,
+                settings.multires_averaging,
             )))
         }
         VisibilityKind::Extinction => {

@@ -423,6 +423,10 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
             "--feature-size",
         ),
         (vec!["--feature-size", "0.1"], "--visibility multires"),
+        (
+            vec!["--multires-averaging", "cluster"],
+            "--visibility multires",
+        ),
     ] {
         let mut args = [vec!["render", "-q"], args].concat();
         args.extend(["-o", "/tmp/radiosity-never.png"]);
@@ -443,6 +447,8 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
         "multires",
         "--feature-size",
         "0.05",
+        "--multires-averaging",
+        "cluster",
         "--width",
         "32",
         "--height",

@@ -8,6 +8,8 @@ use radiosity::hierarchy::Hierarchy;
 use radiosity::pipeline::{build_visibility_with, simulate, SimulationSettings, VisibilityKind};
 use radiosity::scene::{cornell::cornell_box, generators, Polygon, Scene};
 use radiosity::visibility::item_buffer::IntraClusterKind;
+use radiosity::visibility::multires::{Averaging, Multires};
+use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
@@ -101,6 +103,34 @@ fn extinction_matches_exact_mean_visibility_in_a_random_cloud() {
         assert_eq!(
             extinction.segment_occluded(a, b),
             exact.segment_occluded(a, b)
+        );
+        // Multi-resolution visibility that averages every cluster as a whole (the paper's §3.2, at
+        // an infinite feature size): the root cluster's single κ = ΣA/(4V) over its box. The box holds
+        // the triangles' corners, up to side/√3 past the unit cube of their centres: κ is diluted by
+        // the box's volume V, a known error of the model. Bound: the Boolean model with κ/V, whose
+        // transmittance lies above the true one by `dilution`, plus the exact mean's 4σ.
+        let shapes: Vec<Shape> = scene.polygons.iter().map(|p| p.shape).collect();
+        let corners = shapes.iter().flat_map(|s| s.vertices().iter().copied());
+        let (lo, hi) = corners.fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), v| (lo.min(v), hi.max(v)),
+        );
+        let volume = (hi - lo).x * (hi - lo).y * (hi - lo).z;
+        let diluted = segments
+            .iter()
+            .map(|(a, b)| (-kappa / volume * (*b - *a).length()).exp())
+            .sum::<f64>()
+            / m;
+        let dilution = diluted - expected;
+        let whole = Multires::new(&shapes, tree, f64::INFINITY, Averaging::Cluster);
+        let mean = segments
+            .iter()
+            .map(|(a, b)| whole.transmittance(*a, *b))
+            .sum::<f64>()
+            / m;
+        assert!(
+            (mean - free).abs() < dilution + 4.0 * sigma,
+            "{tree:?}: cluster-averaged multires {mean} vs exact {free} (dilution {dilution})"
         );
     }
 }

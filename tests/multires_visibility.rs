@@ -7,7 +7,7 @@ use radiosity::hierarchy::clusters::ClusterTreeKind;
 use radiosity::scene::generators::ShadowGroups;
 use radiosity::visibility::bvh::Bvh;
 use radiosity::visibility::extinction::Extinction;
-use radiosity::visibility::multires::Multires;
+use radiosity::visibility::multires::{Averaging, Multires};
 use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -43,14 +43,14 @@ fn feature_size_below_every_blocker_is_exact_visibility() {
     let shapes = shapes(&groups);
     let segments = wall_to_source(&groups, 500);
     let exact = Bvh::new(&shapes);
-    let zero = Multires::new(&shapes, ClusterTreeKind::Grid, 0.0);
+    let zero = Multires::new(&shapes, ClusterTreeKind::Grid, 0.0, Averaging::Cluster);
     // The umbra b·D/d is at least BSIZE b (d ≤ D), so any s up to the smallest BSIZE also descends
     // everywhere.
     let smallest = (0..zero.tree().nodes.len() as u32)
         .map(|n| zero.blocker_size(n))
         .fold(f64::INFINITY, f64::min);
     assert!(smallest > 0.0);
-    let below = Multires::new(&shapes, ClusterTreeKind::Grid, smallest);
+    let below = Multires::new(&shapes, ClusterTreeKind::Grid, smallest, Averaging::Cluster);
     let mut blocked = 0;
     for &(from, to) in &segments {
         let truth = exact.transmittance(from, to);
@@ -74,12 +74,12 @@ fn feature_size_below_every_blocker_is_exact_visibility() {
 }
 
 #[test]
-fn infinite_feature_size_is_extinction() {
+fn infinite_feature_size_with_leaf_averaging_is_extinction() {
     let groups = ShadowGroups::default();
     let shapes = shapes(&groups);
     for kind in [ClusterTreeKind::Grid, ClusterTreeKind::Octree] {
         let extinction = Extinction::new(&shapes, kind);
-        let infinite = Multires::new(&shapes, kind, f64::INFINITY);
+        let infinite = Multires::new(&shapes, kind, f64::INFINITY, Averaging::Leaves);
         for (from, to) in wall_to_source(&groups, 250) {
             let trace = infinite.trace(from, to);
             assert_eq!(
@@ -106,7 +106,7 @@ fn larger_feature_sizes_test_fewer_polygons_and_average_small_cubes_first() {
     let mut previous: Option<Vec<usize>> = None;
     let mut totals = Vec::new();
     for &s in &sizes {
-        let m = Multires::new(&shapes, ClusterTreeKind::Grid, s);
+        let m = Multires::new(&shapes, ClusterTreeKind::Grid, s, Averaging::Leaves);
         let traces: Vec<_> = segments.iter().map(|&(f, t)| m.trace(f, t)).collect();
         // A segment no polygon blocks visits every descended cluster; a larger s descends into a subset
         // of them, so its polygon tests cannot grow.
@@ -162,4 +162,25 @@ fn larger_feature_sizes_test_fewer_polygons_and_average_small_cubes_first() {
         assert!(share.windows(2).all(|w| w[0] >= w[1]), "s = {s}: {share:?}");
     }
     assert!(at(0.16)[0] > 0.0, "{:?}", at(0.16));
+}
+
+/// Averaging clusters as a whole (the paper's §3.2) stops at the first cluster whose umbra is below
+/// `s`: at an infinite feature size every segment averages the root alone, with no polygon test, and
+/// the transmittance is a Boolean-model `exp(−κ l)` in (0, 1] (the root holds the wall, the cubes and
+/// the source, so every segment crosses it).
+#[test]
+fn averaging_clusters_as_a_whole_stops_at_the_first_small_umbra() {
+    let groups = ShadowGroups::default();
+    let shapes = shapes(&groups);
+    let whole = Multires::new(
+        &shapes,
+        ClusterTreeKind::Grid,
+        f64::INFINITY,
+        Averaging::Cluster,
+    );
+    for (from, to) in wall_to_source(&groups, 100) {
+        let trace = whole.trace(from, to);
+        assert_eq!((trace.averaged_clusters, trace.polygon_tests), (1, 0));
+        assert!(trace.transmittance > 0.0 && trace.transmittance <= 1.0);
+    }
 }

@@ -13,6 +13,7 @@ use crate::scene::{self, LoadOptions, Scene};
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::multigrid::MultigridSettings;
 use crate::visibility::item_buffer::IntraClusterKind;
+use crate::visibility::multires::Averaging;
 use crate::visibility::shaft::VisibilityReuse;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -204,6 +205,11 @@ pub struct SolveArgs {
     /// 0 is exact visibility, inf extinction.
     #[arg(long, value_name = "S")]
     pub feature_size: Option<f64>,
+    /// Multires visibility: a cluster it does not descend into attenuates by the κ of its leaf clusters
+    /// summed along the ray (leaves, the default: equal to --visibility extinction at --feature-size
+    /// inf), or as a whole by its own κ = ΣA/(4V) (cluster: the paper's, O(1) per cluster, coarser).
+    #[arg(long, value_enum)]
+    pub multires_averaging: Option<Averaging>,
     /// Clustering (Sillion–Drettakis §4): start from one self-link on the root cluster; clusters
     /// exchange light as isotropic volumes or by the projected area of their patches.
     #[arg(long, value_enum, default_value_t = ClusteringKind::Auto)]
@@ -300,6 +306,10 @@ impl SolveArgs {
             (_, None) => 0.0,
             (_, Some(_)) => anyhow::bail!("--feature-size applies to --visibility multires only"),
         };
+        anyhow::ensure!(
+            self.multires_averaging.is_none() || self.visibility == VisibilityKind::Multires,
+            "--multires-averaging applies to --visibility multires only"
+        );
         Ok(SimulationSettings {
             method: self.method,
             oracle: self.oracle.unwrap_or(if self.accuracy.is_some() {
@@ -313,6 +323,7 @@ impl SolveArgs {
             clustering: self.clustering,
             cluster_tree: self.cluster_tree,
             feature_size,
+            multires_averaging: self.multires_averaging.unwrap_or_default(),
             intra_cluster: self.intra_cluster,
             eps: self.eps,
             shadow_levels: self.shadow_levels,

@@ -24,7 +24,7 @@ use crate::scene::{CameraSpec, Scene};
 use crate::solvers::{solve, SolveReport};
 use crate::visibility::bvh::Bvh;
 use crate::visibility::extinction::Extinction;
-use crate::visibility::multires::Multires;
+use crate::visibility::multires::{Averaging, Multires};
 use crate::visibility::Visibility;
 use anyhow::{ensure, Result};
 use serde::Serialize;
@@ -154,7 +154,8 @@ pub struct MultiresExperiment {
 /// One solve of the experiment, its cost and its error per group.
 #[derive(Clone, Debug, Serialize)]
 pub struct Run {
-    /// "exact", "multires" or "extinction".
+    /// "exact", "multires" (clusters averaged as a whole, [`Averaging::Cluster`]), "multires-leaves"
+    /// ([`Averaging::Leaves`]) or "extinction".
     pub visibility: &'static str,
     /// The multires run's `s` (world units); for exact and extinction runs, the `s` of the FBEM columns.
     pub feature_size: f64,
@@ -259,7 +260,15 @@ impl MultiresExperiment {
         let mut runs = Vec::new();
         for &s in &self.feature_sizes {
             let multires = solve("multires", &|| {
-                Box::new(Multires::new(&wall.shapes, self.tree, s))
+                Box::new(Multires::new(
+                    &wall.shapes,
+                    self.tree,
+                    s,
+                    Averaging::Cluster,
+                ))
+            });
+            let multires_leaves = solve("multires, leaf averaging", &|| {
+                Box::new(Multires::new(&wall.shapes, self.tree, s, Averaging::Leaves))
             });
             let pixels = (s / PIXEL).round() as usize;
             let (exact_fbem, _) = errors(&exact.0, &reference, &masks, pixels)?;
@@ -267,6 +276,7 @@ impl MultiresExperiment {
             for (name, result) in [
                 ("exact", &exact),
                 ("multires", &multires),
+                ("multires-leaves", &multires_leaves),
                 ("extinction", &extinction),
             ] {
                 let (fbem_values, l2) = errors(&result.0, &reference, &masks, pixels)?;

@@ -33,6 +33,10 @@ pub struct Extinction {
     bounds: Vec<Aabb>,
     /// Per node: `κ` of the polygons it holds directly (zero for a node of sub-clusters only).
     kappa: Vec<f64>,
+    /// Per node: `κ = ΣA/(4V)` of every polygon below it over its own box: the paper's extinction of a
+    /// cluster taken as a whole (§3.1), which multi-resolution visibility may use for a cluster it
+    /// does not descend into ([`super::multires::Averaging::Cluster`]).
+    kappa_below: Vec<f64>,
 }
 
 impl Extinction {
@@ -76,11 +80,21 @@ impl Extinction {
                 direct / (4.0 * e.x * e.y * e.z)
             })
             .collect();
+        let area_below = area_below(&tree, &items);
+        let kappa_below = area_below
+            .iter()
+            .zip(&bounds)
+            .map(|(&area, b)| {
+                let e = b.extent();
+                area / (4.0 * e.x * e.y * e.z)
+            })
+            .collect();
         Extinction {
             exact: Bvh::new(shapes),
             tree,
             bounds,
             kappa,
+            kappa_below,
         }
     }
 
@@ -109,6 +123,18 @@ impl Extinction {
             }
         }
         depth
+    }
+
+    /// `κ l` of cluster `node` taken as a whole (`κ` of everything below it, [`Extinction::new`]) over
+    /// the part `(t0, t1)` of `segment` inside its box: O(1), where [`Extinction::optical_depth_below`]
+    /// walks the subtree.
+    pub(super) fn optical_depth_as_a_whole(
+        &self,
+        node: u32,
+        (t0, t1): (f64, f64),
+        segment: &Segment,
+    ) -> f64 {
+        self.kappa_below[node as usize] * (t1 - t0) * segment.length
     }
 
     /// The cluster tree over the polygons (indices of `Child::Item` are polygon indices).
@@ -169,6 +195,38 @@ fn clip(b: &Aabb, from: DVec3, inverse: DVec3) -> Option<(f64, f64)> {
         t1 = t1.min(lo.max(hi));
     }
     (t1 > t0).then_some((t0, t1))
+}
+
+/// Per node, the area of every item below it (children before parents, whatever the node order).
+fn area_below(tree: &ClusterTree, items: &[Item]) -> Vec<f64> {
+    let mut area = vec![f64::NAN; tree.nodes.len()];
+    let Some(root) = tree.root() else {
+        return vec![0.0; tree.nodes.len()];
+    };
+    let mut stack = vec![(root, false)];
+    while let Some((n, children_done)) = stack.pop() {
+        let node = &tree.nodes[n as usize];
+        if children_done {
+            area[n as usize] = node
+                .children
+                .iter()
+                .map(|&c| match c {
+                    Child::Item(i) => items[i as usize].area,
+                    Child::Node(m) => area[m as usize],
+                })
+                .sum();
+        } else {
+            stack.push((n, true));
+            for &c in &node.children {
+                if let Child::Node(m) = c {
+                    stack.push((m, false));
+                }
+            }
+        }
+    }
+    area.iter()
+        .map(|a| if a.is_nan() { 0.0 } else { *a })
+        .collect()
 }
 
 impl Visibility for Extinction {

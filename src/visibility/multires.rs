@@ -28,14 +28,16 @@
 //! (Figure 5: the umbra's edges are the lines through opposite ends of emitter and blocker), an emitter
 //! of width `e` gives the receiver an umbra of width `b·D/d − e·(D − d)/d`; the query knows only one
 //! point of the emitter, so `e = 0`: the umbra `b·D/d`, the largest any emitter gives (conservative: a
-//! larger emitter only shrinks the umbra). If that is smaller than `s` the cluster's whole subtree is
-//! treated by extinction (the same leaf-level `Σ κ_i l_i` as [`super::extinction::Extinction`], not the
-//! paper's single `κ` of the stopped cluster: exact agreement at `s = ∞`, at the price of walking the
-//! subtree's boxes); otherwise the polygons it holds directly are intersected exactly (a hit makes the
+//! larger emitter only shrinks the umbra). If that is smaller than `s` the cluster is treated by
+//! extinction ([`Averaging`]): by default by the leaf-level `Σ κ_i l_i` of its subtree, the same sum as
+//! [`super::extinction::Extinction`] (exact agreement at `s = ∞`, at the price of walking the subtree's
+//! boxes), or with `--multires-averaging cluster` as the paper does, with the single `κ = ΣA/(4V)` of
+//! the stopped cluster taken as a whole (O(1) per stopped cluster). Otherwise the polygons it holds directly are intersected exactly (a hit makes the
 //! transmittance 0) and its sub-clusters are visited in turn.
 //!
 //! Limits: `s = 0` descends everywhere and gives exactly the BVH's answer (the same ray–polygon test on
-//! the same numbers, `brute_force::ray_polygon`); `s = ∞` descends nowhere and gives exactly extinction.
+//! the same numbers, `brute_force::ray_polygon`); `s = ∞` descends nowhere: exactly extinction, or with
+//! cluster averaging the root cluster's `κ`.
 //! The feature size is one for the whole scene: the `Visibility` trait does not say which surface
 //! receives, so a per-surface feature size (importance, §6) is not implemented.
 
@@ -68,9 +70,27 @@ const DIRECTIONS: [[f64; 3]; 13] = [
     [-1.0, 1.0, 1.0],
 ];
 
+/// How multi-resolution visibility attenuates through a cluster it does not descend into
+/// (`--multires-averaging`). The paper's O(1) `Cluster` saved no time where we measured it (the
+/// shadow groups, office3: BENCHMARKS.md, "Multi-resolution visibility … again") and its one κ over
+/// the box of a whole group of cubes is the coarser answer (FBEM 7.7× exact visibility's at s = 2.56
+/// against 5.8×), so `Leaves` is the default.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Averaging {
+    /// The cluster as a whole: `exp(−κ l)` with `κ = ΣA/(4V)` of everything it holds over its box
+    /// (Sillion–Drettakis §3.2: "use its extinction"), O(1) per cluster.
+    Cluster,
+    /// Its leaf clusters: `exp(−Σ κ_i l_i)` over the subtree, as `--visibility extinction` sums it
+    /// (equal to it at `s = ∞`), O(subtree) per cluster.
+    #[default]
+    Leaves,
+}
+
 /// Exact ray casting near large features, cluster extinction for small ones.
 pub struct Multires {
     extinction: Extinction,
+    averaging: Averaging,
     shapes: Vec<Shape>,
     /// Per cluster, BSIZE (world units): the largest over the [`DIRECTIONS`].
     bsize: Vec<f64>,
@@ -80,8 +100,14 @@ pub struct Multires {
 
 impl Multires {
     /// Multi-resolution visibility over `shapes` with clusters built by `kind`, for feature size
-    /// `feature_size` (≥ 0, world units; `f64::INFINITY` allowed).
-    pub fn new(shapes: &[Shape], kind: ClusterTreeKind, feature_size: f64) -> Self {
+    /// `feature_size` (≥ 0, world units; `f64::INFINITY` allowed), averaging the clusters it does not
+    /// descend into as `averaging` says.
+    pub fn new(
+        shapes: &[Shape],
+        kind: ClusterTreeKind,
+        feature_size: f64,
+        averaging: Averaging,
+    ) -> Self {
         assert!(
             feature_size >= 0.0,
             "the feature size must be non-negative, not {feature_size}"
@@ -101,6 +127,7 @@ impl Multires {
             .collect();
         Multires {
             extinction,
+            averaging,
             shapes: shapes.to_vec(),
             bsize,
             feature_size,
@@ -156,7 +183,13 @@ impl Multires {
             let to_source = (1.0 - 0.5 * (t0 + t1)) * segment.length;
             let umbra = self.bsize[n as usize] * segment.length / to_source;
             if umbra < self.feature_size {
-                depth += self.extinction.optical_depth_below(n, &segment);
+                depth += match self.averaging {
+                    Averaging::Cluster => {
+                        self.extinction
+                            .optical_depth_as_a_whole(n, (t0, t1), &segment)
+                    }
+                    Averaging::Leaves => self.extinction.optical_depth_below(n, &segment),
+                };
                 trace.averaged_clusters += 1;
                 continue;
             }
