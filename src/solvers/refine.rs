@@ -212,6 +212,50 @@ impl<'a> Facing<'a> {
     }
 }
 
+/// The end of a surface link whose coupling nodes all lie behind the other end's plane although the
+/// two face each other (every link passed [`Facing::has_in_front`] both ways: some vertex is in
+/// front): the plane cuts that end near one of its edges, a horizon, and Algorithm 4.1's nodes see
+/// none of the part in front. Such a coupling is zero and the link would be dropped with all the light
+/// that reaches that part: floor_gloss.mgf's far floor, lit only by the back of a tilted two-sided
+/// lamp, got none of it (BENCHMARKS.md, "Horizons"). Splitting that end until some node is in front
+/// (or the minimum area, or until what the link could carry is below the threshold: `decide`) finds
+/// the light. `None` when the nodes see each other, or no plane cuts the other end.
+fn horizon_split(
+    h: &Hierarchy,
+    receiver: ElementId,
+    source: ElementId,
+    cubature_degree: usize,
+) -> Option<Decision> {
+    let plane = |id: ElementId| (h.patch_of(id).normal, h.element(id).shape().vertices()[0]);
+    // Whether every node of `id`'s rule of `degree` lies behind the plane of `other`: only looked at
+    // when that plane cuts `id` (a vertex behind it; most pairs have none, and cost four products).
+    let blind = |id: ElementId, other: ElementId, degree: usize| {
+        let (normal, origin) = plane(other);
+        let shape = h.element(id).shape();
+        let behind = |p: DVec3| normal.dot(p - origin) <= 0.0;
+        shape.vertices().iter().any(|&v| behind(v))
+            && crate::geometry::cubature::rule(shape.domain(), degree)
+                .nodes
+                .iter()
+                .all(|&(uv, _)| behind(shape.point_at(uv)))
+    };
+    let receiver_blind = blind(receiver, source, cubature_degree);
+    let source_blind = blind(
+        source,
+        receiver,
+        crate::bases::source_cubature_degree(cubature_degree),
+    );
+    match (receiver_blind, source_blind) {
+        (false, false) => None,
+        (true, false) => Some(Decision::SubdivideReceiver),
+        (false, true) => Some(Decision::SubdivideSource),
+        (true, true) if h.element(receiver).area >= h.element(source).area => {
+            Some(Decision::SubdivideReceiver)
+        }
+        (true, true) => Some(Decision::SubdivideSource),
+    }
+}
+
 /// The first candidates: with clusters, one self-link on the root cluster (Sillion–Drettakis §4, Smits
 /// et al. 1994), refined from there; without, root-to-root candidates for every ordered pair of patches
 /// that can interact (Hanrahan's initial linking, quadratic in the number of patches). Receivers that
@@ -1029,6 +1073,31 @@ fn decide(
     }
     if !splittable(c.receiver) && !splittable(c.source) {
         return Verdict::admissible(c.oracle_factor);
+    }
+    // Across a horizon the coupling sees nothing, so the link's error is all it could carry: bounded
+    // as a cluster link's is (`transport_bound`), and split only where that exceeds the threshold.
+    let could_carry = || {
+        let carried = reflected_source_radiance(h, c.receiver, c.source)
+            * transport_bound(h, c.receiver, c.source);
+        if oracle.judges_couplings() {
+            carried / h.element(c.receiver).area.max(1e-300) > h.element(c.receiver).threshold
+        } else {
+            carried > settings.threshold
+        }
+    };
+    let horizon = horizon_split(h, c.receiver, c.source, settings.coupling.cubature_degree)
+        .filter(|&d| match d {
+            Decision::SubdivideReceiver => splittable(c.receiver),
+            Decision::SubdivideSource => splittable(c.source),
+            Decision::Admissible => false,
+        })
+        .filter(|_| could_carry());
+    if let Some(decision) = horizon {
+        return Verdict {
+            decision,
+            error: f32::INFINITY,
+            ..Verdict::admissible(OracleFactor::NONE)
+        };
     }
     let mut verdict = Verdict::admissible(OracleFactor::NONE);
     let (error, threshold, split) = if oracle.judges_couplings() {
