@@ -112,10 +112,10 @@ impl PartialEq for OracleFactor {
 /// block is followed by `2n` values instead of `n (b + 1)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkCoupling {
-    /// The block (`f32` bits), the scales of the error coefficients and of the node factors and the
-    /// visibility error (`f32` bits, [`LinkCoupling::visibility_error`]; kept here rather than beside
-    /// `visibility`, so that a `Link` is 40 bytes, not 48), then the error coefficients (or their reduced form) and the node factors as `i16` steps of
-    /// their scale, two per word (see the accessors).
+    /// The block (`f32` bits); [`HEADER_WORDS`]: the scales of the error coefficients and of the node
+    /// factors and the visibility error (`f32` bits; here rather than beside `visibility`, so that a
+    /// `Link` is 40 bytes, not 48); then the error coefficients (or their reduced form) and the node
+    /// factors as `i16` steps of their scale, two per word (see the accessors).
     words: Box<[u32]>,
     /// Basis size `b` of both ends.
     size: u8,
@@ -165,9 +165,8 @@ impl LinkCoupling {
             size * size == block.len() && errors.len() == node_factors.len() * size,
             "a coupling block is b × b and there are b error coefficients per node"
         );
-        let block: Vec<f32> = block.iter().map(|&k| k as f32).collect();
         Self::stored(
-            &block,
+            block.iter().map(|&k| k as f32),
             errors,
             node_factors,
             false,
@@ -193,9 +192,8 @@ impl LinkCoupling {
             node_factors.len(),
             "one error coefficient per node"
         );
-        let block: Vec<f32> = block.iter().map(|&k| k as f32).collect();
         Self::stored(
-            &block,
+            block.iter().map(|&k| k as f32),
             node_errors,
             node_factors,
             true,
@@ -204,8 +202,8 @@ impl LinkCoupling {
         )
     }
 
-    /// Words of a coupling's allocation: the `b × b` block, two scales, and `tail` 16-bit values
-    /// (error coefficients and node factors) two per word.
+    /// Words of a coupling's allocation: the `b × b` block, the [`HEADER_WORDS`], and `tail` 16-bit
+    /// values (error coefficients and node factors) two per word.
     fn word_count(block_len: usize, tail: usize) -> usize {
         block_len + HEADER_WORDS + tail.div_ceil(2)
     }
@@ -224,25 +222,26 @@ impl LinkCoupling {
     /// The single allocation of [`LinkCoupling`]: block, scales, error coefficients
     /// (`errors_per_node` per node: `b`, or 1 when `reduced`) and node factors in fixed point.
     fn stored(
-        block: &[f32],
+        block: impl ExactSizeIterator<Item = f32>,
         errors: &[f32],
         node_factors: &[f32],
         reduced: bool,
         visibility: f32,
         visibility_error: f32,
     ) -> Self {
-        let size = (block.len() as f64).sqrt().round() as usize;
+        let block_len = block.len();
+        let size = (block_len as f64).sqrt().round() as usize;
         let tail_len = errors.len() + node_factors.len();
-        let mut words = vec![0u32; Self::word_count(block.len(), tail_len)];
+        let mut words = vec![0u32; Self::word_count(block_len, tail_len)];
         let (error_scale, error_steps) = fixed_point(errors);
         let (factor_scale, factor_steps) = fixed_point(node_factors);
-        for (w, &k) in words.iter_mut().zip(block) {
+        for (w, k) in words.iter_mut().zip(block) {
             *w = k.to_bits();
         }
-        words[block.len()] = error_scale.to_bits();
-        words[block.len() + 1] = factor_scale.to_bits();
-        words[block.len() + 2] = visibility_error.to_bits();
-        let tail: &mut [i16] = bytemuck::cast_slice_mut(&mut words[block.len() + HEADER_WORDS..]);
+        words[block_len] = error_scale.to_bits();
+        words[block_len + 1] = factor_scale.to_bits();
+        words[block_len + 2] = visibility_error.to_bits();
+        let tail: &mut [i16] = bytemuck::cast_slice_mut(&mut words[block_len + HEADER_WORDS..]);
         for (t, q) in tail.iter_mut().zip(error_steps.chain(factor_steps)) {
             *t = q;
         }
@@ -287,7 +286,7 @@ impl LinkCoupling {
             .collect();
         let factors: Vec<f32> = self.node_factors().collect();
         Self::stored(
-            self.block(),
+            self.block().iter().copied(),
             &ratios,
             &factors,
             true,
@@ -328,8 +327,11 @@ impl LinkCoupling {
     /// cubature nodes (Algorithm 4.1 step 4b); in the reduced form ([`LinkCoupling::reduced`]), of the
     /// `n` ratios.
     fn error(&self, i: usize) -> f32 {
-        let scale = f32::from_bits(self.words[self.block_len()]);
-        f32::from(self.steps()[i]) * scale
+        f32::from(self.steps()[i]) * self.error_scale()
+    }
+
+    fn error_scale(&self) -> f32 {
+        f32::from_bits(self.words[self.block_len()])
     }
 
     /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
@@ -369,10 +371,11 @@ impl LinkCoupling {
             return source[0] * f64::from(self.error(k));
         }
         let size = source.len();
+        let scale = self.error_scale();
         source
             .iter()
-            .enumerate()
-            .map(|(beta, &l)| l * f64::from(self.error(k * size + beta)))
+            .zip(&self.steps()[k * size..(k + 1) * size])
+            .map(|(&l, &q)| l * f64::from(f32::from(q) * scale))
             .sum()
     }
 

@@ -63,6 +63,11 @@ impl Extinction {
                 max: n.bounds.max + pad,
             })
             .collect();
+        // κ = ΣA/(4V) over a node's padded box.
+        let per_volume = |area: f64, b: &Aabb| {
+            let e = b.extent();
+            area / (4.0 * e.x * e.y * e.z)
+        };
         let kappa = tree
             .nodes
             .iter()
@@ -76,18 +81,14 @@ impl Extinction {
                         Child::Node(_) => 0.0,
                     })
                     .sum();
-                let e = b.extent();
-                direct / (4.0 * e.x * e.y * e.z)
+                per_volume(direct, b)
             })
             .collect();
-        let area_below = area_below(&tree, &items);
-        let kappa_below = area_below
+        let kappa_below = tree
+            .nodes
             .iter()
             .zip(&bounds)
-            .map(|(&area, b)| {
-                let e = b.extent();
-                area / (4.0 * e.x * e.y * e.z)
-            })
+            .map(|(node, b)| per_volume(node.area, b))
             .collect();
         Extinction {
             exact: Bvh::new(shapes),
@@ -195,38 +196,6 @@ fn clip(b: &Aabb, from: DVec3, inverse: DVec3) -> Option<(f64, f64)> {
         t1 = t1.min(lo.max(hi));
     }
     (t1 > t0).then_some((t0, t1))
-}
-
-/// Per node, the area of every item below it (children before parents, whatever the node order).
-fn area_below(tree: &ClusterTree, items: &[Item]) -> Vec<f64> {
-    let mut area = vec![f64::NAN; tree.nodes.len()];
-    let Some(root) = tree.root() else {
-        return vec![0.0; tree.nodes.len()];
-    };
-    let mut stack = vec![(root, false)];
-    while let Some((n, children_done)) = stack.pop() {
-        let node = &tree.nodes[n as usize];
-        if children_done {
-            area[n as usize] = node
-                .children
-                .iter()
-                .map(|&c| match c {
-                    Child::Item(i) => items[i as usize].area,
-                    Child::Node(m) => area[m as usize],
-                })
-                .sum();
-        } else {
-            stack.push((n, true));
-            for &c in &node.children {
-                if let Child::Node(m) = c {
-                    stack.push((m, false));
-                }
-            }
-        }
-    }
-    area.iter()
-        .map(|a| if a.is_nan() { 0.0 } else { *a })
-        .collect()
 }
 
 impl Visibility for Extinction {
