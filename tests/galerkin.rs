@@ -416,6 +416,52 @@ fn the_white_furnace_is_solved_to_the_accuracy_with_every_solver() {
     }
 }
 
+/// Where the accuracy cannot be met at any element size (the furnace's edges, where the estimates of
+/// links at different levels add up), error control stops once every failing leaf is at the minimum
+/// element area, says so and counts them, instead of lowering thresholds until the pass limit: a
+/// further pass could only split those leaves' sources.
+#[test]
+fn error_control_stops_when_only_leaves_at_the_minimum_area_fail() {
+    let (rho, e) = (0.5, 1.0);
+    let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, e);
+    let min_area = 2e-3;
+    let settings = SimulationSettings {
+        oracle: OracleKind::Error,
+        basis: BasisKind::Linear,
+        accuracy: Accuracy::Absolute(0.01 * e / (1.0 - rho)),
+        min_area,
+        max_passes: 40,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &quiet()).expect("solve");
+    let (h, error) = (&solution.hierarchy, &solution.report.error);
+    let accuracy = error.accuracy.expect("error control");
+    let smallest = min_area * h.total_area();
+    let failing: Vec<_> = h
+        .leaves()
+        .into_iter()
+        .filter(|&id| h.element(id).error > accuracy)
+        .collect();
+    eprintln!(
+        "{} passes, {} of {} leaves failing, {}",
+        solution.report.passes,
+        failing.len(),
+        h.leaf_count(),
+        error.stopped_by
+    );
+    assert_eq!(error.stopped_by, "minimum element area");
+    assert!(solution.report.passes < settings.max_passes);
+    assert!(!failing.is_empty());
+    assert_eq!(error.summary.leaves_above, failing.len());
+    assert_eq!(error.summary.leaves_above_at_min_area, failing.len());
+    for id in failing {
+        assert!(
+            h.element(id).area <= smallest,
+            "leaf {id} could still be split"
+        );
+    }
+}
+
 /// Eq. (11) adds the propagated error `Σ_j ε̄_j ∫ K` to the realistic estimate's sources, so it bounds the
 /// realistic estimate from above on every element, strictly where light is reflected onto it, and it
 /// stays finite (the Jacobi iteration converges since Σ_j ∫ K = ρ < 1).

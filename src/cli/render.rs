@@ -237,11 +237,12 @@ pub fn error_summary(error: &crate::solvers::ErrorReport, units: Units) -> Strin
         ),
         Some(accuracy) => format!(
             "accuracy {accuracy:.3} {unit} NOT reached ({}): {} of {} leaves ({:.1}% of the area) \
-             above it, worst estimate {:.3}",
+             above it ({} at the minimum element area), worst estimate {:.3}",
             error.stopped_by,
             s.leaves_above,
             s.leaves,
             100.0 * s.area_fraction_above,
+            s.leaves_above_at_min_area,
             k * s.max_estimate
         ),
         None => format!(

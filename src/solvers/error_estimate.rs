@@ -321,14 +321,19 @@ impl TreeWalk<'_> {
 pub struct ErrorSummary {
     pub leaves: usize,
     pub leaves_above: usize,
+    /// Of the leaves above the accuracy, those at the minimum element area: refinement cannot split
+    /// them, so no later pass can bring them under it (corners and contacts, where the radiance is not
+    /// polynomial at any element size).
+    pub leaves_above_at_min_area: usize,
     pub max_estimate: f64,
     /// Area-weighted mean of the leaf estimates.
     pub mean_estimate: f64,
     pub area_fraction_above: f64,
 }
 
-/// Summary of `Element::error` over the leaves, against `accuracy` (radiance).
-pub fn summarize(h: &Hierarchy, accuracy: f64) -> ErrorSummary {
+/// Summary of `Element::error` over the leaves, against `accuracy` (radiance); surface leaves of at most
+/// `min_area` cannot be split further.
+pub fn summarize(h: &Hierarchy, accuracy: f64, min_area: f64) -> ErrorSummary {
     let mut s = ErrorSummary::default();
     let (mut area, mut area_above, mut weighted) = (0.0, 0.0, 0.0);
     for id in h.leaves() {
@@ -340,6 +345,9 @@ pub fn summarize(h: &Hierarchy, accuracy: f64) -> ErrorSummary {
         if e.error > accuracy {
             s.leaves_above += 1;
             area_above += e.area;
+            if !h.is_cluster(id) && e.area <= min_area {
+                s.leaves_above_at_min_area += 1;
+            }
         }
     }
     if area > 0.0 {

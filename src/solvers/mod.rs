@@ -78,7 +78,8 @@ pub struct ErrorReport {
     pub estimate: Option<EstimateKind>,
     /// The estimate over the leaves after the last pass.
     pub summary: ErrorSummary,
-    /// Why refinement stopped: "accuracy reached", "element budget", "pass limit", "stable".
+    /// Why refinement stopped: "accuracy reached", "element budget", "minimum element area", "pass
+    /// limit", "stable".
     pub stopped_by: String,
     /// The estimate after each refine/solve pass: how error control (or refinement) progressed, and
     /// what each pass cost.
@@ -210,7 +211,7 @@ fn start_report(hierarchy: &mut Hierarchy, settings: &SolveSettings) -> SolveRep
 /// Without error control, the estimate's summary over every leaf (error control summarises each pass).
 fn finish_report(hierarchy: &Hierarchy, settings: &SolveSettings, report: &mut SolveReport) {
     if settings.error_control.is_none() {
-        report.error.summary = summarize(hierarchy, f64::INFINITY);
+        report.error.summary = summarize(hierarchy, f64::INFINITY, settings.refine.min_area);
     }
 }
 
@@ -233,19 +234,26 @@ fn end_pass(
     report.error.passes.push(PassEstimate {
         pass: report.passes,
         links: hierarchy.link_count(),
-        summary: summarize(hierarchy, accuracy),
+        summary: summarize(hierarchy, accuracy, settings.refine.min_area),
         refine_seconds: report.refine_seconds,
         solve_seconds: report.solve_seconds,
     });
     if let Some(control) = &settings.error_control {
-        report.error.summary = summarize(hierarchy, control.accuracy);
-        if report.error.summary.leaves_above == 0 {
+        report.error.summary = summarize(hierarchy, control.accuracy, settings.refine.min_area);
+        let summary = &report.error.summary;
+        if summary.leaves_above == 0 {
             report.converged = swept_to_tolerance;
             report.error.stopped_by = "accuracy reached".into();
             return true;
         }
         if refused {
             report.error.stopped_by = "element budget".into();
+            return true;
+        }
+        if summary.leaves_above == summary.leaves_above_at_min_area {
+            // Every failing leaf is as small as elements get: lowering thresholds further would only
+            // split their sources, and their own approximation error would stay.
+            report.error.stopped_by = "minimum element area".into();
             return true;
         }
         if settled {
