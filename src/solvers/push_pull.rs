@@ -10,6 +10,7 @@
 //! parallelograms, where this is the plain area-weighted pull; on a trapezoid it keeps constant
 //! children constant (no false gradient) and the pulled function's power equal to the children's.
 
+use crate::bases::Overlap;
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
 use std::f64::consts::PI;
@@ -77,11 +78,14 @@ struct Walk<'a> {
 }
 
 impl Walk<'_> {
-    /// `incident` arrives holding the irradiance pushed down from the ancestors; returns the radiance.
-    fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> Vec<Rgb> {
+    /// `incident` arrives holding the irradiance pushed down from the ancestors; returns the radiance,
+    /// with the element's overlap matrix (`None` where it is the identity), which its parent's pull
+    /// needs too (computed once per element and sweep: a trapezoid's costs a cubature and a Cholesky).
+    fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> (Vec<Rgb>, Option<Overlap>) {
         let h = self.h;
         let e = h.element(id);
         (self.gathered)(id, &mut incident);
+        let overlap = h.basis.overlap(e.shape(), e.area);
         let radiance = if e.is_leaf() {
             // The luminaires' first gather, a fixed part of the leaf's irradiance.
             for (h, &d) in incident.iter_mut().zip(h.direct_at(id)) {
@@ -91,7 +95,7 @@ impl Walk<'_> {
             // Emission is constant over a patch: the constant function represents it exactly (δ_e = 0).
             b[0] += self.emission;
             // Area averages: coefficient 0, or on a trapezoid Σ_α c_α (1/A) ∫ φ_α dA.
-            let (mean_incident, mean_exitant) = match h.basis.overlap(e.shape(), e.area) {
+            let (mean_incident, mean_exitant) = match &overlap {
                 Some(overlap) => (overlap.mean(&incident), overlap.mean(&b)),
                 None => (incident[0], b[0]),
             };
@@ -103,22 +107,22 @@ impl Walk<'_> {
             let mut sum = vec![Rgb::BLACK; incident.len()];
             for (k, &child) in e.children.iter().enumerate() {
                 let down = h.basis.push_rgb(domain, k, &incident);
-                let child_radiance = self.visit(child, down);
+                let (child_radiance, child_overlap) = self.visit(child, down);
                 let c = h.element(child);
-                let moments = match h.basis.overlap(c.shape(), c.area) {
+                let moments = match child_overlap {
                     Some(overlap) => overlap.moments_rgb(&child_radiance),
                     None => child_radiance,
                 };
                 h.basis
                     .pull_add_rgb(domain, k, c.area / e.area, &moments, &mut sum);
             }
-            if let Some(overlap) = h.basis.overlap(e.shape(), e.area) {
+            if let Some(overlap) = &overlap {
                 overlap.solve_rgb(&mut sum);
             }
             sum
         };
         self.update.elements.push(id);
         self.update.radiance.extend_from_slice(&radiance);
-        radiance
+        (radiance, overlap)
     }
 }
