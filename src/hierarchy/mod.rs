@@ -12,7 +12,7 @@
 
 pub mod clusters;
 
-use crate::bases::{Basis, BasisKind};
+use crate::bases::{Basis, BasisKind, MAX_BASIS_SIZE};
 use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::scene::luminaire::Luminaire;
@@ -110,12 +110,17 @@ impl PartialEq for OracleFactor {
 /// With [`ErrorStorage::Reduced`] (Bekaert–Willems §4.3) the `n × b` error coefficients are replaced by
 /// `n` ratios `Σ_β L_{j,β} δ_{j,β}(x_k) / L_{j,1}` for the source radiance at coupling time, so that the
 /// block is followed by `2n` values instead of `n (b + 1)`.
+///
+/// A coupling that is zero throughout (every node pair blocked: the link carries nothing, estimates no
+/// error, and stays only so that later passes may judge it again) holds no words at all: on office3
+/// more than half the links are such (BENCHMARKS.md, "Blocked links without words").
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinkCoupling {
     /// The block (`f32` bits); [`HEADER_WORDS`]: the scales of the error coefficients and of the node
     /// factors and the visibility error (`f32` bits; here rather than beside `visibility`, so that a
     /// `Link` is 40 bytes, not 48); then the error coefficients (or their reduced form) and the node
-    /// factors as `i16` steps of their scale, two per word (see the accessors).
+    /// factors as `i16` steps of their scale, two per word (see the accessors). Empty where every word
+    /// would be zero.
     words: Box<[u32]>,
     /// Basis size `b` of both ends.
     size: u8,
@@ -130,6 +135,9 @@ pub struct LinkCoupling {
 
 /// Words between a coupling's block and its fixed-point values: two scales and the visibility error.
 const HEADER_WORDS: usize = 3;
+
+/// The block of a coupling without words ([`LinkCoupling`]).
+static ZERO_BLOCK: [f32; MAX_BASIS_SIZE * MAX_BASIS_SIZE] = [0.0; MAX_BASIS_SIZE * MAX_BASIS_SIZE];
 
 /// Largest magnitude of a fixed-point step count ([`LinkCoupling`]'s error coefficients and node
 /// factors).
@@ -245,8 +253,13 @@ impl LinkCoupling {
         for (t, q) in tail.iter_mut().zip(error_steps.chain(factor_steps)) {
             *t = q;
         }
+        let words = if words.iter().all(|&w| w == 0) {
+            Box::default()
+        } else {
+            words.into_boxed_slice()
+        };
         LinkCoupling {
-            words: words.into_boxed_slice(),
+            words,
             size: u8::try_from(size).expect("basis sizes are at most MAX_BASIS_SIZE"),
             reduced,
             nodes: u16::try_from(node_factors.len()).expect("at most 65535 cubature nodes"),
@@ -315,33 +328,45 @@ impl LinkCoupling {
 
     /// `b × b` row-major coupling coefficients `K_{i,α;j,β} / (ρ_i A_i)` (eq. (3)).
     pub fn block(&self) -> &[f32] {
-        bytemuck::cast_slice(&self.words[..self.block_len()])
+        match self.words.get(..self.block_len()) {
+            Some(words) => bytemuck::cast_slice(words),
+            None => &ZERO_BLOCK[..self.block_len()],
+        }
     }
 
-    /// The fixed-point error coefficients then node factors.
+    /// Word `i` (0 for a coupling without words).
+    fn word(&self, i: usize) -> u32 {
+        self.words.get(i).copied().unwrap_or(0)
+    }
+
+    /// The fixed-point error coefficients then node factors (none without words: all zero).
     fn steps(&self) -> &[i16] {
-        bytemuck::cast_slice(&self.words[self.block_len() + HEADER_WORDS..])
+        self.words
+            .get(self.block_len() + HEADER_WORDS..)
+            .map_or(&[], bytemuck::cast_slice)
     }
 
     /// Link error coefficient `i` of the `n × b` row-major `δ_{j,β}(x_k) / ρ_i` at the receiver's `n`
     /// cubature nodes (Algorithm 4.1 step 4b); in the reduced form ([`LinkCoupling::reduced`]), of the
     /// `n` ratios.
     fn error(&self, i: usize) -> f32 {
-        f32::from(self.steps()[i]) * self.error_scale()
+        self.steps()
+            .get(i)
+            .map_or(0.0, |&q| f32::from(q) * self.error_scale())
     }
 
     fn error_scale(&self) -> f32 {
-        f32::from_bits(self.words[self.block_len()])
+        f32::from_bits(self.word(self.block_len()))
     }
 
     /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
     /// which carry propagated error in eqs. (11) and (13).
     pub fn node_factors(&self) -> impl ExactSizeIterator<Item = f32> + '_ {
-        let scale = f32::from_bits(self.words[self.block_len() + 1]);
+        let scale = f32::from_bits(self.word(self.block_len() + 1));
         let start = self.node_count() * self.errors_per_node();
-        self.steps()[start..start + self.node_count()]
-            .iter()
-            .map(move |&q| f32::from(q) * scale)
+        let steps = self.steps();
+        (start..start + self.node_count())
+            .map(move |i| steps.get(i).map_or(0.0, |&q| f32::from(q) * scale))
     }
 
     /// Visibility error per unit source radiance, before ρ_i: `F_unoccluded · sqrt(v (1 − v) / m)`, the
@@ -350,13 +375,27 @@ impl LinkCoupling {
     /// §7 proposes to add to eq. (5): δ_j cannot see a partial occlusion that the node pairs sample
     /// wrongly.
     pub fn visibility_error(&self) -> f32 {
-        f32::from_bits(self.words[self.block_len() + 2])
+        f32::from_bits(self.word(self.block_len() + 2))
     }
 
-    /// Replaces [`LinkCoupling::visibility_error`].
+    /// Replaces [`LinkCoupling::visibility_error`] (a coupling without words gets them, zero, unless
+    /// the error is zero too).
     pub fn set_visibility_error(&mut self, error: f32) {
+        if self.words.is_empty() {
+            if error.to_bits() == 0 {
+                return;
+            }
+            let tail = self.node_count() * (self.errors_per_node() + 1);
+            self.words = vec![0; Self::word_count(self.block_len(), tail)].into_boxed_slice();
+        }
         let at = self.block_len() + 2;
         self.words[at] = error.to_bits();
+    }
+
+    /// Whether the coupling is zero throughout (it then holds no words): the link carries nothing and
+    /// estimates no error.
+    pub fn is_zero(&self) -> bool {
+        self.words.is_empty()
     }
 
     /// The constant–constant entry of the block: the form factor F_ij.
@@ -372,9 +411,10 @@ impl LinkCoupling {
         }
         let size = source.len();
         let scale = self.error_scale();
+        let steps = self.steps().get(k * size..(k + 1) * size).unwrap_or(&[]);
         source
             .iter()
-            .zip(&self.steps()[k * size..(k + 1) * size])
+            .zip(steps)
             .map(|(&l, &q)| l * f64::from(f32::from(q) * scale))
             .sum()
     }
@@ -1076,6 +1116,42 @@ mod tests {
         assert_eq!(changed.visibility_error(), 0.25);
         assert!(changed.node_factors().eq(c.node_factors()));
         assert!((0..3 * n).all(|i| changed.error(i) == c.error(i)));
+    }
+
+    /// A coupling that is zero throughout (every node pair blocked) allocates nothing and reads as the
+    /// zero coupling it is, in both error storages; a visibility error set on it gives it its words,
+    /// and only that value is then non-zero.
+    #[test]
+    fn blocked_couplings_hold_no_words() {
+        let n = 9;
+        let zero = LinkCoupling::new(&[0.0; 9], &[0.0; 27], &[0.0; 9], 0.0, 0.0);
+        assert!(zero.is_zero() && zero.heap_bytes() == 0);
+        assert_eq!(zero.block(), &[0.0; 9]);
+        assert_eq!(zero.form_factor(), 0.0);
+        assert!((0..3 * n).all(|i| zero.error(i) == 0.0));
+        assert!(zero.node_factors().len() == n && zero.node_factors().all(|f| f == 0.0));
+        let source = [Rgb::WHITE, Rgb::WHITE, Rgb::WHITE];
+        assert!((0..n).all(|k| zero.node_error(k, &source) == Rgb::BLACK));
+        assert_eq!(zero.visibility_error(), 0.0);
+        let reduced = zero.clone().reduced(&source);
+        assert!(reduced.is_zero() && (0..n).all(|k| reduced.node_error(k, &source) == Rgb::BLACK));
+        let mut seen = zero.clone();
+        seen.set_visibility_error(0.0);
+        assert!(seen.is_zero());
+        seen.set_visibility_error(0.125);
+        assert!(!seen.is_zero());
+        assert_eq!(seen.visibility_error(), 0.125);
+        assert_eq!(seen.block(), zero.block());
+        assert!(seen.node_factors().eq(zero.node_factors()));
+        assert!((0..3 * n).all(|i| seen.error(i) == 0.0));
+        assert_eq!(
+            seen.heap_bytes(),
+            LinkCoupling::heap_bytes_for(3, n, ErrorStorage::Full)
+        );
+        // One non-zero value anywhere keeps the words.
+        let mut factors = [0.0; 9];
+        factors[4] = 1e-3;
+        assert!(!LinkCoupling::new(&[0.0; 9], &[0.0; 27], &factors, 0.0, 0.0).is_zero());
     }
 
     /// §4.3: "When this coefficient is multiplied with `L_{j,1}` the exact `δ_j(x_k)` is recovered",

@@ -49,6 +49,9 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
             }
             continue;
         }
+        if link.coupling.is_zero() {
+            continue; // blocked: more than half of office3's links
+        }
         let source = &hierarchy.element(link.source).radiance;
         for (alpha, h) in out.iter_mut().enumerate() {
             let row = &link.coupling.block()[alpha * size..(alpha + 1) * size];
