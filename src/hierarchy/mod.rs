@@ -948,6 +948,13 @@ impl Hierarchy {
     /// parameters on the root, then one child per level by the two-scale map of the parameters
     /// ([`crate::bases::child_containing`]), with no geometry below the root.
     pub fn locate(&self, patch: u32, p: DVec3) -> ElementId {
+        self.locate_with_parameters(patch, p).0
+    }
+
+    /// [`Hierarchy::locate`], with `p`'s parameters on the leaf: the children's parameter maps are
+    /// the restrictions of the parent's (exactly, for triangles and bilinear quads alike), so the
+    /// descent carries them down and a renderer need not invert the leaf's bilinear map again.
+    pub fn locate_with_parameters(&self, patch: u32, p: DVec3) -> (ElementId, DVec2) {
         let mut id = self.patches[patch as usize].root;
         let shape = self.elements[id as usize].shape();
         let domain = shape.domain();
@@ -957,7 +964,7 @@ impl Hierarchy {
             id = self.elements[id as usize].children[child];
             uv = child_uv;
         }
-        id
+        (id, uv)
     }
 
     /// The radiance leaving surface element `id` at `p` as outputs report it (images, probes, lux
@@ -967,6 +974,12 @@ impl Hierarchy {
     /// and no radiance is negative; solver and error estimates keep the expansion itself.
     pub fn exitant_radiance_at(&self, id: ElementId, p: DVec3) -> Rgb {
         self.radiance_at(id, p).map(|c| c.max(0.0))
+    }
+
+    /// [`Hierarchy::exitant_radiance_at`] at parameters `uv` of the element (from
+    /// [`Hierarchy::locate_with_parameters`]).
+    pub fn exitant_radiance_at_parameters(&self, id: ElementId, uv: DVec2) -> Rgb {
+        self.radiance_at_parameters(id, uv).map(|c| c.max(0.0))
     }
 
     /// Exitant radiance of surface element `id` at the point `p` on it: its basis expansion evaluated

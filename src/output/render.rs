@@ -159,7 +159,7 @@ impl Tracer<'_> {
         // Project onto the patch plane so that parameter inversion sees an in-plane point.
         let p = ray.at(hit.t);
         let p = p - patch_ref.normal * patch_ref.normal.dot(p - patch_ref.shape.vertices()[0]);
-        let leaf = self.hierarchy.locate(patch, p);
+        let (leaf, uv) = self.hierarchy.locate_with_parameters(patch, p);
         let element = self.hierarchy.element(leaf);
         if self.options.mesh {
             // Camera rays are unit length, so t is the distance from the eye.
@@ -173,7 +173,7 @@ impl Tracer<'_> {
         }
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
-            (Shading::Basis, _) => self.hierarchy.exitant_radiance_at(leaf, p),
+            (Shading::Basis, _) => self.hierarchy.exitant_radiance_at_parameters(leaf, uv),
             _ => element.radiance[0],
         }
     }
