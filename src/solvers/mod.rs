@@ -231,16 +231,17 @@ fn end_pass(
     let accuracy = settings
         .error_control
         .map_or(f64::INFINITY, |control| control.accuracy);
+    let summary = summarize(hierarchy, accuracy, settings.refine.min_area);
     report.error.passes.push(PassEstimate {
         pass: report.passes,
         links: hierarchy.link_count(),
-        summary: summarize(hierarchy, accuracy, settings.refine.min_area),
+        summary,
         refine_seconds: report.refine_seconds,
         solve_seconds: report.solve_seconds,
     });
     if let Some(control) = &settings.error_control {
-        report.error.summary = summarize(hierarchy, control.accuracy, settings.refine.min_area);
-        let summary = &report.error.summary;
+        // The pass's summary is the solve's so far (the same accuracy): one walk over the leaves.
+        report.error.summary = summary;
         if summary.leaves_above == 0 {
             report.converged = swept_to_tolerance;
             report.error.stopped_by = "accuracy reached".into();
