@@ -120,15 +120,19 @@ pub fn link_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorag
     std::mem::size_of::<Link>() + LinkCoupling::heap_bytes_for(size, nodes, storage)
 }
 
+/// Most bytes of a refinement verdict (one per candidate or stored link while a pass judges them).
+pub const VERDICT_BYTES: usize = 40;
+
 /// A link's peak cost: [`link_bytes`], one more `Link` for the growth slack of its receiver's list
 /// (which doubles), and while a refinement pass runs, the link as a candidate (kept in place when
-/// admissible) and its verdict (at most a candidate's size); a later pass judges stored links in place,
+/// admissible) and its verdict (at most [`VERDICT_BYTES`]); a later pass judges stored links in place,
 /// with a verdict each. Links are coupled and stored a chunk at a
 /// time, so their copies on the way to their receivers are not counted per link.
 pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorStorage) -> usize {
     link_bytes(basis, cubature_degree, storage)
         + std::mem::size_of::<Link>()
-        + 2 * std::mem::size_of::<Candidate>()
+        + std::mem::size_of::<Candidate>()
+        + VERDICT_BYTES
 }
 
 /// Bytes of one element: the struct (twice, for the growth slack of the element list), its radiance

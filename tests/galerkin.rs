@@ -63,9 +63,8 @@ fn solve_receiver(scene: &Scene, kind: BasisKind, level: u16, vis: &dyn Visibili
         let k = couple(&h, vis, leaf, emitter, &settings, None);
         h.elements[leaf as usize].links.push(Link {
             source: emitter,
-            coupling: k.coupling,
+            coupling: k.coupling.with_shaft(k.shaft),
             oracle_factor: OracleFactor::NONE,
-            shaft: k.shaft,
         });
     }
     for _ in 0..3 {
@@ -192,9 +191,8 @@ fn the_error_estimate_sums_the_levels_with_their_signs() {
                 let c = couple(&h, &vis, r, source, &settings, None);
                 h.elements[r as usize].links.push(Link {
                     source,
-                    coupling: c.coupling,
+                    coupling: c.coupling.with_shaft(c.shaft),
                     oracle_factor: OracleFactor::NONE,
-                    shaft: c.shaft,
                 });
             }
         }

@@ -682,7 +682,8 @@ pub const NORMAL_CELLS: u32 = 32;
 /// link delivers whatever the grouping.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Orientation {
-    pub groups: Vec<NormalGroup>,
+    /// Exactly as many as there are (a cluster keeps its orientation for the whole solve).
+    pub groups: Box<[NormalGroup]>,
     /// Positions in the cluster's contents, group after group.
     pub members: Box<[u32]>,
     /// Running area over `members` (inclusive), to sample a member by area within its group.
@@ -752,7 +753,7 @@ impl Orientation {
             }
         }
         Orientation {
-            groups,
+            groups: groups.into_boxed_slice(),
             members: order.into_iter().map(|(_, k)| k).collect(),
             cumulative_area: cumulative.into(),
         }
@@ -815,101 +816,190 @@ fn octahedral_cell(n: DVec3) -> u32 {
 /// ([`Orientation`]'s group order), so that a link finds the cluster's visible projected area toward
 /// its other end in O(groups) instead of a walk over every patch.
 ///
-/// The cache of these answers was office3's largest heap block (54 MB as `f32` fractions), and most
-/// fractions are 0 (76% there: patches hidden behind others, or facing away) or 1 (19%). So they are
-/// stored sparsely, in one shared allocation of 32-bit words: the groups' areas (`f32`), then per 64
-/// patches the count of visible patches before them (a rank) and a bitmap of which are visible, then
-/// the visible patches' fractions in 16-bit fixed point ([`FRACTION_STEPS`]), two per word: about 5
-/// bits per patch instead of 32, and `f_k` in O(1) (a popcount). The fixed point's rounding (7.6·10⁻⁶)
-/// is far below the item buffer's own (one pixel of a patch's projection, of at most 65,536).
+/// The cache of these answers is office3's largest heap block after the links (60k of them), and
+/// most of what they hold is 0 or 1: 77% of the fractions are 0 (patches hidden behind others, or
+/// facing away), 19% are 1 and 4.5% in between; 47% of the groups' areas are 0. So they are stored
+/// sparsely, in one shared allocation of 32-bit words ([`VisibleAreas::new`] gives the layout): a
+/// bitmap of the groups seen and their areas (`f32`); per 64 patches a bitmap of the visible ones, a
+/// bitmap of the partly visible ones and the count of partly visible patches before them (a rank);
+/// then the partial fractions in 16-bit fixed point ([`FRACTION_STEPS`]), two per word. About 3 bits
+/// per patch and `f_k` in O(1) (a popcount). The fixed point's rounding (7.6·10⁻⁶) is far below the
+/// item buffer's own (one pixel of a patch's projection, of at most 65,536).
 #[derive(Clone, Debug, PartialEq)]
 pub struct VisibleAreas {
     words: Arc<[u32]>,
-    patches: usize,
-    groups: usize,
 }
 
 /// Fixed-point steps of a visible fraction (fully visible, exactly).
 const FRACTION_STEPS: f32 = u16::MAX as f32;
 
-/// Patches per rank and bitmap of [`VisibleAreas`] (two words of bitmap after each rank word).
+/// Patches per block of [`VisibleAreas`]: a rank word, then two words of each bitmap.
 const BLOCK: usize = 64;
+
+/// Words per block of patches in [`VisibleAreas`].
+const BLOCK_WORDS: usize = 5;
+
+/// [`VisibleAreas`]'s header: patches, groups, where the patch blocks start, where the partial
+/// fractions start.
+const HEADER: usize = 4;
+
+/// Bit `bit` of the 64-bit bitmap at `words[at..at + 2]`, and the set bits below it.
+fn bit_and_rank(words: &[u32], at: usize, bit: usize) -> (bool, u32) {
+    let bitmap = u64::from(words[at]) | u64::from(words[at + 1]) << 32;
+    (
+        bitmap >> bit & 1 == 1,
+        (bitmap & ((1u64 << bit) - 1)).count_ones(),
+    )
+}
 
 impl VisibleAreas {
     /// The visible areas of a cluster grouped by `orientation` whose patches (content order) have
     /// areas `areas` and visible fractions `fractions` (rounded to [`FRACTION_STEPS`], a fraction
     /// that rounds to 0 hidden; the groups' areas are summed from the rounded fractions, so that both
     /// agree).
+    ///
+    /// Layout of the words: the [`HEADER`]; a bitmap of the groups whose visible area is not 0
+    /// (`⌈groups/32⌉` words) and those areas' bits; per [`BLOCK`] patches the count of partly
+    /// visible patches before the block, the bitmap of visible patches and the bitmap of partly
+    /// visible ones (two words each); the partial fractions' steps, two per word.
     pub fn new(orientation: &Orientation, areas: &[f64], fractions: &[f32]) -> Self {
         let steps: Vec<u16> = fractions
             .iter()
             .map(|&f| (f.clamp(0.0, 1.0) * FRACTION_STEPS).round() as u16)
             .collect();
         let fraction = |k: u32| f64::from(f32::from(steps[k as usize]) / FRACTION_STEPS);
-        let group_areas = orientation.groups.iter().map(|g| {
-            let members = &orientation.members[g.members.start as usize..g.members.end as usize];
-            let visible: f64 = members
-                .iter()
-                .map(|&k| areas[k as usize] * fraction(k))
-                .sum();
-            (visible as f32).to_bits()
-        });
-        let mut words: Vec<u32> = group_areas.collect();
-        let mut rank = 0u32;
-        for block in steps.chunks(BLOCK) {
-            let bitmap = block
+        let group_areas: Vec<u32> = orientation
+            .groups
+            .iter()
+            .map(|g| {
+                let members =
+                    &orientation.members[g.members.start as usize..g.members.end as usize];
+                let visible: f64 = members
+                    .iter()
+                    .map(|&k| areas[k as usize] * fraction(k))
+                    .sum();
+                (visible as f32).to_bits()
+            })
+            .collect();
+        let mut words = vec![0u32; HEADER];
+        words.extend(group_areas.chunks(32).map(|chunk| {
+            chunk
                 .iter()
                 .enumerate()
-                .fold(0u64, |m, (i, &q)| m | u64::from(q > 0) << i);
-            words.extend([rank, bitmap as u32, (bitmap >> 32) as u32]);
-            rank += bitmap.count_ones();
+                .fold(0u32, |m, (i, &bits)| m | u32::from(bits != 0) << i)
+        }));
+        words.extend(group_areas.iter().copied().filter(|&bits| bits != 0));
+        let blocks_at = words.len();
+        let mut rank = 0u32;
+        for block in steps.chunks(BLOCK) {
+            let bitmap = |keep: &dyn Fn(u16) -> bool| {
+                block
+                    .iter()
+                    .enumerate()
+                    .fold(0u64, |m, (i, &q)| m | u64::from(keep(q)) << i)
+            };
+            let visible = bitmap(&|q| q > 0);
+            let partial = bitmap(&|q| q > 0 && q < u16::MAX);
+            words.extend([
+                rank,
+                visible as u32,
+                (visible >> 32) as u32,
+                partial as u32,
+                (partial >> 32) as u32,
+            ]);
+            rank += partial.count_ones();
         }
-        let visible: Vec<u16> = steps.iter().copied().filter(|&q| q > 0).collect();
+        let values_at = words.len();
+        let partial: Vec<u16> = steps
+            .iter()
+            .copied()
+            .filter(|&q| q > 0 && q < u16::MAX)
+            .collect();
         words.extend(
-            visible.chunks(2).map(|pair| {
+            partial.chunks(2).map(|pair| {
                 u32::from(pair[0]) | u32::from(pair.get(1).copied().unwrap_or(0)) << 16
             }),
         );
+        let count = |n: usize| u32::try_from(n).expect("a cluster's patches and groups fit in u32");
+        words[..HEADER].copy_from_slice(&[
+            count(fractions.len()),
+            count(group_areas.len()),
+            count(blocks_at),
+            count(values_at),
+        ]);
         VisibleAreas {
             words: words.into(),
-            patches: fractions.len(),
-            groups: orientation.groups.len(),
         }
+    }
+
+    fn patches(&self) -> usize {
+        self.words[0] as usize
+    }
+
+    fn groups(&self) -> usize {
+        self.words[1] as usize
+    }
+
+    /// The `index`-th partial fraction.
+    fn partial(&self, index: usize) -> f32 {
+        let word = self.words[self.words[3] as usize + index / 2];
+        f32::from((word >> (16 * (index % 2))) as u16) / FRACTION_STEPS
     }
 
     /// Visible fraction of the patch at position `k` of the cluster's contents.
     pub fn fraction(&self, k: usize) -> f32 {
-        let at = self.groups + 3 * (k / BLOCK);
-        let bitmap = u64::from(self.words[at + 1]) | u64::from(self.words[at + 2]) << 32;
+        let at = self.words[2] as usize + BLOCK_WORDS * (k / BLOCK);
         let bit = k % BLOCK;
-        if bitmap >> bit & 1 == 0 {
+        if !bit_and_rank(&self.words, at + 1, bit).0 {
             return 0.0;
         }
-        let before = (bitmap & ((1u64 << bit) - 1)).count_ones();
-        let index = (self.words[at] + before) as usize;
-        let values = self.groups + 3 * self.patches.div_ceil(BLOCK);
-        let word = self.words[values + index / 2];
-        f32::from((word >> (16 * (index % 2))) as u16) / FRACTION_STEPS
+        match bit_and_rank(&self.words, at + 3, bit) {
+            (false, _) => 1.0,
+            (true, before) => self.partial((self.words[at] + before) as usize),
+        }
     }
 
     /// Visible fraction of each patch, in content order.
     pub fn fractions(&self) -> impl Iterator<Item = f32> + '_ {
-        let values = &self.words[self.groups + 3 * self.patches.div_ceil(BLOCK)..];
+        let blocks_at = self.words[2] as usize;
         let mut index = 0;
-        (0..self.patches).map(move |k| {
-            let bitmap = self.words[self.groups + 3 * (k / BLOCK) + 1 + k % BLOCK / 32];
-            if bitmap >> (k % 32) & 1 == 0 {
-                return 0.0;
+        (0..self.patches()).map(move |k| {
+            let at = blocks_at + BLOCK_WORDS * (k / BLOCK) + k % BLOCK / 32;
+            let bit = k % 32;
+            if self.words[at + 1] >> bit & 1 == 0 {
+                0.0
+            } else if self.words[at + 3] >> bit & 1 == 0 {
+                1.0
+            } else {
+                index += 1;
+                self.partial(index - 1)
             }
-            let word = values[index / 2];
-            index += 1;
-            f32::from((word >> (16 * ((index - 1) % 2))) as u16) / FRACTION_STEPS
         })
     }
 
     /// Visible area of normal group `g` (the [`Orientation`]'s group order).
     pub fn group_area(&self, g: usize) -> f32 {
-        f32::from_bits(self.words[g])
+        let bitmap = &self.words[HEADER..];
+        if bitmap[g / 32] >> (g % 32) & 1 == 0 {
+            return 0.0;
+        }
+        let before: u32 = bitmap[..g / 32].iter().map(|w| w.count_ones()).sum::<u32>()
+            + (bitmap[g / 32] & ((1u32 << (g % 32)) - 1)).count_ones();
+        f32::from_bits(self.words[HEADER + self.groups().div_ceil(32) + before as usize])
+    }
+
+    /// Visible area of each normal group, in the [`Orientation`]'s group order.
+    pub fn group_areas(&self) -> impl Iterator<Item = f32> + '_ {
+        let bitmap_words = self.groups().div_ceil(32);
+        let mut next = HEADER + bitmap_words;
+        (0..self.groups()).map(move |g| {
+            if self.words[HEADER + g / 32] >> (g % 32) & 1 == 0 {
+                0.0
+            } else {
+                next += 1;
+                f32::from_bits(self.words[next - 1])
+            }
+        })
     }
 
     /// Bytes of the shared allocation.

@@ -11,6 +11,7 @@
 //! element whose radiance is the area-weighted average of its contents.
 
 pub mod clusters;
+mod thin_words;
 
 use crate::bases::{Basis, BasisKind, MAX_BASIS_SIZE};
 use crate::color::Rgb;
@@ -49,15 +50,12 @@ pub struct Link {
     /// ρ_i B_j), kept so that re-refinement after a solve needs no new kernel samples; `None` when the
     /// source was dark when the link was judged (or for the link error oracle, which reads `coupling`).
     pub oracle_factor: OracleFactor,
-    /// The shaft test's verdict on this link (`None`: not tested), which the links of its sub-elements
-    /// inherit when Clear or Blocked ([`crate::visibility::shaft`]).
-    pub shaft: Option<crate::visibility::shaft::ShaftVerdict>,
 }
 
-// Links are what a large solve is made of: 40 bytes each besides their coupling's words
-// (BENCHMARKS.md, "Links in fixed point").
+// Links are what a large solve is made of: 24 bytes each besides their coupling's words
+// (BENCHMARKS.md, "Links in fixed point" and "Twenty-four-byte links").
 #[cfg(target_pointer_width = "64")]
-const _: () = assert!(std::mem::size_of::<Link>() == 40);
+const _: () = assert!(std::mem::size_of::<Link>() == 24);
 
 impl Link {
     /// Receiver-area-averaged form factor F_ij (visibility included): the constant–constant entry.
@@ -66,23 +64,28 @@ impl Link {
     }
 }
 
-/// The oracle factor a link or candidate caches ([`Link::oracle_factor`]): an `Option<f64>` in 8 bytes
-/// instead of 16, NaN standing for none, since every link and every refinement candidate holds one. A
-/// factor that is itself NaN reads as none and is recomputed, from the link's own seed, to the same NaN.
+/// The oracle factor a link or candidate caches ([`Link::oracle_factor`]): an `Option<f64>` in 4 bytes
+/// instead of 16, single precision with NaN standing for none, since every link and every refinement
+/// candidate holds one. Single precision (a relative rounding of 6·10⁻⁸, saturating at `f32::MAX`)
+/// moves a re-judged link's estimate by far less than the oracle's own sampling resolves, and makes a
+/// [`Link`] 8 bytes smaller. A factor that is itself NaN reads as none and is recomputed, from
+/// the link's own seed, to the same NaN.
 #[derive(Clone, Copy, Debug)]
-pub struct OracleFactor(f64);
+pub struct OracleFactor(f32);
 
 impl OracleFactor {
-    pub const NONE: Self = OracleFactor(f64::NAN);
+    pub const NONE: Self = OracleFactor(f32::NAN);
 
     pub fn get(self) -> Option<f64> {
-        (!self.0.is_nan()).then_some(self.0)
+        (!self.0.is_nan()).then_some(f64::from(self.0))
     }
 }
 
 impl From<Option<f64>> for OracleFactor {
     fn from(factor: Option<f64>) -> Self {
-        OracleFactor(factor.unwrap_or(f64::NAN))
+        OracleFactor(factor.map_or(f32::NAN, |f| {
+            f.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
+        }))
     }
 }
 
@@ -118,20 +121,26 @@ impl PartialEq for OracleFactor {
 pub struct LinkCoupling {
     /// The block (`f32` bits); [`HEADER_WORDS`]: the scales of the error coefficients and of the node
     /// factors and the visibility error (`f32` bits; here rather than beside `visibility`, so that a
-    /// `Link` is 40 bytes, not 48); then the error coefficients (or their reduced form) and the node
+    /// `Link` is 24 bytes); then the error coefficients (or their reduced form) and the node
     /// factors as `i16` steps of their scale, two per word (see the accessors). Empty where every word
-    /// would be zero.
-    words: Box<[u32]>,
-    /// Basis size `b` of both ends.
-    size: u8,
-    /// Whether the error coefficients are stored one per node: §4.3's reduced form, or the exact
-    /// `δ_{j,1}(x_k)` of a [`LinkCoupling::constant_source`] coupling.
-    reduced: bool,
+    /// would be zero. Behind a thin pointer, the length in the allocation ([`thin_words`]).
+    words: thin_words::ThinWords,
+    /// Basis size `b` of both ends, and [`REDUCED`] where the error coefficients are stored one per
+    /// node: §4.3's reduced form, or the exact `δ_{j,1}(x_k)` of a [`LinkCoupling::constant_source`]
+    /// coupling.
+    form: u8,
     /// Number of receiver cubature nodes `n`.
     nodes: u16,
+    /// The verdict of the shaft test of the link this coupling belongs to (`None`: not tested), which
+    /// the links of its sub-elements inherit when Clear or Blocked ([`crate::visibility::shaft`]).
+    /// Kept here, in what would be padding, so that a [`Link`] is 24 bytes.
+    pub shaft: Option<crate::visibility::shaft::ShaftVerdict>,
     /// Fraction `v` of the unoccluded transfer that the node pairs found visible (1 when nothing blocks).
     pub visibility: f32,
 }
+
+/// [`LinkCoupling::form`]'s flag for error coefficients stored one per node.
+const REDUCED: u8 = 0x80;
 
 /// Words between a coupling's block and its fixed-point values: two scales and the visibility error.
 const HEADER_WORDS: usize = 3;
@@ -224,7 +233,9 @@ impl LinkCoupling {
             ErrorStorage::Full => size,
             ErrorStorage::Reduced => 1,
         };
-        allocated_bytes(4 * Self::word_count(size * size, nodes * (errors_per_node + 1)))
+        allocated_bytes(
+            4 * Self::allocated_words(Self::word_count(size * size, nodes * (errors_per_node + 1))),
+        )
     }
 
     /// The single allocation of [`LinkCoupling`]: block, scales, error coefficients
@@ -254,14 +265,18 @@ impl LinkCoupling {
             *t = q;
         }
         let words = if words.iter().all(|&w| w == 0) {
-            Box::default()
+            thin_words::ThinWords::default()
         } else {
-            words.into_boxed_slice()
+            thin_words::ThinWords::new(&words)
         };
         LinkCoupling {
             words,
-            size: u8::try_from(size).expect("basis sizes are at most MAX_BASIS_SIZE"),
-            reduced,
+            form: u8::try_from(size)
+                .ok()
+                .filter(|&b| b < REDUCED)
+                .expect("basis sizes are at most MAX_BASIS_SIZE")
+                | if reduced { REDUCED } else { 0 },
+            shaft: None,
             nodes: u16::try_from(node_factors.len()).expect("at most 65535 cubature nodes"),
             visibility,
         }
@@ -277,10 +292,10 @@ impl LinkCoupling {
     /// links are made, and a later change of shape is what this form cannot follow (BENCHMARKS.md
     /// measures what that costs the estimate). For the constant basis both forms hold the same numbers.
     pub fn reduced(self, source: &[Rgb]) -> Self {
-        if self.reduced {
+        if self.is_reduced() {
             return self;
         }
-        let size = usize::from(self.size);
+        let size = self.size();
         let grey: Vec<f64> = source.iter().map(|c| c.r + c.g + c.b).collect();
         let ratios: Vec<f32> = (0..self.node_count())
             .map(|k| {
@@ -308,16 +323,31 @@ impl LinkCoupling {
         )
     }
 
+    /// This coupling on a link whose shaft test gave `shaft`.
+    pub fn with_shaft(self, shaft: Option<crate::visibility::shaft::ShaftVerdict>) -> Self {
+        LinkCoupling { shaft, ..self }
+    }
+
+    /// Basis size `b` of both ends.
+    fn size(&self) -> usize {
+        usize::from(self.form & !REDUCED)
+    }
+
+    /// Whether the error coefficients are stored one per node.
+    fn is_reduced(&self) -> bool {
+        self.form & REDUCED != 0
+    }
+
     fn block_len(&self) -> usize {
-        usize::from(self.size) * usize::from(self.size)
+        self.size() * self.size()
     }
 
     /// Error coefficients per receiver node: `b`, or 1 in the reduced form.
     fn errors_per_node(&self) -> usize {
-        if self.reduced {
+        if self.is_reduced() {
             1
         } else {
-            usize::from(self.size)
+            self.size()
         }
     }
 
@@ -386,7 +416,8 @@ impl LinkCoupling {
                 return;
             }
             let tail = self.node_count() * (self.errors_per_node() + 1);
-            self.words = vec![0; Self::word_count(self.block_len(), tail)].into_boxed_slice();
+            self.words =
+                thin_words::ThinWords::new(&vec![0; Self::word_count(self.block_len(), tail)]);
         }
         let at = self.block_len() + 2;
         self.words[at] = error.to_bits();
@@ -406,7 +437,7 @@ impl LinkCoupling {
     /// `δ_j(x_k) / ρ_i = Σ_β L_{j,β} δ_{j,β}(x_k)` at receiver node `k`, for the source's radiance
     /// coefficients `source` (Bekaert–Willems §4.2).
     pub fn node_error(&self, k: usize, source: &[Rgb]) -> Rgb {
-        if self.reduced {
+        if self.is_reduced() {
             return source[0] * f64::from(self.error(k));
         }
         let size = source.len();
@@ -422,7 +453,17 @@ impl LinkCoupling {
     /// Heap bytes held by this coupling, as the allocator hands them out (for memory budgets and
     /// reports).
     pub fn heap_bytes(&self) -> usize {
-        allocated_bytes(self.words.len() * std::mem::size_of::<u32>())
+        allocated_bytes(Self::allocated_words(self.words.len()) * std::mem::size_of::<u32>())
+    }
+
+    /// Words a coupling with `words` words allocates: none for none, else one more for the length
+    /// ([`thin_words`]).
+    fn allocated_words(words: usize) -> usize {
+        if words == 0 {
+            0
+        } else {
+            words + 1
+        }
     }
 }
 
@@ -580,6 +621,17 @@ impl Hierarchy {
             clustering: clusters::ClusteringKind::None,
             item_buffers: None,
         };
+        // One patch and one root element per radiating side, reserved exactly: a doubling vector
+        // would keep up to half its room unused for the whole solve (megabytes on office3).
+        let sides: usize = scene
+            .polygons
+            .iter()
+            .zip(&h.openings)
+            .filter(|(_, opening)| opening.is_none())
+            .map(|(polygon, _)| if polygon.two_sided { 2 } else { 1 })
+            .sum();
+        h.patches.reserve_exact(sides);
+        h.elements.reserve_exact(sides);
         for (index, polygon) in scene.polygons.iter().enumerate() {
             if h.openings[index].is_some() {
                 continue;
@@ -668,6 +720,7 @@ impl Hierarchy {
         let tree = clusters::ClusterTree::build(&items, kind);
         let first = self.elements.len() as ElementId;
         let size = self.basis_size();
+        self.elements.reserve_exact(tree.nodes.len());
         for node in &tree.nodes {
             let id = self.elements.len() as ElementId;
             let children: Vec<ElementId> = node

@@ -187,6 +187,7 @@ pub fn split_contacts(scene: &mut Scene, mode: SplitContacts, gap: f64) -> Conta
         }
     }
     scene.origins.repeat(&counts);
+    polygons.shrink_to_fit();
     scene.polygons = polygons;
     report
 }

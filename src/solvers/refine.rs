@@ -29,18 +29,20 @@ pub struct Candidate {
     /// and a pass holds many candidates).
     pub coupling: Option<Box<LinkCoupling>>,
     pub oracle_factor: OracleFactor,
-    /// Visibility `v` of the parent link when that link was partially occluded: a link between
-    /// sub-elements whose own node pairs all agree (all open or all blocked) may have sampled a
-    /// partial occlusion too coarsely, so it keeps the parent's visibility error (one generation).
-    pub inherited_visibility: Option<f32>,
+    /// Visibility `v` of the parent link when that link was partially occluded (NaN: none; see
+    /// [`Candidate::inherited_visibility`]).
+    inherited_visibility: f32,
     /// The shaft verdict on this link: its own test's, or a Clear or Blocked one inherited from the
     /// link it was refined from (whose shaft holds this one's).
     pub shaft: Option<ShaftVerdict>,
     /// Where the verdict is not known: the complete occluder list of a Partial test of an ancestor
-    /// link's shaft, as an index into the table of such tests that one [`refine`] call keeps, so
-    /// that this link's own test examines only those polygons ([`ShaftPrior::Among`]).
-    pub occluders: Option<u32>,
+    /// link's shaft (`u32::MAX`: none; see [`Candidate::occluders`]).
+    occluders: u32,
 }
+
+// A pass holds its candidates together: 32 bytes each (`Option`s of their own would make it 40).
+#[cfg(target_pointer_width = "64")]
+const _: () = assert!(std::mem::size_of::<Candidate>() == 32);
 
 impl Candidate {
     fn new(
@@ -55,10 +57,27 @@ impl Candidate {
             source,
             coupling: None,
             oracle_factor: OracleFactor::NONE,
-            inherited_visibility,
+            inherited_visibility: inherited_visibility.unwrap_or(f32::NAN),
             shaft,
-            occluders,
+            occluders: occluders.map_or(u32::MAX, |k| {
+                assert!(k < u32::MAX, "shaft tests are indexed below u32::MAX");
+                k
+            }),
         }
+    }
+
+    /// Visibility `v` of the parent link when that link was partially occluded: a link between
+    /// sub-elements whose own node pairs all agree (all open or all blocked) may have sampled a
+    /// partial occlusion too coarsely, so it keeps the parent's visibility error (one generation).
+    pub fn inherited_visibility(&self) -> Option<f32> {
+        (!self.inherited_visibility.is_nan()).then_some(self.inherited_visibility)
+    }
+
+    /// Where the shaft verdict is not known: the complete occluder list of a Partial test of an
+    /// ancestor link's shaft, as an index into the table of such tests that one [`refine`] call
+    /// keeps, so that this link's own test examines only those polygons ([`ShaftPrior::Among`]).
+    pub fn occluders(&self) -> Option<u32> {
+        (self.occluders != u32::MAX).then_some(self.occluders)
     }
 
     /// This candidate as the oracle judges it.
@@ -68,9 +87,9 @@ impl Candidate {
             source: self.source,
             coupling: self.coupling.as_deref(),
             oracle_factor: self.oracle_factor,
-            inherited_visibility: self.inherited_visibility,
+            inherited_visibility: self.inherited_visibility(),
             shaft: self.shaft,
-            occluders: self.occluders,
+            occluders: self.occluders(),
         }
     }
 
@@ -106,7 +125,7 @@ impl<'c> Judging<'c> {
             coupling: Some(&link.coupling),
             oracle_factor: link.oracle_factor,
             inherited_visibility: None,
-            shaft: link.shaft,
+            shaft: link.coupling.shaft,
             occluders: None,
         }
     }
@@ -657,7 +676,7 @@ fn judge_and_settle_stored(
                     if let Some(coupling) = admitted.coupling {
                         link.coupling = *coupling;
                     }
-                    link.shaft = admitted.shaft;
+                    link.coupling.shaft = admitted.shaft;
                     true
                 }
                 None => false,
@@ -772,7 +791,7 @@ impl Pass {
         self.settled += 1;
         outcome.oracle_rays += u64::from(verdict.rays);
         outcome.form_factor_rays += u64::from(verdict.coupling_rays);
-        outcome.shaft_tests += u64::from(verdict.shaft_tests);
+        outcome.shaft_tests += u64::from(verdict.shaft_tested);
         outcome.rays_saved += u64::from(verdict.rays_saved);
         let mut decision = verdict.decision;
         let splits_surface = match decision {
@@ -886,9 +905,8 @@ fn couple_chunk(
                     c.receiver,
                     Link {
                         source: c.source,
-                        coupling: *coupling,
+                        coupling: coupling.with_shaft(c.shaft),
                         oracle_factor: c.oracle_factor,
-                        shaft: c.shaft,
                     },
                 )),
                 Coupled::default(),
@@ -914,9 +932,8 @@ fn couple_chunk(
                 let keep = k.unoccluded > 0.0 || h.is_cluster(c.receiver) || h.is_cluster(c.source);
                 let link = keep.then_some(Link {
                     source: c.source,
-                    coupling: k.coupling,
+                    coupling: k.coupling.with_shaft(k.shaft),
                     oracle_factor: c.oracle_factor,
-                    shaft: k.shaft,
                 });
                 (link.map(|l| (c.receiver, l)), cost)
             }
@@ -1014,15 +1031,16 @@ struct Verdict {
     /// The Partial test of a link to be refined, when its occluder list is complete (boxed: few
     /// verdicts carry one).
     partial_test: Option<Box<ShaftTest>>,
-    shaft_tests: u32,
+    /// Whether judging it ran a shaft test (one at most).
+    shaft_tested: bool,
     rays_saved: u32,
     /// The error estimate compared with the threshold (for a [`RefinementSchedule`]'s histogram:
     /// single precision, as the verdicts of a pass are held together).
     error: f32,
 }
 
-// `memory::link_peak_bytes` counts a verdict as at most a candidate's size.
-const _: () = assert!(std::mem::size_of::<Verdict>() <= std::mem::size_of::<Candidate>());
+// `memory::link_peak_bytes` counts a verdict as at most this.
+const _: () = assert!(std::mem::size_of::<Verdict>() <= crate::memory::VERDICT_BYTES);
 
 /// One link's count of rays in a [`Verdict`] (a link casts at most its node pairs' and the oracle's
 /// samples' rays, far below `u32::MAX`; saturating all the same).
@@ -1041,7 +1059,7 @@ impl Verdict {
             no_interaction: false,
             shaft: None,
             partial_test: None,
-            shaft_tests: 0,
+            shaft_tested: false,
             rays_saved: 0,
             error: 0.0,
         }
@@ -1181,7 +1199,7 @@ fn decide(
         };
         let test = shaft_test(h, context.visibility, c.receiver, c.source, among);
         verdict.shaft = test.map(|t| t.verdict);
-        verdict.shaft_tests = u32::from(test.is_some());
+        verdict.shaft_tested = test.is_some();
         verdict.partial_test = test.filter(|t| t.occluders().is_some()).map(Box::new);
     }
     verdict
@@ -1204,7 +1222,7 @@ fn couple_for_verdict(
         c.shaft_prior(partial_tests),
     );
     verdict.shaft = k.shaft;
-    verdict.shaft_tests = u32::from(c.shaft.is_none() && k.shaft.is_some());
+    verdict.shaft_tested = c.shaft.is_none() && k.shaft.is_some();
     verdict.rays_saved = ray_count(k.rays_saved);
     verdict.coupling_rays = ray_count(k.rays);
     verdict.no_interaction = k.unoccluded <= 0.0;

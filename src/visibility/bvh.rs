@@ -435,6 +435,11 @@ impl Bvh {
             let cuts = Cuts::new(&binary);
             collapse(&binary, &cuts, 0, &prims, &mut nodes, &mut leaves);
         }
+        // The BVH lives as long as the solve: no room reserved while building stays unused.
+        nodes.shrink_to_fit();
+        leaves.blocks.shrink_to_fit();
+        leaves.lanes.shrink_to_fit();
+        leaves.vertices.shrink_to_fit();
         Bvh {
             nodes,
             root_min: bounds.min.as_dvec3(),
