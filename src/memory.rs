@@ -135,11 +135,10 @@ pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorS
         + VERDICT_BYTES
 }
 
-/// Bytes of one element: the struct (twice, for the growth slack of the element list), its radiance
-/// coefficients and its list of four children.
+/// Bytes of one element: the struct and its radiance coefficients (twice each, for the growth slack
+/// of the two lists), and its list of four children.
 pub fn element_bytes(basis: BasisKind) -> usize {
-    2 * std::mem::size_of::<Element>()
-        + allocated_bytes(basis.size() * std::mem::size_of::<crate::color::Rgb>())
+    2 * (std::mem::size_of::<Element>() + basis.size() * std::mem::size_of::<crate::color::Rgb>())
         + allocated_bytes(4 * 4)
 }
 

@@ -620,7 +620,7 @@ fn cube_mgf_with_its_two_sided_lamp_agrees_with_the_reference() {
         let patch = &h.patches[surface.patch as usize];
         if patch.emission.max_channel() > 0.0 && patch.reflectance.max_channel() == 0.0 {
             let emission = patch.emission.max_channel();
-            for (beta, c) in element.radiance.iter().enumerate().skip(1) {
+            for (beta, c) in h.radiance(id as u32).iter().enumerate().skip(1) {
                 assert!(
                     [c.r, c.g, c.b].iter().all(|x| x.abs() <= 1e-9 * emission),
                     "emitter element {id} (level {}): coefficient {beta} is {c:?}, not 0",

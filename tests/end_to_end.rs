@@ -20,7 +20,7 @@ fn object_means(scene: &Scene, h: &Hierarchy, names: &[&str]) -> Vec<Rgb> {
                 let polygon = &scene.polygons[patch.polygon];
                 if scene.objects[polygon.object].name == *name {
                     let root = h.element(patch.root);
-                    sum += root.average_radiance() * root.area;
+                    sum += h.average_radiance(patch.root) * root.area;
                     area += root.area;
                 }
             }

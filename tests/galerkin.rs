@@ -554,7 +554,7 @@ fn push_pull_on_trapezoids_keeps_constants_constant_and_power_unchanged() {
             let mut stack = vec![h.patches[patch].root];
             while let Some(id) = stack.pop() {
                 let e = h.element(id);
-                for (a, c) in e.radiance.iter().enumerate() {
+                for (a, c) in h.radiance(id).iter().enumerate() {
                     let expected = if a == 0 { value } else { 0.0 };
                     assert!(
                         (c.g - expected).abs() <= 1e-12 * value,

@@ -151,9 +151,10 @@ fn the_white_furnace_gives_pi_l_in_every_direction() {
     check(&solution, 0.005);
     // The exact uniform radiance: the pieces' exact factors close the sphere, so π L up to rounding and
     // the gather's own error (pieces cut by the horizon between their nodes).
-    for e in &mut solution.hierarchy.elements {
-        e.radiance.iter_mut().for_each(|c| *c = Rgb::BLACK);
-        e.radiance[0] = Rgb::splat(exact);
+    for id in 0..solution.hierarchy.elements.len() as u32 {
+        let coefficients = solution.hierarchy.radiance_mut(id);
+        coefficients.iter_mut().for_each(|c| *c = Rgb::BLACK);
+        coefficients[0] = Rgb::splat(exact);
     }
     check(&solution, 0.0);
 }

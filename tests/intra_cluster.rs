@@ -388,13 +388,13 @@ fn per_link_radiance(h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
     let areas = projected_areas(h, source, toward);
     let total: f64 = areas.iter().sum();
     if total <= 0.0 {
-        return h.element(source).radiance[0];
+        return h.average_radiance(source);
     }
     let contents = h.contents(h.cluster(source).expect("cluster"));
     contents
         .iter()
         .zip(&areas)
-        .map(|(&s, &w)| h.element(s).radiance[0] * (w / total))
+        .map(|(&s, &w)| h.average_radiance(s) * (w / total))
         .sum()
 }
 
@@ -426,7 +426,7 @@ fn bucket_weight_change(h: &Hierarchy, id: ElementId, toward: DVec3) -> f64 {
 fn radiance_spread(h: &Hierarchy, id: ElementId) -> f64 {
     let contents = h.contents(h.cluster(id).expect("cluster"));
     let channel = |c: fn(Rgb) -> f64| {
-        let values = contents.iter().map(|&s| c(h.element(s).radiance[0]));
+        let values = contents.iter().map(|&s| c(h.average_radiance(s)));
         let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
             (lo.min(v), hi.max(v))
         });
@@ -460,7 +460,7 @@ fn per_bucket_cluster_exchange_conserves_power_and_stays_within_the_bucket_error
     let mut rng = Pcg64Mcg::seed_from_u64(9);
     for p in 0..h.patches.len() {
         let root = h.patches[p].root as usize;
-        h.elements[root].radiance[0] = Rgb::new(rng.random(), rng.random(), rng.random());
+        h.radiance_mut(root as u32)[0] = Rgb::new(rng.random(), rng.random(), rng.random());
     }
     h.pull_clusters();
     let sweep = ClusterSweep::new(&h);
@@ -481,7 +481,7 @@ fn per_bucket_cluster_exchange_conserves_power_and_stays_within_the_bucket_error
                     spread * bucket_weight_change(&h, link.source, centre).min(1.0),
                 )
             } else {
-                (h.element(link.source).radiance[0], 0.0)
+                (h.average_radiance(link.source), 0.0)
             };
             for (n, o) in [(new.r, old.r), (new.g, old.g), (new.b, old.b)] {
                 assert!(

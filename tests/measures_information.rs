@@ -133,7 +133,7 @@ fn incoming_radiosity_is_the_solved_gather() {
     let incoming = leaves.system.incoming(&leaves.radiosity);
     for (k, &leaf) in leaves.leaves.iter().enumerate() {
         let patch = h.patch_of(leaf);
-        let b = h.element(leaf).average_radiance();
+        let b = h.average_radiance(leaf);
         let rho = patch.reflectance.to_array();
         let expected: f64 = (0..3)
             .map(|c| (b.to_array()[c] - patch.emission.to_array()[c]) / rho[c])

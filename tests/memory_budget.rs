@@ -66,7 +66,7 @@ fn a_small_budget_stops_refinement_with_a_valid_solution_within_it() {
         assert!(a > 0.0 && a <= e * (1.0 + 1e-9), "absorbed {a} of {e}");
     }
     for leaf in tight.hierarchy.leaves() {
-        let l = tight.hierarchy.element(leaf).average_radiance();
+        let l = tight.hierarchy.average_radiance(leaf);
         assert!(
             [l.r, l.g, l.b].iter().all(|c| c.is_finite() && *c >= 0.0),
             "{l:?}"

@@ -82,7 +82,7 @@ fn every_oracle_reproduces_the_parallel_plates_form_factor() {
         let solution = simulate(&scene, &settings(oracle), &Progress::new(true)).expect("solve");
         let h = &solution.hierarchy;
         let root = h.patches[0].root;
-        let f = h.element(root).average_radiance().g / (rho * e);
+        let f = h.average_radiance(root).g / (rho * e);
         assert!(
             (f - exact).abs() / exact < 0.01,
             "{oracle:?}: F = {f}, exact {exact}"

@@ -59,7 +59,7 @@ fn floor_setup(two_sided: bool) -> (Scene, Hierarchy) {
     h.subdivide(grand[2]);
     for leaf in h.leaves() {
         let c = h.element(leaf).shape().centroid();
-        h.elements[leaf as usize].radiance[0] = Rgb::new(1.0 + c.x, 2.0 + c.y, 0.5 + c.x * c.y);
+        h.radiance_mut(leaf)[0] = Rgb::new(1.0 + c.x, 2.0 + c.y, 0.5 + c.x * c.y);
     }
     (s, h)
 }
@@ -108,7 +108,7 @@ fn flat_render_is_the_leaf_radiance_and_misses_are_black() {
             }) else {
                 continue;
             };
-            assert_eq!(pixel, h.element(leaf).radiance[0], "pixel ({x}, {y})");
+            assert_eq!(pixel, h.average_radiance(leaf), "pixel ({x}, {y})");
             on_floor += 1;
         }
     }
@@ -154,7 +154,7 @@ fn back_sides_are_black_when_one_sided_and_their_own_patch_when_two_sided() {
 
     let (s, mut h) = floor_setup(true);
     let back_root = h.patches[1].root;
-    h.elements[back_root as usize].radiance[0] = Rgb::new(0.1, 0.2, 0.3);
+    h.radiance_mut(back_root)[0] = Rgb::new(0.1, 0.2, 0.3);
     let image = render(&h, &visibility(&s), &camera, &RenderOptions::default());
     // The 20 degree view from 2 below sees only the floor's back: its single leaf.
     assert!(image.pixels.iter().all(|p| *p == Rgb::new(0.1, 0.2, 0.3)));
@@ -199,8 +199,8 @@ fn images_do_not_depend_on_thread_count_and_jitter_is_seeded() {
 #[test]
 fn supersampling_averages_inside_the_pixel() {
     let (s, mut h) = floor_setup(false);
-    for e in &mut h.elements {
-        e.radiance[0] = Rgb::splat(2.0);
+    for id in 0..h.elements.len() as u32 {
+        h.radiance_mut(id)[0] = Rgb::splat(2.0);
     }
     let camera = top_camera();
     let options = RenderOptions {
@@ -639,7 +639,7 @@ fn lit_box_renders_with_mesh_overlay() {
             * light_visibility(&vis, c + patch.normal * 1e-6, &light);
         let radiance =
             patch.emission + patch.reflectance * (Rgb::splat(10.0) * direct + Rgb::splat(AMBIENT));
-        h.elements[leaf as usize].radiance[0] = radiance;
+        h.radiance_mut(leaf)[0] = radiance;
     }
     let vr = VertexRadiosity::new(&h);
     assert!(vr.fanned_leaf_count() > 10);

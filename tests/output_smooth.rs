@@ -58,7 +58,7 @@ fn scrambled(c: DVec3) -> Rgb {
 fn set_leaves(h: &mut Hierarchy, value: impl Fn(DVec3) -> Rgb) {
     for leaf in h.leaves() {
         let c = h.element(leaf).shape().centroid();
-        h.elements[leaf as usize].radiance[0] = value(c);
+        h.radiance_mut(leaf)[0] = value(c);
     }
 }
 
@@ -104,7 +104,7 @@ fn check_continuity(h: &Hierarchy, vr: &VertexRadiosity, patches: &[u32]) -> usi
                     let (inside, outside) = (q + delta * inward, q - delta * inward);
                     let Some(&other) = patches
                         .iter()
-                        .find(|&&p| margin(&h.patches[p as usize].shape, outside) > 0.0)
+                        .find(|&&p| margin(h.patch_shape(p), outside) > 0.0)
                     else {
                         continue; // the edge is on the boundary of the surface
                     };
@@ -274,10 +274,10 @@ fn vertex_values_are_area_weighted_and_t_vertices_interpolated() {
     // children: [0,.5]^2, [.5,1]x[0,.5], [.5,1]^2, [0,.5]x[.5,1]
     let grand = h.subdivide(children[0]);
     for (i, &c) in children.iter().enumerate() {
-        h.elements[c as usize].radiance[0] = Rgb::splat(10.0 * (i as f64 + 1.0));
+        h.radiance_mut(c)[0] = Rgb::splat(10.0 * (i as f64 + 1.0));
     }
     for (i, &g) in grand.iter().enumerate() {
-        h.elements[g as usize].radiance[0] = Rgb::splat(i as f64 + 1.0);
+        h.radiance_mut(g)[0] = Rgb::splat(i as f64 + 1.0);
     }
     let vr = VertexRadiosity::new(&h);
     let at = |x: f64, y: f64| {

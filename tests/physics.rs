@@ -16,7 +16,7 @@ fn quiet() -> Progress {
 fn polygon_radiance(h: &Hierarchy, polygon: usize) -> Rgb {
     let patch = h.patch_for_side(polygon, true).expect("front patch");
     let root = h.patches[patch as usize].root;
-    h.element(root).average_radiance()
+    h.average_radiance(root)
 }
 
 fn solve(scene: &Scene, eps: f64) -> radiosity::pipeline::Solution {
@@ -74,7 +74,7 @@ fn white_furnace_converges_to_e_over_one_minus_rho_everywhere() {
             leaves.len()
         );
         for id in leaves {
-            let b = h.element(id).average_radiance();
+            let b = h.average_radiance(id);
             for c in b.to_array() {
                 assert!(
                     (c - expected).abs() / expected < 0.005,

@@ -171,7 +171,7 @@ fn furnace_mgf_solves_to_e_over_one_minus_rho() {
     let leaves = h.leaves();
     assert!(leaves.len() > 100, "refined: {} leaves", leaves.len());
     for id in leaves {
-        for c in h.element(id).average_radiance().to_array() {
+        for c in h.average_radiance(id).to_array() {
             assert!(
                 (c - expected).abs() / expected < 1e-3,
                 "leaf radiance {c}, expected {expected}"

@@ -748,7 +748,7 @@ fn a_blender_export_of_the_cornell_box_solves_like_its_obj() {
             let e = h.element(p.root);
             let name = s.objects[s.polygons[p.polygon].object].name.clone();
             let entry = out.entry(name).or_default();
-            entry.0 += e.area * e.average_radiance().g;
+            entry.0 += e.area * h.average_radiance(p.root).g;
             entry.1 += e.area;
         }
         out.into_iter()

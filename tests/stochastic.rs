@@ -32,7 +32,7 @@ fn patch_radiance(solution: &Solution) -> Vec<f64> {
     let h = &solution.hierarchy;
     h.patches
         .iter()
-        .flat_map(|p| h.element(p.root).average_radiance().to_array())
+        .flat_map(|p| h.average_radiance(p.root).to_array())
         .collect()
 }
 
@@ -213,11 +213,9 @@ fn results_do_not_depend_on_thread_count() {
             .expect("pool");
         pool.install(|| {
             let solution = run(&scene, &settings);
-            let radiance: Vec<Rgb> = solution
-                .hierarchy
-                .elements
-                .iter()
-                .map(|e| e.average_radiance())
+            let h = &solution.hierarchy;
+            let radiance: Vec<Rgb> = (0..h.elements.len() as u32)
+                .map(|id| h.average_radiance(id))
                 .collect();
             let stats = RunStats::new("lit box", scene.polygons.len(), &solution, &settings);
             (radiance, stats.deterministic_part())

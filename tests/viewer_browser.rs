@@ -164,7 +164,7 @@ fn visible_leaves(solution: &Solution, camera: &Camera) -> Vec<Option<(u32, u32)
                 .and_then(|hit| {
                     let patch = solution.hierarchy.patch_for_side(hit.polygon, hit.front)?;
                     let normal = solution.hierarchy.patches[patch as usize].normal;
-                    let origin = solution.hierarchy.patches[patch as usize].shape.vertices()[0];
+                    let origin = solution.hierarchy.patch_shape(patch).vertices()[0];
                     let p = ray.at(hit.t);
                     let p: DVec3 = p - normal * normal.dot(p - origin);
                     Some((patch, solution.hierarchy.locate(patch, p)))

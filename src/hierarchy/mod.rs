@@ -3,8 +3,8 @@
 //! quads at parameter midpoints, triangles at edge midpoints). Links between elements live at the
 //! receiving element and carry the form factor of the interaction.
 //!
-//! An element carries a vector of basis coefficients (`radiance`, constant function first: see
-//! [`crate::bases`]), and every link a coupling block with one entry per pair of receiver and source
+//! An element has a vector of basis coefficients ([`Hierarchy::radiance`], constant function first:
+//! see [`crate::bases`]), and every link a coupling block with one entry per pair of receiver and source
 //! basis functions (Bekaert–Willems eq. (3)) plus the link error coefficients of their Algorithm 4.1.
 //! Elements come in two kinds ([`ElementKind`]): a piece of one patch's surface, or a cluster
 //! (Sillion–Drettakis §4): a box of other elements, with no patch, that links and push-pull treat as one
@@ -32,8 +32,6 @@ pub struct Patch {
     pub polygon: usize,
     /// Front side (true) or back side of a two-sided polygon.
     pub front: bool,
-    /// The polygon's shape oriented so that its normal points out of this side.
-    pub shape: Shape,
     pub normal: DVec3,
     pub reflectance: Rgb,
     pub emission: Rgb,
@@ -525,12 +523,10 @@ pub struct Element {
     pub kind: ElementKind,
     pub parent: Option<ElementId>,
     /// Four regular children for a split surface, the contents for a cluster, empty for a leaf.
-    pub children: Vec<ElementId>,
+    pub children: Box<[ElementId]>,
     pub level: u16,
     /// Surface area (for a cluster, the total area of its contents).
     pub area: f64,
-    /// Basis coefficients of the exitant radiance, RGB; index 0 is the constant (element average).
-    pub radiance: Vec<Rgb>,
     /// Incoming links: the sources this element gathers from.
     pub links: Vec<Link>,
     /// A-posteriori error estimate of the radiance (Bekaert–Willems §4, W/(m² sr)): after the extended
@@ -543,11 +539,6 @@ pub struct Element {
 impl Element {
     pub fn is_leaf(&self) -> bool {
         self.children.is_empty()
-    }
-
-    /// Average exitant radiance over the element (the constant coefficient).
-    pub fn average_radiance(&self) -> Rgb {
-        self.radiance[0]
     }
 
     /// The surface this element covers; `None` for a cluster.
@@ -580,6 +571,10 @@ impl Element {
 pub struct Hierarchy {
     pub patches: Vec<Patch>,
     pub elements: Vec<Element>,
+    /// Basis coefficients of each element's exitant radiance, RGB, `basis size` per element in element
+    /// order; an element's first is the constant (its average). One list rather than one per element:
+    /// office3's 50k elements saved 1.6 MB of list headers and allocator rounding.
+    radiance: Vec<Rgb>,
     /// Patch index of each polygon's front and back side (`None` for the back of a one-sided polygon).
     pub polygon_patches: Vec<[Option<u32>; 2]>,
     /// The radiance basis of every element (Bekaert–Willems §2).
@@ -611,6 +606,7 @@ impl Hierarchy {
         let mut h = Hierarchy {
             patches: Vec::new(),
             elements: Vec::new(),
+            radiance: Vec::new(),
             polygon_patches: vec![[None, None]; scene.polygons.len()],
             basis: Arc::new(Basis::new(basis)),
             luminaires: scene.luminaires.clone(),
@@ -632,6 +628,7 @@ impl Hierarchy {
             .sum();
         h.patches.reserve_exact(sides);
         h.elements.reserve_exact(sides);
+        h.radiance.reserve_exact(sides * h.basis_size());
         for (index, polygon) in scene.polygons.iter().enumerate() {
             if h.openings[index].is_some() {
                 continue;
@@ -650,15 +647,15 @@ impl Hierarchy {
                 };
                 let patch = h.patches.len() as u32;
                 let root = h.elements.len() as ElementId;
-                let mut radiance = vec![Rgb::BLACK; h.basis_size()];
-                radiance[0] = material.emission;
+                h.radiance.push(material.emission);
+                h.radiance
+                    .extend(std::iter::repeat_n(Rgb::BLACK, h.basis_size() - 1));
                 h.elements.push(Element {
                     kind: ElementKind::Surface(Surface { patch, shape }),
                     parent: None,
-                    children: Vec::new(),
+                    children: Box::default(),
                     level: 0,
                     area: shape.area(),
-                    radiance,
                     links: Vec::new(),
                     error: 0.0,
                     threshold: f64::INFINITY,
@@ -666,7 +663,6 @@ impl Hierarchy {
                 h.patches.push(Patch {
                     polygon: index,
                     front,
-                    shape,
                     normal: shape.normal(),
                     reflectance: material.reflectance,
                     emission: material.emission,
@@ -685,6 +681,12 @@ impl Hierarchy {
 
     pub fn element(&self, id: ElementId) -> &Element {
         &self.elements[id as usize]
+    }
+
+    /// The shape of patch `patch` (its root element's: the polygon's, oriented so that its normal
+    /// points out of this side; kept once, with the element, not again with the patch).
+    pub fn patch_shape(&self, patch: u32) -> &Shape {
+        self.element(self.patches[patch as usize].root).shape()
     }
 
     /// The patch of a surface element.
@@ -713,7 +715,7 @@ impl Hierarchy {
             .patches
             .iter()
             .map(|p| clusters::Item {
-                bounds: p.shape.bounds(),
+                bounds: self.element(p.root).shape().bounds(),
                 area: self.element(p.root).area,
             })
             .collect();
@@ -721,6 +723,7 @@ impl Hierarchy {
         let first = self.elements.len() as ElementId;
         let size = self.basis_size();
         self.elements.reserve_exact(tree.nodes.len());
+        self.radiance.reserve_exact(tree.nodes.len() * size);
         for node in &tree.nodes {
             let id = self.elements.len() as ElementId;
             let children: Vec<ElementId> = node
@@ -747,14 +750,14 @@ impl Hierarchy {
                     orientation: clusters::Orientation::default(),
                 })),
                 parent: None,
-                children,
+                children: children.into_boxed_slice(),
                 level: 0,
                 area: node.area,
-                radiance: vec![Rgb::BLACK; size],
                 links: Vec::new(),
                 error: 0.0,
                 threshold: f64::INFINITY,
             });
+            self.radiance.extend(std::iter::repeat_n(Rgb::BLACK, size));
         }
         let root = self.elements.len() as ElementId - 1;
         self.root_cluster = Some(root);
@@ -823,14 +826,14 @@ impl Hierarchy {
             let sum: Rgb = e
                 .children
                 .iter()
-                .map(|&c| self.elements[c as usize].radiance[0] * self.elements[c as usize].area)
+                .map(|&c| self.average_radiance(c) * self.elements[c as usize].area)
                 .sum();
             let average = if e.area > 0.0 {
                 sum / e.area
             } else {
                 Rgb::BLACK
             };
-            self.elements[id].radiance[0] = average;
+            self.radiance_mut(id as ElementId)[0] = average;
         }
     }
 
@@ -906,7 +909,7 @@ impl Hierarchy {
     /// regular children (created on first use).
     pub fn split(&mut self, id: ElementId) -> Vec<ElementId> {
         if self.is_cluster(id) {
-            self.elements[id as usize].children.clone()
+            self.elements[id as usize].children.to_vec()
         } else {
             self.subdivide(id).to_vec()
         }
@@ -917,6 +920,31 @@ impl Hierarchy {
     /// office3's 40k elements, a doubling can leave megabytes unused).
     pub fn reserve_splits(&mut self, leaves: usize) {
         self.elements.reserve_exact(4 * leaves);
+        self.radiance.reserve_exact(4 * leaves * self.basis_size());
+    }
+
+    /// Basis coefficients of element `id`'s exitant radiance, RGB; the first is the constant (the
+    /// element's average).
+    pub fn radiance(&self, id: ElementId) -> &[Rgb] {
+        let size = self.basis_size();
+        &self.radiance[id as usize * size..(id as usize + 1) * size]
+    }
+
+    /// [`Hierarchy::radiance`], to write.
+    pub fn radiance_mut(&mut self, id: ElementId) -> &mut [Rgb] {
+        let size = self.basis_size();
+        &mut self.radiance[id as usize * size..(id as usize + 1) * size]
+    }
+
+    /// Every element's radiance coefficients, `basis size` per element in element order (to compare
+    /// two solutions whole).
+    pub fn radiance_coefficients(&self) -> &[Rgb] {
+        &self.radiance
+    }
+
+    /// Average exitant radiance over element `id` (the constant coefficient).
+    pub fn average_radiance(&self, id: ElementId) -> Rgb {
+        self.radiance[id as usize * self.basis_size()]
     }
 
     /// Splits a surface leaf into its four regular children (returning the existing children if it is
@@ -932,26 +960,24 @@ impl Hierarchy {
         let domain = surface.shape.domain();
         let first = self.elements.len() as ElementId;
         for (k, shape) in surface.shape.subdivide().into_iter().enumerate() {
-            let radiance = self
-                .basis
-                .push_rgb(domain, k, &self.elements[id as usize].radiance);
+            let radiance = self.basis.push_rgb(domain, k, self.radiance(id));
+            self.radiance.extend_from_slice(&radiance);
             self.elements.push(Element {
                 kind: ElementKind::Surface(Surface {
                     patch: surface.patch,
                     shape,
                 }),
                 parent: Some(id),
-                children: Vec::new(),
+                children: Box::default(),
                 level,
                 area: shape.area(),
-                radiance,
                 links: Vec::new(),
                 error,
                 threshold,
             });
         }
         let children = [first, first + 1, first + 2, first + 3];
-        self.elements[id as usize].children = children.to_vec();
+        self.elements[id as usize].children = Box::new(children);
         children
     }
 
@@ -1049,9 +1075,9 @@ impl Hierarchy {
         let domain = e.shape().domain();
         let uv = domain.clamp(uv);
         let mut phi = [0.0; crate::bases::MAX_BASIS_SIZE];
-        let phi = &mut phi[..e.radiance.len()];
+        let phi = &mut phi[..self.basis_size()];
         self.basis.eval(domain, uv, phi);
-        e.radiance
+        self.radiance(id)
             .iter()
             .zip(phi.iter())
             .map(|(&c, &f)| c * f)
@@ -1102,8 +1128,8 @@ impl Hierarchy {
     /// Bytes held by elements, coefficients and links, as the allocator hands them out (the part of
     /// `--max-memory` that refinement fills, [`crate::memory`]).
     pub fn memory_bytes(&self) -> usize {
-        let coefficients = allocated_bytes(self.basis_size() * std::mem::size_of::<Rgb>());
         self.elements.capacity() * std::mem::size_of::<Element>()
+            + self.radiance.capacity() * std::mem::size_of::<Rgb>()
             + self
                 .elements
                 .iter()
@@ -1112,8 +1138,7 @@ impl Hierarchy {
                         ElementKind::Cluster(_) => allocated_bytes(std::mem::size_of::<Cluster>()),
                         ElementKind::Surface(_) => 0,
                     };
-                    coefficients
-                        + cluster
+                    cluster
                         + allocated_bytes(e.children.len() * 4)
                         + e.links.capacity() * std::mem::size_of::<Link>()
                         + e.links
@@ -1308,7 +1333,8 @@ mod tests {
         let scene = crate::scene::generators::parallel_plates(1.0, 1.0, 0.5, 1.0);
         let mut h = Hierarchy::new(&scene, BasisKind::Linear);
         let root = h.patches[0].root;
-        h.elements[root as usize].radiance = vec![Rgb::splat(0.25), Rgb::splat(0.5), Rgb::BLACK];
+        h.radiance_mut(root)
+            .copy_from_slice(&[Rgb::splat(0.25), Rgb::splat(0.5), Rgb::BLACK]);
         let mut negative = 0;
         for k in 0..=10 {
             for l in 0..=10 {

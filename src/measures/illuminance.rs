@@ -150,11 +150,11 @@ impl<'a> IrradianceGather<'a> {
                 stack.extend(&e.children);
                 leaves.clear();
                 hierarchy.collect_leaves(id, &mut leaves);
-                let own = e.average_radiance();
+                let own = hierarchy.average_radiance(id);
                 spread[id as usize] = leaves
                     .iter()
                     .map(|&l| {
-                        let d = hierarchy.element(l).average_radiance() - own;
+                        let d = hierarchy.average_radiance(l) - own;
                         d.map(f64::abs).max_channel()
                     })
                     .fold(0.0, f64::max);
@@ -272,7 +272,7 @@ impl<'a> IrradianceGather<'a> {
             rule(piece.shape.domain(), self.settings.cubature_degree),
         );
         let (mut open, mut seen, mut lit) = (0.0, 0.0, Rgb::BLACK);
-        let mut brightest = h.element(piece.element).average_radiance().max_channel();
+        let mut brightest = h.average_radiance(piece.element).max_channel();
         let (mut rays, mut visible_samples) = (0, 0.0);
         for node in &nodes {
             let k = node.weight * point_to_point(x, normal, node.point, n_y);
@@ -294,7 +294,7 @@ impl<'a> IrradianceGather<'a> {
             // Above the horizon only between the nodes: nothing sampled; half the element's average
             // radiance, with an error of the other half.
             return NodeSample {
-                radiance: h.element(piece.element).average_radiance() * 0.5,
+                radiance: h.average_radiance(piece.element) * 0.5,
                 visible: 0.5,
                 mixed: Some(0.5),
                 brightest,

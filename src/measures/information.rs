@@ -222,7 +222,7 @@ impl HierarchyLeaves {
         let area = leaves.iter().map(|&l| hierarchy.element(l).area).collect();
         let radiosity = leaves
             .iter()
-            .map(|&l| hierarchy.element(l).average_radiance().average())
+            .map(|&l| hierarchy.average_radiance(l).average())
             .collect();
         Ok(HierarchyLeaves {
             system: LeafSystem { area, blocks },

@@ -69,7 +69,7 @@ impl RefinementOracle for LinkErrorOracle {
         let h = context.hierarchy;
         let rho = h.patch_of(receiver).reflectance;
         let source_element = h.element(source);
-        let radiance = &source_element.radiance;
+        let radiance = h.radiance(source);
         let propagated_error = source_element.error;
         let (mut own, mut propagated, mut total) = (0.0f64, 0.0f64, 0.0f64);
         for (k, factor) in coupling.node_factors().enumerate() {
@@ -83,7 +83,7 @@ impl RefinementOracle for LinkErrorOracle {
             }
         }
         let visibility = rho.max_channel()
-            * source_element.average_radiance().max_channel().abs()
+            * h.average_radiance(source).max_channel().abs()
             * f64::from(coupling.visibility_error());
         let (r_area, s_area) = (h.element(receiver).area, source_element.area);
         let partially_visible = coupling.visibility_error() > 0.0;

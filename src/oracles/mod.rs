@@ -128,7 +128,7 @@ pub fn reflected_source_radiance(
     source: ElementId,
 ) -> f64 {
     let rho = hierarchy.reflectance_of(receiver);
-    let b = hierarchy.element(source).average_radiance();
+    let b = hierarchy.average_radiance(source);
     (rho * b).max_channel()
 }
 

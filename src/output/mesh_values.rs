@@ -75,10 +75,9 @@ impl VertexRadiosity {
     /// Welds the leaves' corners, averages leaf radiance to them (area-weighted) and anchors T-vertices.
     pub fn new(hierarchy: &Hierarchy) -> Self {
         let leaves = hierarchy.leaves();
-        let bounds = hierarchy
-            .patches
-            .iter()
-            .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()));
+        let bounds = hierarchy.patches.iter().fold(Aabb::EMPTY, |b, p| {
+            b.union(&hierarchy.element(p.root).shape().bounds())
+        });
         let tolerance = (WELD_TOLERANCE * bounds.diagonal()).max(1e-300);
 
         // Pass 1: weld corner positions regardless of patch, and note which patches meet at each point.
@@ -173,7 +172,7 @@ impl VertexRadiosity {
             .map(|record| {
                 let element = hierarchy.element(record.element);
                 let group = group_of[element.patch() as usize];
-                let root = &hierarchy.patches[element.patch() as usize].shape;
+                let root = hierarchy.patch_shape(element.patch());
                 let n = element.shape().vertex_count();
                 let mut loop_ids = Vec::with_capacity(n);
                 let mut anchors = Vec::new();
@@ -265,7 +264,7 @@ impl VertexRadiosity {
             .copied()
             .unwrap_or(NOT_A_LEAF);
         if slot == NOT_A_LEAF {
-            return element.radiance[0];
+            return hierarchy.average_radiance(leaf);
         }
         let record = &self.leaves[slot as usize];
         let shape = element.shape();
@@ -521,7 +520,7 @@ impl<'a> OutlineVertices<'a> {
         let mut ids: Vec<u32> = Vec::new();
         for record in records {
             let element = hierarchy.element(record.element);
-            let root = &hierarchy.patches[element.patch() as usize].shape;
+            let root = hierarchy.patch_shape(element.patch());
             for &id in &record.corners[..element.shape().vertex_count()] {
                 if on_outline(root, positions[id as usize], tolerance) {
                     ids.push(id);

@@ -158,7 +158,8 @@ impl Tracer<'_> {
         let patch_ref = &self.hierarchy.patches[patch as usize];
         // Project onto the patch plane so that parameter inversion sees an in-plane point.
         let p = ray.at(hit.t);
-        let p = p - patch_ref.normal * patch_ref.normal.dot(p - patch_ref.shape.vertices()[0]);
+        let corner = self.hierarchy.patch_shape(patch).vertices()[0];
+        let p = p - patch_ref.normal * patch_ref.normal.dot(p - corner);
         let (leaf, uv) = self.hierarchy.locate_with_parameters(patch, p);
         let element = self.hierarchy.element(leaf);
         if self.options.mesh {
@@ -174,7 +175,7 @@ impl Tracer<'_> {
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
             (Shading::Basis, _) => self.hierarchy.exitant_radiance_at_parameters(leaf, uv),
-            _ => element.radiance[0],
+            _ => self.hierarchy.average_radiance(leaf),
         }
     }
 

@@ -72,10 +72,9 @@ impl ViewerMesh {
         vertices: Option<&VertexRadiosity>,
         max_triangles: usize,
     ) -> Result<ViewerMesh> {
-        let bounds = hierarchy
-            .patches
-            .iter()
-            .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()));
+        let bounds = hierarchy.patches.iter().fold(Aabb::EMPTY, |b, p| {
+            b.union(&hierarchy.element(p.root).shape().bounds())
+        });
         anyhow::ensure!(
             !bounds.is_empty(),
             "the scene has no surfaces to show in the viewer"
@@ -137,7 +136,7 @@ impl ViewerMesh {
                     // and clamps per pixel, as the PNG render clamps the expansion at each pixel.
                     let value = |uv: DVec2| match shading {
                         Shading::Basis => hierarchy.radiance_at_parameters(leaf, uv),
-                        _ => element.radiance[0],
+                        _ => hierarchy.average_radiance(leaf),
                     };
                     let shape = element.shape();
                     match vertices.outline(leaf) {

@@ -587,7 +587,7 @@ impl Contents {
             radiance: h
                 .cluster_surfaces
                 .iter()
-                .map(|&s| h.element(s).radiance[0])
+                .map(|&s| h.average_radiance(s))
                 .collect(),
         }
     }
@@ -695,7 +695,7 @@ impl ClusterSweep {
     /// The (average) radiance that `source` sends toward the point `toward`, to multiply a link's
     /// coupling with (see the type's documentation).
     pub fn radiance_toward(&self, h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
-        let average = h.element(source).radiance[0];
+        let average = h.average_radiance(source);
         let Some(buffers) = h.item_buffers.as_deref().filter(|_| h.is_cluster(source)) else {
             return average;
         };
@@ -849,7 +849,7 @@ fn sent_along(
     let areas = visible_areas_along(h, contents, buffers, id, bucket);
     let total: f64 = areas.iter().sum();
     if total <= 0.0 {
-        return h.element(id).radiance[0];
+        return h.average_radiance(id);
     }
     contents.radiance[Contents::range(h, id)]
         .iter()

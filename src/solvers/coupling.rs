@@ -116,9 +116,7 @@ pub fn couple_with_prior(
     match settings.error_storage {
         ErrorStorage::Full => coupled,
         ErrorStorage::Reduced => Coupling {
-            coupling: coupled
-                .coupling
-                .reduced(&hierarchy.element(source).radiance),
+            coupling: coupled.coupling.reduced(hierarchy.radiance(source)),
             ..coupled
         },
     }

@@ -235,7 +235,7 @@ fn own_sums(h: &Hierarchy, id: ElementId, propagated: Option<&[f64]>) -> Option<
         },
     };
     for link in &e.links {
-        let radiance = &h.element(link.source).radiance;
+        let radiance = h.radiance(link.source);
         for k in 0..nodes {
             sums.signed[k] += rho * link.coupling.node_error(k, radiance);
         }
@@ -257,7 +257,7 @@ fn visibility_squared(h: &Hierarchy, id: ElementId) -> f64 {
         .links
         .iter()
         .map(|l| {
-            (rho * h.element(l.source).average_radiance().max_channel()
+            (rho * h.average_radiance(l.source).max_channel()
                 * f64::from(l.coupling.visibility_error()))
             .powi(2)
         })

@@ -52,7 +52,7 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
         if link.coupling.is_zero() {
             continue; // blocked: more than half of office3's links
         }
-        let source = &hierarchy.element(link.source).radiance;
+        let source = hierarchy.radiance(link.source);
         for (alpha, h) in out.iter_mut().enumerate() {
             let row = &link.coupling.block()[alpha * size..(alpha + 1) * size];
             *h += row
@@ -163,9 +163,9 @@ impl GatheringSolver for Southwell {
                 push_pull(h, p as u32, &|id, out| gather(h, &clusters, id, out))
             };
             let root = hierarchy.patches[p].root;
-            let before = hierarchy.element(root).radiance[0];
+            let before = hierarchy.average_radiance(root);
             apply(hierarchy, &update, &mut totals);
-            let after = hierarchy.element(root).radiance[0];
+            let after = hierarchy.average_radiance(root);
             let change = Rgb::new(
                 (after.r - before.r).abs(),
                 (after.g - before.g).abs(),

@@ -41,9 +41,7 @@ impl PatchUpdate {
     /// Writes the new coefficients into the hierarchy.
     pub fn apply(&self, hierarchy: &mut Hierarchy) {
         for (id, coefficients) in self.entries() {
-            hierarchy.elements[id as usize]
-                .radiance
-                .copy_from_slice(coefficients);
+            hierarchy.radiance_mut(id).copy_from_slice(coefficients);
         }
     }
 }

@@ -312,7 +312,7 @@ fn patch_facings(hierarchy: &Hierarchy) -> Vec<Facing<'_>> {
     hierarchy
         .patches
         .iter()
-        .map(|p| Facing::of(&p.shape))
+        .map(|p| Facing::of(hierarchy.element(p.root).shape()))
         .collect()
 }
 

@@ -341,8 +341,9 @@ pub fn solve_stochastic(
         ..Default::default()
     };
     let emission: Vec<Rgb> = hierarchy.patches.iter().map(|p| p.emission).collect();
-    for e in &mut hierarchy.elements {
-        e.radiance[0] = emission[e.patch() as usize];
+    for id in 0..hierarchy.elements.len() as ElementId {
+        let patch = hierarchy.element(id).patch();
+        hierarchy.radiance_mut(id)[0] = emission[patch as usize];
     }
     // Goniometric luminaires: their first gather (`hierarchy.direct`, from solvers::direct) reflected,
     // ρ H_direct, joins the self-emitted radiance as unshot light of the first iteration; it is then
@@ -356,12 +357,14 @@ pub fn solve_stochastic(
         for update in &updates {
             report.absorbed_power += update.absorbed;
             for (id, b) in update.entries() {
-                hierarchy.elements[id as usize].radiance[0] = b[0];
+                hierarchy.radiance_mut(id)[0] = b[0];
             }
         }
         hierarchy.direct.clear();
     }
-    let mut unshot: Vec<Rgb> = hierarchy.elements.iter().map(|e| e.radiance[0]).collect();
+    let mut unshot: Vec<Rgb> = (0..hierarchy.elements.len() as ElementId)
+        .map(|id| hierarchy.average_radiance(id))
+        .collect();
     let t_min = 1e-9 * scene_diameter(hierarchy);
     let emitted = scalar(report.emitted_power);
     let bar = progress.bar(settings.max_iterations as u64, "shoot");
@@ -433,11 +436,10 @@ pub fn solve_stochastic(
             report.absorbed_power += update.absorbed;
             for (id, b) in update.entries() {
                 let b = b[0];
-                let e = &mut hierarchy.elements[id as usize];
                 // push-pull returns E + ρ H; this iteration's share is ρ H.
-                let delta = b - emission[e.patch() as usize];
+                let delta = b - emission[hierarchy.element(id).patch() as usize];
                 unshot[id as usize] = delta;
-                e.radiance[0] += delta;
+                hierarchy.radiance_mut(id)[0] += delta;
             }
         }
         report.solve_seconds += start.elapsed().as_secs_f64();
@@ -447,10 +449,7 @@ pub fn solve_stochastic(
     report.exitant_power = hierarchy
         .leaves()
         .iter()
-        .map(|&id| {
-            let e = hierarchy.element(id);
-            e.average_radiance() * (PI * e.area)
-        })
+        .map(|&id| hierarchy.average_radiance(id) * (PI * hierarchy.element(id).area))
         .sum();
     report
 }
@@ -459,7 +458,7 @@ pub fn solve_stochastic(
 fn scene_diameter(hierarchy: &Hierarchy) -> f64 {
     let mut bounds = crate::geometry::Aabb::EMPTY;
     for p in &hierarchy.patches {
-        bounds = bounds.union(&p.shape.bounds());
+        bounds = bounds.union(&hierarchy.element(p.root).shape().bounds());
     }
     bounds.diagonal()
 }

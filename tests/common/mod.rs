@@ -57,7 +57,7 @@ pub fn mean_radiance_of(h: &Hierarchy, which: impl Fn(usize) -> bool) -> f64 {
             continue;
         }
         let e = h.element(p.root);
-        sum += e.area * e.average_radiance().g;
+        sum += e.area * h.average_radiance(p.root).g;
         area += e.area;
     }
     sum / area
