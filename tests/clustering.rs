@@ -253,11 +253,14 @@ fn clustered_solution_is_identical_for_any_thread_count() {
 
 /// `--clustering auto` estimates the unclustered initial links from a sample of patch rows and counts
 /// exactly only near the budget: its choice must be the one the exact count gives, for budgets from far
-/// below to far above the count (a generated hall of 3k polygons, 6k patches).
+/// below to far above the count (a generated hall of 3k polygons, 6k patches), and past
+/// [`AUTO_CLUSTERING_LINKS`] it clusters whatever the budget (which follows the machine's memory).
 #[test]
 fn automatic_clustering_agrees_with_the_exact_count() {
     use radiosity::scene::generators::BoxHall;
-    use radiosity::solvers::refine::{automatic_clustering, initial_link_count};
+    use radiosity::solvers::refine::{
+        automatic_clustering, initial_link_count, AUTO_CLUSTERING_LINKS,
+    };
     let scene = BoxHall::with_polygons(3000).scene();
     let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
     let total = initial_link_count(&h, usize::MAX);
@@ -269,8 +272,9 @@ fn automatic_clustering_agrees_with_the_exact_count() {
         total,
         total * 3,
         total * 10,
+        usize::MAX,
     ] {
-        let exact = if total > budget {
+        let exact = if total > budget.min(AUTO_CLUSTERING_LINKS) {
             ClusteringKind::Oriented
         } else {
             ClusteringKind::None
@@ -281,4 +285,9 @@ fn automatic_clustering_agrees_with_the_exact_count() {
             "budget {budget}, count {total}"
         );
     }
+    // A hall whose initial links pass the bound: clustered even with no budget at all.
+    let scene = BoxHall::with_polygons(7000).scene();
+    let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
+    assert!(initial_link_count(&h, AUTO_CLUSTERING_LINKS) > AUTO_CLUSTERING_LINKS);
+    assert_eq!(automatic_clustering(&h, usize::MAX), ClusteringKind::Oriented);
 }

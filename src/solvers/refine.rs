@@ -337,9 +337,20 @@ pub fn initial_link_count(hierarchy: &Hierarchy, limit: usize) -> usize {
 /// Rows of the patch-pair matrix [`automatic_clustering`] samples before counting exactly.
 const AUTO_CLUSTERING_SAMPLE_ROWS: usize = 256;
 
+/// Unclustered initial links above which `--clustering auto` clusters whatever the memory budget.
+/// Measured (BENCHMARKS.md, "`--clustering auto` without the machine's memory"): the classroom's 39.9M
+/// initial links take 397 s and 3.0 GB unclustered against 18 s and 173 MB clustered, while the
+/// corridor's 426k solve as fast unclustered and twice as accurately (5.8% against 12.1% RMS at 187
+/// probe points). Before this bound the choice followed the budget alone, which `--max-memory`'s
+/// default takes from the machine's memory: a machine with more memory solved the classroom without
+/// clusters.
+pub const AUTO_CLUSTERING_LINKS: usize = 4_000_000;
+
 /// What `--clustering auto` means for `hierarchy` (before clusters are added): oriented clusters when
-/// the unclustered initial links would exceed the link budget `max_links`, none otherwise.
+/// the unclustered initial links would exceed [`AUTO_CLUSTERING_LINKS`] or the link budget
+/// `max_links`, none otherwise.
 pub fn automatic_clustering(hierarchy: &Hierarchy, max_links: usize) -> ClusteringKind {
+    let max_links = max_links.min(AUTO_CLUSTERING_LINKS);
     let n = hierarchy.patches.len();
     if n.saturating_mul(n) <= max_links {
         return ClusteringKind::None;
