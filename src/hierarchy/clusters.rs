@@ -34,9 +34,10 @@ pub enum ClusteringKind {
     Isotropic,
     /// Clusters by the projected area of their patches toward the other end (Smits et al. 1994).
     Oriented,
-    /// Oriented where the unclustered start (every facing pair of patches linked) would not fit the
-    /// link budget of `--max-memory`, none where it fits (small scenes such as the Cornell box keep
-    /// their unclustered solution; BENCHMARKS.md, "Scale").
+    /// Oriented where the unclustered start (every facing pair of patches linked) would exceed 4M
+    /// links or the link budget of `--max-memory`, none otherwise (scenes up to the corridor's size
+    /// keep their unclustered solution; BENCHMARKS.md, "`--clustering auto` without the machine's
+    /// memory").
     Auto,
 }
 
