@@ -289,5 +289,8 @@ fn automatic_clustering_agrees_with_the_exact_count() {
     let scene = BoxHall::with_polygons(7000).scene();
     let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
     assert!(initial_link_count(&h, AUTO_CLUSTERING_LINKS) > AUTO_CLUSTERING_LINKS);
-    assert_eq!(automatic_clustering(&h, usize::MAX), ClusteringKind::Oriented);
+    assert_eq!(
+        automatic_clustering(&h, usize::MAX),
+        ClusteringKind::Oriented
+    );
 }

@@ -60,10 +60,14 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
     if count < 3 {
         return 0.0;
     }
+    // Each corner's direction from x, normalised once for both edges it ends.
+    let mut directions = [DVec3::ZERO; 8];
+    for (d, &corner) in directions.iter_mut().zip(&clipped[..count]) {
+        *d = (corner - x).normalize_or_zero();
+    }
     let mut sum = 0.0;
     for k in 0..count {
-        let a = (clipped[k] - x).normalize_or_zero();
-        let b = (clipped[(k + 1) % count] - x).normalize_or_zero();
+        let (a, b) = (directions[k], directions[(k + 1) % count]);
         let cross = a.cross(b);
         let sin = cross.length();
         if sin <= 1e-15 {

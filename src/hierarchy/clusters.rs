@@ -513,15 +513,23 @@ mod tests {
 
     /// The sparse visible fractions give back every patch's fraction (hidden and fully visible ones
     /// exactly, the rest within half a fixed-point step) across block boundaries, and each group's
-    /// area is the sum of its members' areas times their stored fractions.
+    /// area is the sum of its members' areas times their stored fractions, 0 exactly for a group whose
+    /// members are all hidden (up to 70 groups: the groups' bitmap spans several words).
     #[test]
     fn visible_areas_keep_every_fraction() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
-        for patches in [1, 63, 64, 65, 200, 1000] {
+        for (patches, directions) in [(1, 3), (63, 3), (64, 3), (65, 3), (200, 3), (1000, 70)] {
+            // Directions on a spiral over the sphere, one normal group each; every fifth hidden.
+            let direction = |k: usize| {
+                let z = 1.0 - 2.0 * (k % directions) as f64 / directions as f64 - 0.01;
+                let phi = 2.4 * (k % directions) as f64;
+                let r = (1.0 - z * z).sqrt();
+                DVec3::new(r * phi.cos(), r * phi.sin(), z)
+            };
             let facings: Vec<Facing> = (0..patches)
                 .map(|k| Facing {
-                    normal: [DVec3::X, DVec3::Y, DVec3::NEG_Z][k % 3],
+                    normal: direction(k),
                     area: rng.random_range(0.1..2.0),
                     centroid: DVec3::new(k as f64, 0.0, 0.0),
                 })
@@ -529,7 +537,8 @@ mod tests {
             let orientation = Orientation::new(&facings);
             let areas: Vec<f64> = facings.iter().map(|f| f.area).collect();
             let fractions: Vec<f32> = (0..patches)
-                .map(|_| match rng.random_range(0..4) {
+                .map(|k| match rng.random_range(0..4) {
+                    _ if k % directions % 5 == 4 => 0.0,
                     0 | 1 => 0.0,
                     2 => 1.0,
                     _ => rng.random(),
@@ -555,6 +564,22 @@ mod tests {
                     .map(|&k| areas[k as usize] * f64::from(visible.fraction(k as usize)))
                     .sum();
                 assert!((f64::from(visible.group_area(g)) - sum).abs() <= 1e-6 * sum.max(1e-30));
+                if sum == 0.0 {
+                    assert_eq!(visible.group_area(g), 0.0);
+                }
+            }
+            let listed: Vec<f32> = visible.group_areas().collect();
+            let single: Vec<f32> = (0..orientation.groups.len())
+                .map(|g| visible.group_area(g))
+                .collect();
+            assert_eq!(listed, single);
+            if directions > 32 {
+                assert!(
+                    orientation.groups.len() > 32,
+                    "{}",
+                    orientation.groups.len()
+                );
+                assert!(listed.contains(&0.0));
             }
         }
     }
