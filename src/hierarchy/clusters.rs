@@ -520,7 +520,8 @@ mod tests {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
         for (patches, directions) in [(1, 3), (63, 3), (64, 3), (65, 3), (200, 3), (1000, 70)] {
-            // Directions on a spiral over the sphere, one normal group each; every fifth hidden.
+            // Directions on a spiral over the sphere, one normal group each; every fifth hidden,
+            // every seventh seen whole.
             let direction = |k: usize| {
                 let z = 1.0 - 2.0 * (k % directions) as f64 / directions as f64 - 0.01;
                 let phi = 2.4 * (k % directions) as f64;
@@ -539,6 +540,7 @@ mod tests {
             let fractions: Vec<f32> = (0..patches)
                 .map(|k| match rng.random_range(0..4) {
                     _ if k % directions % 5 == 4 => 0.0,
+                    _ if k % directions % 7 == 3 => 1.0,
                     0 | 1 => 0.0,
                     2 => 1.0,
                     _ => rng.random(),
@@ -563,14 +565,18 @@ mod tests {
                     .iter()
                     .map(|&k| areas[k as usize] * f64::from(visible.fraction(k as usize)))
                     .sum();
-                assert!((f64::from(visible.group_area(g)) - sum).abs() <= 1e-6 * sum.max(1e-30));
+                let area = visible.group_area(&orientation, g);
+                assert!((f64::from(area) - sum).abs() <= 1e-6 * sum.max(1e-30));
                 if sum == 0.0 {
-                    assert_eq!(visible.group_area(g), 0.0);
+                    assert_eq!(area, 0.0);
+                }
+                if members.iter().all(|&k| fractions[k as usize] == 1.0) {
+                    assert_eq!(area, group.area as f32, "a group seen whole");
                 }
             }
-            let listed: Vec<f32> = visible.group_areas().collect();
+            let listed: Vec<f32> = visible.group_areas(&orientation).collect();
             let single: Vec<f32> = (0..orientation.groups.len())
-                .map(|g| visible.group_area(g))
+                .map(|g| visible.group_area(&orientation, g))
                 .collect();
             assert_eq!(listed, single);
             if directions > 32 {
@@ -580,6 +586,11 @@ mod tests {
                     orientation.groups.len()
                 );
                 assert!(listed.contains(&0.0));
+                assert!(orientation
+                    .groups
+                    .iter()
+                    .zip(&listed)
+                    .any(|(g, &a)| a == g.area as f32));
             }
         }
     }
@@ -844,9 +855,10 @@ fn octahedral_cell(n: DVec3) -> u32 {
 ///
 /// The cache of these answers is office3's largest heap block after the links (60k of them), and
 /// most of what they hold is 0 or 1: 77% of the fractions are 0 (patches hidden behind others, or
-/// facing away), 19% are 1 and 4.5% in between; 47% of the groups' areas are 0. So they are stored
-/// sparsely, in one shared allocation of 32-bit words ([`VisibleAreas::new`] gives the layout): a
-/// bitmap of the groups seen and their areas (`f32`); per 64 patches a bitmap of the visible ones, a
+/// facing away), 19% are 1 and 4.5% in between; 47% of the groups' areas are 0 and 18% the group's
+/// whole area. So they are stored sparsely, in one shared allocation of 32-bit words
+/// ([`VisibleAreas::new`] gives the layout): bitmaps of the groups seen and of those seen whole, and
+/// the other seen groups' areas (`f32`); per 64 patches a bitmap of the visible ones, a
 /// bitmap of the partly visible ones and the count of partly visible patches before them (a rank);
 /// then the partial fractions in 16-bit fixed point ([`FRACTION_STEPS`]), two per word. About 3 bits
 /// per patch and `f_k` in O(1) (a popcount). The fixed point's rounding (7.6·10⁻⁶) is far below the
@@ -884,8 +896,9 @@ impl VisibleAreas {
     /// that rounds to 0 hidden; the groups' areas are summed from the rounded fractions, so that both
     /// agree).
     ///
-    /// Layout of the words: the [`HEADER`]; a bitmap of the groups whose visible area is not 0
-    /// (`⌈groups/32⌉` words) and those areas' bits; per [`BLOCK`] patches the count of partly
+    /// Layout of the words: the [`HEADER`]; a bitmap of the groups whose visible area is not 0 and
+    /// one of those whose visible area is the group's whole area as `f32` (`⌈groups/32⌉` words each),
+    /// then the bits of the other seen groups' areas; per [`BLOCK`] patches the count of partly
     /// visible patches before the block, the bitmap of visible patches and the bitmap of partly
     /// visible ones (two words each); the partial fractions' steps, two per word.
     pub fn new(orientation: &Orientation, areas: &[f64], fractions: &[f32]) -> Self {
@@ -907,14 +920,30 @@ impl VisibleAreas {
                 (visible as f32).to_bits()
             })
             .collect();
+        let whole: Vec<bool> = orientation
+            .groups
+            .iter()
+            .zip(&group_areas)
+            .map(|(g, &bits)| bits != 0 && bits == (g.area as f32).to_bits())
+            .collect();
+        let groups = group_areas.len();
+        let bitmap = |keep: &dyn Fn(usize) -> bool| -> Vec<u32> {
+            (0..groups)
+                .step_by(32)
+                .map(|start| {
+                    (start..(start + 32).min(groups))
+                        .fold(0u32, |m, g| m | u32::from(keep(g)) << (g - start))
+                })
+                .collect()
+        };
         let mut words = vec![0u32; HEADER];
-        words.extend(group_areas.chunks(32).map(|chunk| {
-            chunk
-                .iter()
-                .enumerate()
-                .fold(0u32, |m, (i, &bits)| m | u32::from(bits != 0) << i)
-        }));
-        words.extend(group_areas.iter().copied().filter(|&bits| bits != 0));
+        words.extend(bitmap(&|g| group_areas[g] != 0));
+        words.extend(bitmap(&|g| whole[g]));
+        words.extend(
+            (0..group_areas.len())
+                .filter(|&g| group_areas[g] != 0 && !whole[g])
+                .map(|g| group_areas[g]),
+        );
         let blocks_at = words.len();
         let mut rank = 0u32;
         for block in steps.chunks(BLOCK) {
@@ -1003,29 +1032,48 @@ impl VisibleAreas {
         })
     }
 
-    /// Visible area of normal group `g` (the [`Orientation`]'s group order).
-    pub fn group_area(&self, g: usize) -> f32 {
-        let bitmap = &self.words[HEADER..];
-        if bitmap[g / 32] >> (g % 32) & 1 == 0 {
+    /// Visible area of normal group `g` of `orientation` (the one these areas were made with).
+    pub fn group_area(&self, orientation: &Orientation, g: usize) -> f32 {
+        let bitmap_words = self.groups().div_ceil(32);
+        let (seen, whole) = (&self.words[HEADER..], &self.words[HEADER + bitmap_words..]);
+        let bit = |map: &[u32], g: usize| map[g / 32] >> (g % 32) & 1 == 1;
+        if !bit(seen, g) {
             return 0.0;
         }
-        let before: u32 = bitmap[..g / 32].iter().map(|w| w.count_ones()).sum::<u32>()
-            + (bitmap[g / 32] & ((1u32 << (g % 32)) - 1)).count_ones();
-        f32::from_bits(self.words[HEADER + self.groups().div_ceil(32) + before as usize])
+        if bit(whole, g) {
+            return orientation.groups[g].area as f32;
+        }
+        let below = |map: &[u32]| {
+            map[..g / 32].iter().map(|w| w.count_ones()).sum::<u32>()
+                + (map[g / 32] & ((1u32 << (g % 32)) - 1)).count_ones()
+        };
+        let before = (below(seen) - below(whole)) as usize;
+        f32::from_bits(self.words[HEADER + 2 * bitmap_words + before])
     }
 
-    /// Visible area of each normal group, in the [`Orientation`]'s group order.
-    pub fn group_areas(&self) -> impl Iterator<Item = f32> + '_ {
+    /// Visible area of each normal group of `orientation` (the one these areas were made with), in
+    /// its group order.
+    pub fn group_areas<'a>(
+        &'a self,
+        orientation: &'a Orientation,
+    ) -> impl Iterator<Item = f32> + 'a {
         let bitmap_words = self.groups().div_ceil(32);
-        let mut next = HEADER + bitmap_words;
-        (0..self.groups()).map(move |g| {
-            if self.words[HEADER + g / 32] >> (g % 32) & 1 == 0 {
-                0.0
-            } else {
-                next += 1;
-                f32::from_bits(self.words[next - 1])
-            }
-        })
+        let mut next = HEADER + 2 * bitmap_words;
+        orientation
+            .groups
+            .iter()
+            .enumerate()
+            .map(move |(g, group)| {
+                let bit = |at: usize| self.words[at + g / 32] >> (g % 32) & 1 == 1;
+                if !bit(HEADER) {
+                    0.0
+                } else if bit(HEADER + bitmap_words) {
+                    group.area as f32
+                } else {
+                    next += 1;
+                    f32::from_bits(self.words[next - 1])
+                }
+            })
     }
 
     /// Bytes of the shared allocation.

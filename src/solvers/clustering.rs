@@ -138,7 +138,10 @@ impl Groups<'_> {
     pub fn projected_areas(&self, toward: DVec3) -> impl Iterator<Item = f64> + '_ {
         // The area of each group the other end can see: its visible area, or without item buffers
         // all of it.
-        let mut visible = self.visible.as_ref().map(VisibleAreas::group_areas);
+        let mut visible = self
+            .visible
+            .as_ref()
+            .map(|visible| visible.group_areas(self.orientation));
         let areas = self
             .orientation
             .groups
