@@ -32,6 +32,8 @@ pub struct Patch {
     pub polygon: usize,
     /// Front side (true) or back side of a two-sided polygon.
     pub front: bool,
+    /// Normal of this side (its shape, oriented to match, is its root element's:
+    /// [`Hierarchy::patch_shape`]).
     pub normal: DVec3,
     pub reflectance: Rgb,
     pub emission: Rgb,
