@@ -194,7 +194,7 @@ impl HierarchyLeaves {
                 r.start = r.start.min(k);
                 r.end = r.end.max(k + 1);
                 count[id as usize] += 1;
-                e = hierarchy.element(id).parent;
+                e = hierarchy.element(id).parent();
             }
         }
         let mut blocks = Vec::new();

@@ -193,7 +193,7 @@ fn ancestor_below(hierarchy: &Hierarchy, ancestor: ElementId, descendant: Elemen
     let level = hierarchy.element(ancestor).level + 1;
     let mut id = descendant;
     while hierarchy.element(id).level > level {
-        match hierarchy.element(id).parent {
+        match hierarchy.element(id).parent() {
             Some(p) => id = p,
             None => break,
         }
