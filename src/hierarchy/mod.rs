@@ -251,7 +251,8 @@ impl LinkCoupling {
         let block_len = block.len();
         let size = (block_len as f64).sqrt().round() as usize;
         let tail_len = errors.len() + node_factors.len();
-        let mut words = vec![0u32; Self::word_count(block_len, tail_len)];
+        // Filled in place: couplings are made by the million, one allocation each.
+        let mut words = thin_words::ThinWords::zeroed(Self::word_count(block_len, tail_len));
         let (error_scale, error_steps) = fixed_point(errors);
         let (factor_scale, factor_steps) = fixed_point(node_factors);
         for (w, k) in words.iter_mut().zip(block) {
@@ -264,11 +265,9 @@ impl LinkCoupling {
         for (t, q) in tail.iter_mut().zip(error_steps.chain(factor_steps)) {
             *t = q;
         }
-        let words = if words.iter().all(|&w| w == 0) {
-            thin_words::ThinWords::default()
-        } else {
-            thin_words::ThinWords::new(&words)
-        };
+        if words.iter().all(|&w| w == 0) {
+            words = thin_words::ThinWords::default();
+        }
         LinkCoupling {
             words,
             form: u8::try_from(size)
@@ -416,8 +415,7 @@ impl LinkCoupling {
                 return;
             }
             let tail = self.node_count() * (self.errors_per_node() + 1);
-            self.words =
-                thin_words::ThinWords::new(&vec![0; Self::word_count(self.block_len(), tail)]);
+            self.words = thin_words::ThinWords::zeroed(Self::word_count(self.block_len(), tail));
         }
         let at = self.block_len() + 2;
         self.words[at] = error.to_bits();
@@ -704,6 +702,13 @@ impl Hierarchy {
     /// points out of this side; kept once, with the element, not again with the patch).
     pub fn patch_shape(&self, patch: u32) -> &Shape {
         self.element(self.patches[patch as usize].root).shape()
+    }
+
+    /// Bounds of every patch's shape (the scene without luminaire openings).
+    pub fn patch_bounds(&self) -> Aabb {
+        self.patches.iter().fold(Aabb::EMPTY, |b, p| {
+            b.union(&self.element(p.root).shape().bounds())
+        })
     }
 
     /// The patch of a surface element.

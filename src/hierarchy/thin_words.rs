@@ -21,11 +21,19 @@ unsafe impl Sync for ThinWords {}
 impl ThinWords {
     /// A copy of `words` (no allocation when empty).
     pub fn new(words: &[u32]) -> Self {
-        if words.is_empty() {
+        let mut thin = Self::zeroed(words.len());
+        thin.copy_from_slice(words);
+        thin
+    }
+
+    /// `len` zero words (no allocation when `len` is 0), to fill in place.
+    pub fn zeroed(len: usize) -> Self {
+        if len == 0 {
             return ThinWords(None);
         }
-        let len = u32::try_from(words.len()).expect("a coupling holds fewer than 2³² words");
-        let boxed: Box<[u32]> = std::iter::once(len).chain(words.iter().copied()).collect();
+        let count = u32::try_from(len).expect("a coupling holds fewer than 2³² words");
+        let mut boxed = vec![0u32; len + 1].into_boxed_slice();
+        boxed[0] = count;
         let raw = Box::into_raw(boxed).cast::<u32>();
         ThinWords(Some(
             NonNull::new(raw).expect("a Box never holds a null pointer"),

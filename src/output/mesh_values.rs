@@ -75,9 +75,7 @@ impl VertexRadiosity {
     /// Welds the leaves' corners, averages leaf radiance to them (area-weighted) and anchors T-vertices.
     pub fn new(hierarchy: &Hierarchy) -> Self {
         let leaves = hierarchy.leaves();
-        let bounds = hierarchy.patches.iter().fold(Aabb::EMPTY, |b, p| {
-            b.union(&hierarchy.element(p.root).shape().bounds())
-        });
+        let bounds = hierarchy.patch_bounds();
         let tolerance = (WELD_TOLERANCE * bounds.diagonal()).max(1e-300);
 
         // Pass 1: weld corner positions regardless of patch, and note which patches meet at each point.

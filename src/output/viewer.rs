@@ -22,7 +22,7 @@ use super::mesh_values::VertexRadiosity;
 use super::render::Shading;
 use super::tonemap::Curve;
 use crate::color::Rgb;
-use crate::geometry::{Aabb, DVec2, DVec3, Domain, Shape};
+use crate::geometry::{DVec2, DVec3, Domain, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
 use anyhow::{Context, Result};
 use serde_json::json;
@@ -72,9 +72,7 @@ impl ViewerMesh {
         vertices: Option<&VertexRadiosity>,
         max_triangles: usize,
     ) -> Result<ViewerMesh> {
-        let bounds = hierarchy.patches.iter().fold(Aabb::EMPTY, |b, p| {
-            b.union(&hierarchy.element(p.root).shape().bounds())
-        });
+        let bounds = hierarchy.patch_bounds();
         anyhow::ensure!(
             !bounds.is_empty(),
             "the scene has no surfaces to show in the viewer"

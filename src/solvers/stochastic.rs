@@ -456,11 +456,7 @@ pub fn solve_stochastic(
 
 /// Diagonal of the bounding box of all patches: the scale of the self-intersection margin.
 fn scene_diameter(hierarchy: &Hierarchy) -> f64 {
-    let mut bounds = crate::geometry::Aabb::EMPTY;
-    for p in &hierarchy.patches {
-        bounds = bounds.union(&hierarchy.element(p.root).shape().bounds());
-    }
-    bounds.diagonal()
+    hierarchy.patch_bounds().diagonal()
 }
 
 #[cfg(test)]
