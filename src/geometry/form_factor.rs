@@ -73,7 +73,7 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
         if sin <= 1e-15 {
             continue;
         }
-        let angle = sin.atan2(a.dot(b));
+        let angle = libm::atan2(sin, a.dot(b));
         sum += angle * nx.dot(cross / sin);
     }
     let f = (sum / (2.0 * PI)).abs();

@@ -164,14 +164,21 @@ impl Shape {
     }
 
     /// Parameters of a point lying in the shape's plane (inverse of [`Shape::point_at`]); for a quad this
-    /// solves the bilinear map by Newton iteration.
+    /// solves the bilinear map by Newton iteration, except on a parallelogram, where the map is affine.
     pub fn parameters_of(&self, p: DVec3) -> DVec2 {
         match self {
             Shape::Triangle(v) => barycentric_uv(v[0], v[1], v[2], p),
             Shape::Quad(v) => {
-                let n = self.normal();
-                // Start from the affine guess of the triangle (p0, p1, p3), then refine.
+                // The affine map of the triangle (p0, p1, p3): exact on a parallelogram (to rounding
+                // where the skew is below 1e-13 of the diagonals), the start of Newton's iteration
+                // elsewhere.
                 let mut uv = barycentric_uv(v[0], v[1], v[3], p);
+                let skew = (v[0] + v[2] - v[1] - v[3]).length_squared();
+                let diagonals = v[0].distance_squared(v[2]) + v[1].distance_squared(v[3]);
+                if skew <= 1e-26 * diagonals {
+                    return uv;
+                }
+                let n = self.normal();
                 for _ in 0..8 {
                     let (u, w) = (uv.x, uv.y);
                     let r = self.point_at(uv) - p;

@@ -106,6 +106,7 @@ pub fn render_with(
     };
     let mut image = Image::new(camera.width, camera.height);
     let samples = options.samples_per_pixel.max(1);
+    let cells = strata(samples);
     image
         .pixels
         .par_chunks_mut(camera.width)
@@ -118,7 +119,7 @@ pub fn render_with(
                     let index = (y * camera.width + x) as u64;
                     let mut rng = Pcg64Mcg::seed_from_u64(mix(options.seed, index));
                     let mut sum = Rgb::BLACK;
-                    for (sx, sy) in stratified(samples, &mut rng) {
+                    for (sx, sy) in stratified(&cells, &mut rng) {
                         sum += tracer.radiance(x as f64 + sx, y as f64 + sy);
                     }
                     sum / samples as f64
@@ -227,12 +228,14 @@ fn strata(n: u32) -> Vec<(f64, f64, f64, f64)> {
     out
 }
 
-/// One jittered position in each of the `n` strata of the unit pixel.
-fn stratified(n: u32, rng: &mut Pcg64Mcg) -> Vec<(f64, f64)> {
-    strata(n)
-        .into_iter()
-        .map(|(x0, y0, w, h)| (x0 + rng.random::<f64>() * w, y0 + rng.random::<f64>() * h))
-        .collect()
+/// One jittered position in each of the `strata` of the unit pixel (from [`strata`], made once per image).
+fn stratified<'a>(
+    strata: &'a [(f64, f64, f64, f64)],
+    rng: &'a mut Pcg64Mcg,
+) -> impl Iterator<Item = (f64, f64)> + 'a {
+    strata
+        .iter()
+        .map(|&(x0, y0, w, h)| (x0 + rng.random::<f64>() * w, y0 + rng.random::<f64>() * h))
 }
 
 /// Pixels that see an emitting surface or a luminaire's opening through any of 16 stratified points, and their 8 neighbours (so
@@ -306,7 +309,7 @@ mod tests {
                 }
             }
             let mut rng = Pcg64Mcg::seed_from_u64(u64::from(n));
-            for ((x, y), (x0, y0, w, h)) in stratified(n, &mut rng).into_iter().zip(cells) {
+            for ((x, y), &(x0, y0, w, h)) in stratified(&cells, &mut rng).zip(&cells) {
                 assert!(x >= x0 && x <= x0 + w && y >= y0 && y <= y0 + h);
             }
         }

@@ -2,7 +2,9 @@
 //! Bekaert–Willems eq. (2), each followed by push-pull: Jacobi (all elements gather from the previous
 //! iterate, in parallel), Gauss–Seidel (patches in order, each seeing the radiance already updated by the
 //! patches before it; sequential but converging about twice as fast) and Southwell (the patch with the
-//! largest unshot change first).
+//! largest unshot change first). Within one patch the elements gather in parallel where the patch is
+//! large enough to pay for it ([`relax`]): what they gather reads only other patches and the sweep's
+//! cluster values, so the order is Gauss–Seidel's whatever the threads.
 
 use super::clustering::{carries_light, ClusterSweep};
 use super::push_pull::{push_pull, PatchUpdate};
@@ -65,6 +67,39 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
     out[0] += clusters.pushed(id);
 }
 
+/// Patches whose trees hold fewer elements gather on the calling thread: spreading a few dozen gathers
+/// over the pool costs more than it saves.
+const PARALLEL_GATHER_ELEMENTS: usize = 256;
+
+/// One patch's Gauss–Seidel step: every element of its tree gathers over its links (in parallel on a
+/// large tree), then push-pull. The result does not depend on the thread count: each element's sum
+/// is formed in its own link order, and the patch's own radiance is not read until the update is
+/// applied.
+fn relax(hierarchy: &Hierarchy, clusters: &ClusterSweep, patch: u32) -> PatchUpdate {
+    let size = hierarchy.basis_size();
+    let tree = hierarchy.subtree(hierarchy.patches[patch as usize].root);
+    let mut gathered = vec![Rgb::BLACK; tree.len() * size];
+    let gather_into = |(out, &id): (&mut [Rgb], &ElementId)| gather(hierarchy, clusters, id, out);
+    if tree.len() >= PARALLEL_GATHER_ELEMENTS {
+        gathered
+            .par_chunks_mut(size)
+            .zip(tree.par_iter())
+            .with_min_len(PARALLEL_GATHER_ELEMENTS / 4)
+            .for_each(gather_into);
+    } else {
+        gathered.chunks_mut(size).zip(&tree).for_each(gather_into);
+    }
+    // Push-pull visits the tree in the same pre-order as `subtree`.
+    let next = std::cell::Cell::new(0);
+    push_pull(hierarchy, patch, &|id, out| {
+        let k = next.get();
+        debug_assert_eq!(tree[k], id, "push-pull's order is the subtree's");
+        next.set(k + 1);
+        let g = &gathered[k * size..(k + 1) * size];
+        out.iter_mut().zip(g).for_each(|(o, &g)| *o += g);
+    })
+}
+
 fn apply(hierarchy: &mut Hierarchy, update: &PatchUpdate, totals: &mut Sweep) {
     update.apply(hierarchy);
     totals.exitant += update.exitant;
@@ -121,10 +156,7 @@ impl GatheringSolver for GaussSeidel {
         let clusters = ClusterSweep::new(hierarchy);
         let mut totals = Sweep::default();
         for p in 0..hierarchy.patches.len() as u32 {
-            let update = {
-                let h = &*hierarchy;
-                push_pull(h, p, &|id, out| gather(h, &clusters, id, out))
-            };
+            let update = relax(hierarchy, &clusters, p);
             apply(hierarchy, &update, &mut totals);
         }
         hierarchy.pull_clusters();
@@ -158,10 +190,7 @@ impl GatheringSolver for Southwell {
         let clusters = ClusterSweep::new(hierarchy);
         let mut totals = Sweep::default();
         for p in order {
-            let update = {
-                let h = &*hierarchy;
-                push_pull(h, p as u32, &|id, out| gather(h, &clusters, id, out))
-            };
+            let update = relax(hierarchy, &clusters, p as u32);
             let root = hierarchy.patches[p].root;
             let before = hierarchy.average_radiance(root);
             apply(hierarchy, &update, &mut totals);

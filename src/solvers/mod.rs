@@ -312,7 +312,8 @@ fn refine_pass(
 }
 
 /// Sweeps with `solver` until the relative change of the total exitant power is below the tolerance
-/// (then returns true) or the iteration limit.
+/// (then returns true) or the iteration limit. The first sweep of a later pass is compared with the
+/// last of the pass before (the same iterate, refined): a pass that changed little ends after one.
 fn sweep_to_tolerance(
     hierarchy: &mut Hierarchy,
     solver: &dyn GatheringSolver,
@@ -323,7 +324,12 @@ fn sweep_to_tolerance(
 ) -> bool {
     let start = Instant::now();
     let bar = progress.bar(settings.max_iterations as u64, "solve");
-    let mut previous = f64::NAN;
+    let mut previous = if report.iterations > 0 {
+        let last = report.exitant_power;
+        last.r + last.g + last.b
+    } else {
+        f64::NAN
+    };
     let mut swept_to_tolerance = false;
     for _ in 0..settings.max_iterations {
         let sweep = solver.sweep(hierarchy);

@@ -45,7 +45,6 @@ pub fn intersect_shape(
     Some(Hit {
         t,
         polygon: index,
-        uv: shape.parameters_of(ray.at(t)),
         front: ray.direction.dot(shape.vector_area()) < 0.0,
     })
 }

@@ -24,7 +24,7 @@
 
 use super::brute_force::{ray_triangle as triangle, IN_PLANE};
 use super::{Hit, Visibility};
-use crate::geometry::{DVec2, DVec3, Ray, Shape};
+use crate::geometry::{DVec3, Ray, Shape};
 use glam::{Vec3A, Vec4};
 use std::mem::MaybeUninit;
 
@@ -651,8 +651,8 @@ impl Bvh {
     #[inline(always)]
     fn intersect_with<K: Simd>(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
         let mut trav = self.setup(ray, t_min, t_max)?;
-        // Closest lane so far: (t, block, lane, barycentric u, v).
-        let mut best: Option<(f64, usize, usize, f64, f64)> = None;
+        // Closest lane so far: (t, block, lane).
+        let mut best: Option<(f64, usize, usize)> = None;
         let mut limit = t_max;
         let mut filter = FilterRay::new(ray, t_min, t_max);
         // Lanes in order, each tested up to the nearest hit so far: a quad's second triangle replaces
@@ -663,8 +663,8 @@ impl Bvh {
             while lanes != 0 {
                 let k = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                if let Some((t, u, v)) = self.hit(index, k, ray, t_min, limit) {
-                    best = Some((t, index, k, u, v));
+                if let Some((t, _, _)) = self.hit(index, k, ray, t_min, limit) {
+                    best = Some((t, index, k));
                     limit = t;
                     filter.set_t_max(t);
                     trav.set_far(t);
@@ -743,18 +743,12 @@ impl Bvh {
     }
 
     /// The hit record of the closest lane found.
-    fn finish(&self, ray: &Ray, best: Option<(f64, usize, usize, f64, f64)>) -> Option<Hit> {
-        let (t, index, k, u, v) = best?;
-        let shape = self.shape(index, k);
-        let uv = match shape {
-            Shape::Triangle(_) => DVec2::new(u, v),
-            Shape::Quad(_) => shape.parameters_of(ray.at(t)),
-        };
+    fn finish(&self, ray: &Ray, best: Option<(f64, usize, usize)>) -> Option<Hit> {
+        let (t, index, k) = best?;
         Some(Hit {
             t,
             polygon: self.lanes[index].polygon[k] as usize,
-            uv,
-            front: ray.direction.dot(shape.vector_area()) < 0.0,
+            front: ray.direction.dot(self.shape(index, k).vector_area()) < 0.0,
         })
     }
 }

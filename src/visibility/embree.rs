@@ -133,7 +133,6 @@ impl Visibility for EmbreeScene {
             Some(Hit {
                 t,
                 polygon,
-                uv: shape.parameters_of(ray.at(t)),
                 front: ray.direction.dot(shape.vector_area()) < 0.0,
             })
         })

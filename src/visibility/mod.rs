@@ -13,7 +13,7 @@ pub mod item_buffer;
 pub mod multires;
 pub mod shaft;
 
-use crate::geometry::{DVec2, DVec3, Ray};
+use crate::geometry::{DVec3, Ray};
 
 /// The first surface hit by a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -22,8 +22,6 @@ pub struct Hit {
     pub t: f64,
     /// Index of the polygon in `Scene::polygons`.
     pub polygon: usize,
-    /// Parameters of the hit point on the polygon's shape (see `Shape::point_at`).
-    pub uv: DVec2,
     /// Whether the ray arrives on the polygon's front side (against its normal).
     pub front: bool,
 }
