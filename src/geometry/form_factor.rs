@@ -4,7 +4,7 @@
 //! estimate (Feixas et al. eq. (1)) and for the unoccluded part of link form factors.
 
 use super::{DVec3, Shape};
-use std::f64::consts::PI;
+use std::f64::consts::{FRAC_1_PI, PI};
 
 /// Point-to-point (differential) form factor kernel between `x` with normal `nx` and `y` with normal `ny`,
 /// per unit area of `y`; zero when either point faces away (or an input is not finite).
@@ -19,8 +19,10 @@ pub fn point_to_point(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
     if !(cos_x > 0.0 && cos_y > 0.0) {
         return 0.0;
     }
-    // Divided separately so that r2 * r2 cannot underflow for very close points.
-    let f = (cos_x / r2) * (cos_y / r2) / PI;
+    // Each cosine scaled by 1/r² separately, so that r2 * r2 cannot underflow for very close points;
+    // one division (this kernel runs for every node pair of every coupling).
+    let inverse_r2 = r2.recip();
+    let f = (cos_x * inverse_r2) * (cos_y * inverse_r2) * FRAC_1_PI;
     if f.is_finite() {
         f
     } else {
@@ -33,38 +35,59 @@ pub fn point_to_point(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
 /// Any triangle or quad is accepted (non-convex, non-planar, degenerate): the result is in [0, 1], and 0
 /// for non-finite input.
 pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
-    let n_src = polygon.normal();
     let verts = polygon.vertices();
-    // The source emits from its front side only.
-    if n_src.dot(x - verts[0]) <= 0.0 {
+    // The source emits from its front side only (the side its vertex order's normal points to: a
+    // multiple of the vector area, with no square root).
+    let facing = match polygon {
+        Shape::Triangle(v) => (v[1] - v[0]).cross(v[2] - v[0]),
+        Shape::Quad(v) => (v[2] - v[0]).cross(v[3] - v[1]),
+    };
+    if facing.dot(x - verts[0]) <= 0.0 {
         return 0.0;
     }
-    // Clip the polygon to the half-space in front of x (Sutherland–Hodgman against one plane). Each
-    // vertex contributes at most itself and one crossing, so a non-convex quad needs up to 8 slots.
-    let mut clipped: [DVec3; 8] = [DVec3::ZERO; 8];
-    let mut count = 0;
     let height = |p: DVec3| nx.dot(p - x);
-    for k in 0..verts.len() {
-        let (a, b) = (verts[k], verts[(k + 1) % verts.len()]);
-        let (ha, hb) = (height(a), height(b));
-        if ha >= 0.0 {
-            clipped[count] = a;
-            count += 1;
+    let f = if verts.iter().all(|&v| height(v) >= 0.0) {
+        contour_integral(x, nx, verts)
+    } else {
+        // Clip the polygon to the half-space in front of x (Sutherland–Hodgman against one plane).
+        // Each vertex contributes at most itself and one crossing, so a non-convex quad needs up to 8
+        // slots.
+        let mut clipped: [DVec3; 8] = [DVec3::ZERO; 8];
+        let mut count = 0;
+        for k in 0..verts.len() {
+            let (a, b) = (verts[k], verts[(k + 1) % verts.len()]);
+            let (ha, hb) = (height(a), height(b));
+            if ha >= 0.0 {
+                clipped[count] = a;
+                count += 1;
+            }
+            if (ha >= 0.0) != (hb >= 0.0) {
+                let t = ha / (ha - hb);
+                clipped[count] = a + t * (b - a);
+                count += 1;
+            }
         }
-        if (ha >= 0.0) != (hb >= 0.0) {
-            let t = ha / (ha - hb);
-            clipped[count] = a + t * (b - a);
-            count += 1;
+        if count < 3 {
+            return 0.0;
         }
+        contour_integral(x, nx, &clipped[..count])
+    };
+    if f.is_finite() {
+        f.min(1.0)
+    } else {
+        0.0
     }
-    if count < 3 {
-        return 0.0;
-    }
+}
+
+/// Lambert's contour integral `|Σ_edges γ_k n_x · (a_k × b_k)/|a_k × b_k|| / 2π` over the polygon
+/// `corners`, all on or above the tangent plane of `x`; `γ_k` is the angle the edge subtends at `x`.
+fn contour_integral(x: DVec3, nx: DVec3, corners: &[DVec3]) -> f64 {
     // Each corner's direction from x, normalised once for both edges it ends.
     let mut directions = [DVec3::ZERO; 8];
-    for (d, &corner) in directions.iter_mut().zip(&clipped[..count]) {
+    for (d, &corner) in directions.iter_mut().zip(corners) {
         *d = (corner - x).normalize_or_zero();
     }
+    let count = corners.len();
     let mut sum = 0.0;
     for k in 0..count {
         let (a, b) = (directions[k], directions[(k + 1) % count]);
@@ -74,14 +97,9 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
             continue;
         }
         let angle = libm::atan2(sin, a.dot(b));
-        sum += angle * nx.dot(cross / sin);
+        sum += angle * nx.dot(cross) / sin;
     }
-    let f = (sum / (2.0 * PI)).abs();
-    if f.is_finite() {
-        f.min(1.0)
-    } else {
-        0.0
-    }
+    (sum / (2.0 * PI)).abs()
 }
 
 /// Closed-form form factor between two coaxial parallel rectangles a x b at distance c (Howell's catalogue,
