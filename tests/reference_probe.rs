@@ -255,3 +255,36 @@ fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
         );
     }
 }
+
+/// Points the Cornell box's camera sees: seeded, on non-emitting polygons facing the eye, and nothing
+/// between the eye and each of them.
+#[test]
+fn seen_points_are_visible_from_the_eye_on_the_side_it_sees() {
+    use radiosity::output::camera::Camera;
+    use radiosity::reference::probe::{find_surface, seen_points};
+    use radiosity::visibility::Visibility;
+    let scene = radiosity::scene::cornell::cornell_box();
+    let fov = scene.camera.map_or(40.0, |c| c.fov_degrees);
+    let camera = Camera::new(&Camera::auto_view(&scene, fov), 64, 48);
+    let points = seen_points(&scene, &camera, 400, 3);
+    assert_eq!(points.len(), 400, "the box fills the image");
+    assert_eq!(points, seen_points(&scene, &camera, 400, 3), "seeded");
+    assert_ne!(points, seen_points(&scene, &camera, 400, 4));
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
+    for p in &points {
+        let to_eye = camera.eye - p.point;
+        assert!(p.normal.dot(to_eye) > 0.0, "point {}: faces away", p.line);
+        let ray = radiosity::geometry::Ray::new(camera.eye, -to_eye);
+        assert!(
+            !visibility.occluded(&ray, 0.0, 1.0 - 1e-6),
+            "point {}: hidden from the eye",
+            p.line
+        );
+        let found = find_surface(&scene, &visibility, p).expect("on a surface");
+        assert!(scene
+            .material_of(&scene.polygons[found.polygon])
+            .emission
+            .is_black());
+    }
+}

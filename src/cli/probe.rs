@@ -1,14 +1,15 @@
-//! `radiosity probe [SCENE] --points pts.csv [--reference --spp N]`: the radiosity solution's radiance at
-//! given surface points, optionally beside the unbiased path-traced estimate.
+//! `radiosity probe [SCENE] --points pts.csv|--random N|--seen N [--reference --spp N]`: the
+//! radiosity solution's radiance at given surface points (or random ones: over all surfaces, or where
+//! the camera looks), optionally beside the unbiased path-traced estimate.
 
-use super::args::{SceneArgs, SolveArgs};
+use super::args::{CameraArgs, SceneArgs, SolveArgs};
 use crate::color::Units;
 use crate::measures::illuminance::{probe_photometry, GatherSettings, IrradianceGather};
 use crate::measures::point_errors::{point_errors, LIT_FRACTION};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use crate::reference::probe::{
-    attach_stored_reference, probe_points, random_points, read_points, ProbeReference,
+    attach_stored_reference, probe_points, random_points, read_points, seen_points, ProbeReference,
 };
 use anyhow::Result;
 use clap::Args;
@@ -22,12 +23,19 @@ pub struct ProbeCommand {
     pub solve: SolveArgs,
     /// Points file: one `x y z nx ny nz` per line (whitespace or commas, `#` comments); the normal points
     /// out of the probed side.
-    #[arg(long, value_name = "FILE", required_unless_present = "random")]
+    #[arg(long, value_name = "FILE", required_unless_present_any = ["random", "seen"])]
     pub points: Option<PathBuf>,
     /// Instead of a points file: N points uniform by area over the surfaces that do not emit (each side
     /// of a two-sided polygon by its area), from --seed.
     #[arg(long, value_name = "N", conflicts_with = "points", value_parser = super::args::count(1, 1_000_000))]
     pub random: Option<usize>,
+    /// Instead of a points file: N points the camera sees (the first non-emitting surface along rays
+    /// through uniformly random image positions; the camera options as for `render`), from --seed:
+    /// the error where a viewer looks.
+    #[arg(long, value_name = "N", conflicts_with_all = ["points", "random"], value_parser = super::args::count(1, 1_000_000))]
+    pub seen: Option<usize>,
+    #[command(flatten)]
+    pub camera: CameraArgs,
     /// Also estimate the radiance by unbiased path tracing, with its standard error.
     #[arg(long)]
     pub reference: bool,
@@ -54,13 +62,22 @@ impl ProbeCommand {
             "--spp must be at least 2 (the standard error needs two samples)"
         );
         let (scene, name) = self.scene.load_for_solving(progress)?;
-        let (points, file) = match (&self.points, self.random) {
-            (Some(path), _) => (read_points(path)?, path.clone()),
-            (None, Some(n)) => (
+        let (points, file) = match (&self.points, self.random, self.seen) {
+            (Some(path), _, _) => (read_points(path)?, path.clone()),
+            (None, Some(n), _) => (
                 random_points(&scene, n, seed),
                 PathBuf::from("random points"),
             ),
-            (None, None) => anyhow::bail!("give --points FILE or --random N"),
+            (None, None, Some(n)) => {
+                let camera = self.camera.camera(&scene, 512)?;
+                let points = seen_points(&scene, &camera, n, seed);
+                anyhow::ensure!(
+                    !points.is_empty(),
+                    "the camera sees no surface that does not emit: give --eye/--look-at"
+                );
+                (points, PathBuf::from("points seen by the camera"))
+            }
+            (None, None, None) => anyhow::bail!("give --points FILE, --random N or --seen N"),
         };
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;

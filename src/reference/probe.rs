@@ -5,6 +5,7 @@ use super::{derive_seed, Estimate, PathTracer};
 use crate::color::Rgb;
 use crate::geometry::{convex_contains, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::output::camera::Camera;
 use crate::scene::{Diagnostic, Scene};
 use crate::visibility::Visibility;
 use anyhow::Context;
@@ -66,6 +67,51 @@ pub fn random_points(scene: &Scene, n: usize, seed: u64) -> Vec<ProbePoint> {
             }
         })
         .collect()
+}
+
+/// Tries per point asked for by [`seen_points`] before it gives up (rays into the background, onto
+/// emitters or onto the black back of a one-sided polygon find no point).
+const SEEN_ATTEMPTS_PER_POINT: usize = 64;
+
+/// Up to `n` points where the camera's rays through uniformly random positions of its image first meet
+/// a surface side that does not emit (and is no luminaire's opening), with the normal of the side the
+/// camera sees: what an image of the solution shows, by image area. A seeded sample for checking a
+/// solution against the reference where a viewer looks, without the pixel-sized noise of a reference
+/// image (`random_points` weighs hidden surfaces as much as seen ones). Fewer than `n` only when most
+/// of the image sees nothing (after [`SEEN_ATTEMPTS_PER_POINT`] tries per point).
+pub fn seen_points(scene: &Scene, camera: &Camera, n: usize, seed: u64) -> Vec<ProbePoint> {
+    use rand::{Rng, SeedableRng};
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    let bvh = crate::visibility::bvh::Bvh::new(&shapes);
+    let openings = scene.opening_luminaires();
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(derive_seed(seed, u64::MAX - 1));
+    let mut points = Vec::with_capacity(n);
+    for _ in 0..n.saturating_mul(SEEN_ATTEMPTS_PER_POINT) {
+        if points.len() == n {
+            break;
+        }
+        let x = rng.random::<f64>() * camera.width as f64;
+        let y = rng.random::<f64>() * camera.height as f64;
+        let ray = camera.ray(x, y);
+        let Some(hit) = bvh.intersect(&ray, 0.0, f64::INFINITY) else {
+            continue;
+        };
+        let polygon = &scene.polygons[hit.polygon];
+        let radiates = hit.front || polygon.two_sided;
+        if !radiates
+            || openings[hit.polygon].is_some()
+            || !scene.material_of(polygon).emission.is_black()
+        {
+            continue;
+        }
+        let normal = polygon.shape.normal();
+        points.push(ProbePoint {
+            line: points.len() + 1,
+            point: ray.at(hit.t),
+            normal: if hit.front { normal } else { -normal },
+        });
+    }
+    points
 }
 
 /// A malformed points file: file, line and reason.

@@ -10,7 +10,6 @@
 //! parallelograms, where this is the plain area-weighted pull; on a trapezoid it keeps constant
 //! children constant (no false gradient) and the pulled function's power equal to the children's.
 
-use crate::bases::Overlap;
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
 use std::f64::consts::PI;
@@ -76,10 +75,11 @@ struct Walk<'a> {
 }
 
 impl Walk<'_> {
-    /// `incident` arrives holding the irradiance pushed down from the ancestors; returns the radiance,
-    /// with the element's overlap matrix (`None` where it is the identity), which its parent's pull
-    /// needs too (computed once per element and sweep: a trapezoid's costs a cubature and a Cholesky).
-    fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> (Vec<Rgb>, Option<Overlap>) {
+    /// `incident` arrives holding the irradiance pushed down from the ancestors; returns the radiance
+    /// and, where the element's overlap matrix is not the identity, its area moments `G c`, which its
+    /// parent's pull needs instead of the coefficients (the overlap is computed once per element and
+    /// sweep: a trapezoid's costs a cubature and a Cholesky).
+    fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> (Vec<Rgb>, Option<Vec<Rgb>>) {
         let h = self.h;
         let e = h.element(id);
         (self.gathered)(id, &mut incident);
@@ -105,14 +105,11 @@ impl Walk<'_> {
             let mut sum = vec![Rgb::BLACK; incident.len()];
             for (k, &child) in e.children.iter().enumerate() {
                 let down = h.basis.push_rgb(domain, k, &incident);
-                let (child_radiance, child_overlap) = self.visit(child, down);
+                let (child_radiance, child_moments) = self.visit(child, down);
                 let c = h.element(child);
-                let moments = match child_overlap {
-                    Some(overlap) => overlap.moments_rgb(&child_radiance),
-                    None => child_radiance,
-                };
+                let moments = child_moments.as_deref().unwrap_or(&child_radiance);
                 h.basis
-                    .pull_add_rgb(domain, k, c.area / e.area, &moments, &mut sum);
+                    .pull_add_rgb(domain, k, c.area / e.area, moments, &mut sum);
             }
             if let Some(overlap) = &overlap {
                 overlap.solve_rgb(&mut sum);
@@ -121,6 +118,7 @@ impl Walk<'_> {
         };
         self.update.elements.push(id);
         self.update.radiance.extend_from_slice(&radiance);
-        (radiance, overlap)
+        let moments = overlap.map(|overlap| overlap.moments_rgb(&radiance));
+        (radiance, moments)
     }
 }
