@@ -8,6 +8,7 @@
 
 use super::clustering::{carries_light, ClusterSweep};
 use super::push_pull::{push_pull, PatchUpdate};
+use crate::bases::MAX_BASIS_SIZE;
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
 use rayon::prelude::*;
@@ -72,31 +73,38 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
 const PARALLEL_GATHER_ELEMENTS: usize = 256;
 
 /// One patch's Gauss–Seidel step: every element of its tree gathers over its links (in parallel on a
-/// large tree), then push-pull. The result does not depend on the thread count: each element's sum
-/// is formed in its own link order, and the patch's own radiance is not read until the update is
-/// applied.
+/// tree of [`PARALLEL_GATHER_ELEMENTS`] or more), then push-pull. The result does not depend on the
+/// thread count: each element's links are summed in their order into zero before the sum is added to
+/// what its ancestors pushed down, and the patch's own radiance is not read until the update is applied.
 fn relax(hierarchy: &Hierarchy, clusters: &ClusterSweep, patch: u32) -> PatchUpdate {
     let size = hierarchy.basis_size();
-    let tree = hierarchy.subtree(hierarchy.patches[patch as usize].root);
+    let add = |out: &mut [Rgb], gathered: &[Rgb]| {
+        out.iter_mut().zip(gathered).for_each(|(o, &g)| *o += g);
+    };
+    let root = hierarchy.patches[patch as usize].root;
+    let large = (!hierarchy.element(root).is_leaf())
+        .then(|| hierarchy.subtree(root))
+        .filter(|tree| tree.len() >= PARALLEL_GATHER_ELEMENTS);
+    let Some(tree) = large else {
+        return push_pull(hierarchy, patch, &|id, out| {
+            let mut gathered = [Rgb::BLACK; MAX_BASIS_SIZE];
+            gather(hierarchy, clusters, id, &mut gathered[..size]);
+            add(out, &gathered[..size]);
+        });
+    };
     let mut gathered = vec![Rgb::BLACK; tree.len() * size];
-    let gather_into = |(out, &id): (&mut [Rgb], &ElementId)| gather(hierarchy, clusters, id, out);
-    if tree.len() >= PARALLEL_GATHER_ELEMENTS {
-        gathered
-            .par_chunks_mut(size)
-            .zip(tree.par_iter())
-            .with_min_len(PARALLEL_GATHER_ELEMENTS / 4)
-            .for_each(gather_into);
-    } else {
-        gathered.chunks_mut(size).zip(&tree).for_each(gather_into);
-    }
+    gathered
+        .par_chunks_mut(size)
+        .zip(tree.par_iter())
+        .with_min_len(PARALLEL_GATHER_ELEMENTS / 4)
+        .for_each(|(out, &id)| gather(hierarchy, clusters, id, out));
     // Push-pull visits the tree in the same pre-order as `subtree`.
     let next = std::cell::Cell::new(0);
     push_pull(hierarchy, patch, &|id, out| {
         let k = next.get();
         debug_assert_eq!(tree[k], id, "push-pull's order is the subtree's");
         next.set(k + 1);
-        let g = &gathered[k * size..(k + 1) * size];
-        out.iter_mut().zip(g).for_each(|(o, &g)| *o += g);
+        add(out, &gathered[k * size..(k + 1) * size]);
     })
 }
 
