@@ -81,21 +81,20 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
 
 /// Lambert's contour integral `|Σ_edges γ_k n_x · (a_k × b_k)/|a_k × b_k|| / 2π` over the polygon
 /// `corners`, all on or above the tangent plane of `x`; `γ_k` is the angle the edge subtends at `x`.
+/// Both the angle (`atan2(|a × b|, a · b)`) and the edge plane's normal are unchanged by the lengths of
+/// `a` and `b`, so the corners' directions are not normalised.
 fn contour_integral(x: DVec3, nx: DVec3, corners: &[DVec3]) -> f64 {
-    // Each corner's direction from x, normalised once for both edges it ends.
-    let mut directions = [DVec3::ZERO; 8];
-    for (d, &corner) in directions.iter_mut().zip(corners) {
-        *d = (corner - x).normalize_or_zero();
-    }
     let count = corners.len();
     let mut sum = 0.0;
     for k in 0..count {
-        let (a, b) = (directions[k], directions[(k + 1) % count]);
+        let (a, b) = (corners[k] - x, corners[(k + 1) % count] - x);
         let cross = a.cross(b);
-        let sin = cross.length();
-        if sin <= 1e-15 {
+        let sin2 = cross.length_squared();
+        // An edge seen end-on (or a corner at x) subtends no angle: |a × b| ≤ 1e-15 |a| |b|.
+        if sin2 <= 1e-30 * a.length_squared() * b.length_squared() {
             continue;
         }
+        let sin = sin2.sqrt();
         let angle = libm::atan2(sin, a.dot(b));
         sum += angle * nx.dot(cross) / sin;
     }

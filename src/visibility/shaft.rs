@@ -152,23 +152,30 @@ impl Shaft {
     /// point, when every point lies on one side of it (within `support`) and no face holds it already.
     fn add_face(&mut self, p: DVec3, q: DVec3, r: DVec3, support: f64) {
         let (e1, e2) = (q - p, r - p);
+        // Sides are judged with the unnormalised normal (most candidate faces have points on both
+        // sides and are dropped), the support scaled to it.
         let normal = e1.cross(e2);
         let length = normal.length();
         if length <= 1e-9 * e1.length() * e2.length() {
             return;
         }
-        let normal = normal / length;
         let offset = normal.dot(p);
-        let (low, high) = self.points().iter().fold((0.0f64, 0.0f64), |(lo, hi), x| {
+        let scaled_support = support * length;
+        let (mut low, mut high) = (0.0f64, 0.0f64);
+        for x in self.points() {
             let s = normal.dot(*x) - offset;
-            (lo.min(s), hi.max(s))
-        });
-        let plane = if high <= support {
-            (normal, offset + high)
-        } else if low >= -support {
-            (-normal, -(offset + low))
+            low = low.min(s);
+            high = high.max(s);
+            if low < -scaled_support && high > scaled_support {
+                return;
+            }
+        }
+        let inverse = length.recip();
+        let (normal, offset) = (normal * inverse, offset * inverse);
+        let plane = if high <= scaled_support {
+            (normal, offset + high * inverse)
         } else {
-            return;
+            (-normal, -(offset + low * inverse))
         };
         let known = self
             .planes()
