@@ -181,6 +181,10 @@ pub struct Basis {
     coefficients: [Vec<f64>; 2],
     /// Per domain and child, `size × size` row-major push matrices.
     push: [[Vec<f64>; 4]; 2],
+    /// `∫ u φ_α φ_α' du dv` and `∫ v φ_α φ_α' du dv` over the unit square (`size × size` row-major):
+    /// with `∫ φ_α φ_α' = δ`, the overlap matrix of a planar quad, whose Jacobian is affine in
+    /// `(u, v)`, is their combination ([`Basis::overlap`]).
+    square_moments: [Vec<f64>; 2],
 }
 
 impl Basis {
@@ -196,13 +200,33 @@ impl Basis {
             size,
             coefficients,
             push: Default::default(),
+            square_moments: Default::default(),
         };
         for domain in [Domain::Square, Domain::Triangle] {
             for child in 0..4 {
                 basis.push[domain_index(domain)][child] = basis.compute_push(domain, child);
             }
         }
+        basis.square_moments = basis.compute_square_moments();
         basis
+    }
+
+    /// `∫ u φ_α φ_α'` and `∫ v φ_α φ_α'` on the unit square, by a rule exact for their degree 2 d + 1.
+    fn compute_square_moments(&self) -> [Vec<f64>; 2] {
+        let n = self.size;
+        let mut moments = [vec![0.0; n * n], vec![0.0; n * n]];
+        let mut phi = [0.0; MAX_BASIS_SIZE];
+        let degree = 2 * self.kind.polynomial_degree() + 1;
+        for &(uv, w) in &rule(Domain::Square, degree).nodes {
+            self.eval(Domain::Square, uv, &mut phi);
+            for i in 0..n {
+                for j in 0..n {
+                    moments[0][i * n + j] += w * uv.x * phi[i] * phi[j];
+                    moments[1][i * n + j] += w * uv.y * phi[i] * phi[j];
+                }
+            }
+        }
+        moments
     }
 
     pub fn kind(&self) -> BasisKind {
@@ -499,15 +523,41 @@ impl Basis {
         }
         let n = self.size;
         let mut g = [0.0; MAX_BASIS_SIZE * MAX_BASIS_SIZE];
-        let mut phi = [0.0; MAX_BASIS_SIZE];
-        // φ_α φ_α' J has degree 2 d + 1 (J is affine in u, v on a planar quad), 2 d + 2 on a warped one.
-        let degree = 2 * self.kind.polynomial_degree() + 2;
-        for &(uv, w) in &rule(Domain::Square, degree).nodes {
-            self.eval(Domain::Square, uv, &mut phi);
-            let wj = w * shape.jacobian(uv) / area;
+        // The bilinear map's `∂p/∂u × ∂p/∂v` is affine in (u, v) on any quad (its uv term is
+        // (a + c − b − d) × itself): `c00 + u (c10 − c00) + v (c01 − c00)`. On a planar quad all three
+        // are normal to the plane, so the Jacobian, its length, is affine too and G follows from the
+        // basis's square moments; a warped quad is integrated by cubature.
+        let (c00, c10, c01) = (
+            (b - a).cross(d - a),
+            (b - a).cross(c - b),
+            (c - d).cross(d - a),
+        );
+        let normal = (c00 + c10 + c01).normalize_or_zero();
+        let planar = [c00, c10, c01]
+            .iter()
+            .all(|c| (*c - normal * normal.dot(*c)).length() <= AFFINE_TOLERANCE * c.length());
+        if planar {
+            let j0 = normal.dot(c00) / area;
+            let (ju, jv) = (normal.dot(c10) / area - j0, normal.dot(c01) / area - j0);
+            let [mu, mv] = &self.square_moments;
             for i in 0..n {
                 for j in 0..=i {
-                    g[i * n + j] += wj * phi[i] * phi[j];
+                    let k = i * n + j;
+                    g[k] = ju * mu[k] + jv * mv[k] + if i == j { j0 } else { 0.0 };
+                }
+            }
+        } else {
+            let mut phi = [0.0; MAX_BASIS_SIZE];
+            // φ_α φ_α' J has degree 2 d + 2 on a warped quad (J is then no polynomial, but nearly
+            // affine).
+            let degree = 2 * self.kind.polynomial_degree() + 2;
+            for &(uv, w) in &rule(Domain::Square, degree).nodes {
+                self.eval(Domain::Square, uv, &mut phi);
+                let wj = w * shape.jacobian(uv) / area;
+                for i in 0..n {
+                    for j in 0..=i {
+                        g[i * n + j] += wj * phi[i] * phi[j];
+                    }
                 }
             }
         }
@@ -805,13 +855,22 @@ mod tests {
 
     #[test]
     fn the_overlap_solve_turns_trapezoid_moments_into_exact_coefficients() {
-        let shape = trapezoid();
-        for kind in [
-            BasisKind::Linear,
-            BasisKind::Bilinear,
-            BasisKind::Quadratic,
-            BasisKind::Cubic,
-        ] {
+        // The trapezoid as given and turned into a plane of no particular orientation (the overlap
+        // of a planar quad comes from its affine Jacobian, read along the plane's normal).
+        let turn = glam::DMat3::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+        let Shape::Quad(corners) = trapezoid() else {
+            unreachable!()
+        };
+        let turned = Shape::Quad(corners.map(|p| turn * p + DVec3::new(5.0, -2.0, 1.0)));
+        for (shape, kind) in [trapezoid(), turned].into_iter().flat_map(|shape| {
+            [
+                BasisKind::Linear,
+                BasisKind::Bilinear,
+                BasisKind::Quadratic,
+                BasisKind::Cubic,
+            ]
+            .map(|kind| (shape, kind))
+        }) {
             let basis = Basis::new(kind);
             let n = basis.size();
             // A constant's moment of φ_2 (v runs from the wide side to the narrow one) is the
@@ -861,7 +920,7 @@ mod tests {
             assert!(linear.overlap(&shape, shape.area()).is_none());
         }
         let constant = Basis::new(BasisKind::Constant);
-        assert!(constant.overlap(&shape, shape.area()).is_none());
+        assert!(constant.overlap(&trapezoid(), trapezoid().area()).is_none());
     }
 
     #[test]
