@@ -350,7 +350,7 @@ pub fn attach_stored_reference(results: &mut [ProbeResult], path: &Path) -> anyh
     })?;
     anyhow::ensure!(
         stored.len() == results.len(),
-        "{}: {} points, this run has {} (same scene, points and --seed?)",
+        "{}: {} points, this run has {} (same scene, points or camera, and --seed?)",
         path.display(),
         stored.len(),
         results.len()
@@ -364,7 +364,7 @@ pub fn attach_stored_reference(results: &mut [ProbeResult], path: &Path) -> anyh
             .all(|(a, b)| (a - b).abs() <= 1e-9 * scale);
         anyhow::ensure!(
             same,
-            "{}: point {} is {:?}, this run's is {:?} (same scene, points and --seed?)",
+            "{}: point {} is {:?}, this run's is {:?} (same scene, points or camera, and --seed?)",
             path.display(),
             k + 1,
             entry.point,
