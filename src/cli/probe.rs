@@ -40,7 +40,8 @@ pub struct ProbeCommand {
     #[arg(long)]
     pub reference: bool,
     /// A stored reference: the JSON of an earlier `probe --reference --json` at the same points (same
-    /// scene, --points or --random N, and --seed), compared instead of path tracing anew.
+    /// scene, --points, --random N or --seen N with the same camera, and --seed), compared instead of
+    /// path tracing anew.
     #[arg(long, value_name = "REF.json", conflicts_with = "reference")]
     pub against: Option<PathBuf>,
     /// Paths per point for `--reference` (rounded up to a multiple of 16).
