@@ -513,3 +513,51 @@ fn probe_compares_with_a_stored_reference_at_the_same_points() {
     let stderr = String::from_utf8_lossy(&other.stderr);
     assert!(stderr.contains("ref.json: point 1 is"), "{stderr}");
 }
+
+/// `probe --seen N`: points the camera sees, the same for the same camera and seed (a stored reference
+/// applies), others for another camera (refused against that reference), none for a camera looking
+/// away from the scene (a clear error).
+#[test]
+fn probe_at_points_the_camera_sees() {
+    let dir = temp_dir("seen");
+    let common = ["probe", "-q", "--seen", "20", "--eps", "1e-3"];
+    let stored = radiosity(&[&common[..], &["--reference", "--spp", "16", "--json"]].concat());
+    assert!(
+        stored.status.success(),
+        "{}",
+        String::from_utf8_lossy(&stored.stderr)
+    );
+    let path = dir.join("seen.json");
+    std::fs::write(&path, &stored.stdout).unwrap();
+    let again = radiosity(&[&common[..], &["--against", path.to_str().unwrap()]].concat());
+    assert!(
+        again.status.success(),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    assert!(String::from_utf8_lossy(&again.stdout).contains("# luminance error at"));
+    let moved = radiosity(
+        &[
+            &common[..],
+            &["--eye", "278,273,-700", "--look-at", "278,273,0"],
+            &["--against", path.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(!moved.status.success());
+    let stderr = String::from_utf8_lossy(&moved.stderr);
+    assert!(stderr.contains("points or camera"), "{stderr}");
+    let away = radiosity(&[
+        "probe",
+        "-q",
+        "--seen",
+        "5",
+        "--eye",
+        "0,0,-10000",
+        "--look-at",
+        "0,0,-20000",
+    ]);
+    assert!(!away.status.success());
+    let stderr = String::from_utf8_lossy(&away.stderr);
+    assert!(stderr.contains("sees no surface"), "{stderr}");
+}

@@ -76,6 +76,12 @@ impl ProbeCommand {
                     !points.is_empty(),
                     "the camera sees no surface that does not emit: give --eye/--look-at"
                 );
+                if points.len() < n {
+                    crate::progress::stderr_line(format_args!(
+                        "warning: {name}: only {} of {n} points found (the camera sees mostly                          background or emitters)",
+                        points.len()
+                    ));
+                }
                 (points, PathBuf::from("points seen by the camera"))
             }
             (None, None, None) => anyhow::bail!("give --points FILE, --random N or --seen N"),

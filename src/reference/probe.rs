@@ -77,8 +77,8 @@ const SEEN_ATTEMPTS_PER_POINT: usize = 64;
 /// a surface side that does not emit (and is no luminaire's opening), with the normal of the side the
 /// camera sees: what an image of the solution shows, by image area. A seeded sample for checking a
 /// solution against the reference where a viewer looks, without the pixel-sized noise of a reference
-/// image (`random_points` weighs hidden surfaces as much as seen ones). Fewer than `n` only when most
-/// of the image sees nothing (after [`SEEN_ATTEMPTS_PER_POINT`] tries per point).
+/// image (`random_points` weighs hidden surfaces as much as seen ones). Fewer than `n` only where
+/// fewer than one ray in [`SEEN_ATTEMPTS_PER_POINT`] finds a point.
 pub fn seen_points(scene: &Scene, camera: &Camera, n: usize, seed: u64) -> Vec<ProbePoint> {
     use rand::{Rng, SeedableRng};
     let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();

@@ -78,7 +78,7 @@ impl Walk<'_> {
     /// `incident` arrives holding the irradiance pushed down from the ancestors; returns the radiance
     /// and, where the element's overlap matrix is not the identity, its area moments `G c`, which its
     /// parent's pull needs instead of the coefficients (the overlap is computed once per element and
-    /// sweep: a trapezoid's costs a cubature and a Cholesky).
+    /// sweep: on a trapezoid a small Cholesky factorisation, and a cubature where it is warped).
     fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> (Vec<Rgb>, Option<Vec<Rgb>>) {
         let h = self.h;
         let e = h.element(id);
