@@ -68,11 +68,18 @@ pub const SEARCH_DEGREE: usize = 3;
 pub const MAX_CELLS: usize = 64;
 
 /// Whether the source comes nearer to the receiver than about half the receiver's size (its centroid
-/// is closer to the source than half its diameter, which holds for every element along a source's
-/// outline): only then can `F(x → S)` vary over the receiver faster than its regular rule resolves
-/// (farther away, `1/r²` changes by less than a factor of 4 between neighbouring nodes).
+/// or one of its corners is closer to the source than half its diameter, which holds for every
+/// element along a source's outline): only then can `F(x → S)` vary over the receiver faster than its
+/// regular rule resolves (farther away, `1/r²` changes by less than a factor of 4 between
+/// neighbouring nodes). The corners count for elongated elements: a 2 cm × 65 cm strip lying end to
+/// end with a source 1.8 cm below it has its centroid just over half its diameter away, and its
+/// nodes, the nearest 7 cm from the source, missed the light arriving within a few centimetres of its
+/// end (the classroom's lamp housings over their tubes, BENCHMARKS.md).
 pub fn is_near(receiver: &Shape, source: &Shape) -> bool {
-    distance_to_polygon(receiver.centroid(), source) < 0.5 * receiver.diameter()
+    let reach = 0.5 * receiver.diameter();
+    std::iter::once(receiver.centroid())
+        .chain(receiver.vertices().iter().copied())
+        .any(|x| distance_to_polygon(x, source) < reach)
 }
 
 /// The receiver integral `∫_R F(x → S) dA_x` of the exact unoccluded point-to-source factor, with the
@@ -388,6 +395,15 @@ mod tests {
             &receiver,
             &square(-0.2, 0.0, 0.0, 1.0, -0.001, true)
         ));
+        // A long strip with a source lying end to end with it, 1.8 cm below: the centroid is just over
+        // half the diameter away, the near corners 1.8 cm.
+        let strip = square(0.0, 0.02, 0.0, 0.65, 0.0, false);
+        let beyond_its_end = square(0.0, 0.02, -0.65, 0.0, -0.018, true);
+        assert!(
+            distance_to_polygon(strip.centroid(), &beyond_its_end) > 0.5 * strip.diameter(),
+            "the centroid test alone would not find it near"
+        );
+        assert!(is_near(&strip, &beyond_its_end));
         assert_eq!(
             distance_to_polygon(DVec3::new(0.5, 0.5, 2.0), &receiver),
             2.0
