@@ -17,9 +17,9 @@
 //! the bilinear map's varying Jacobian makes it `A_i G` with a full `G` ([`crate::bases::Overlap`]),
 //! which step 4a solves with (else a uniformly lit trapezoid would get a false gradient).
 //!
-//! Near sources: where the source lies within half the receiver's diameter of its centroid and the exact
-//! point factor varies more than twofold over the receiver's nodes, the light may arrive in a band the
-//! nodes miss (a lamp hung just under a ceiling). [`crate::geometry::near_field`] then integrates the
+//! Near sources: where the source lies within half the receiver's diameter of its centroid or of a
+//! corner and the exact point factor varies more than twofold over the receiver's nodes, the light may
+//! arrive in a band the nodes miss (a lamp hung just under a ceiling). [`crate::geometry::near_field`] then integrates the
 //! point factor adaptively, and where the regular rule is off by more than [`NEAR_FIELD_MISS`] the
 //! block, the unoccluded and the visible transfer come from its composite rule; the error
 //! coefficients and node factors stay at the regular nodes, where the error estimate reads them.
