@@ -698,18 +698,6 @@ impl Hierarchy {
         &self.elements[id as usize]
     }
 
-    /// `root` and every element below it, in pre-order (an element, then its children's subtrees in
-    /// order): the order in which push-pull visits a patch's tree.
-    pub fn subtree(&self, root: ElementId) -> Vec<ElementId> {
-        let mut order = Vec::new();
-        let mut stack = vec![root];
-        while let Some(id) = stack.pop() {
-            order.push(id);
-            stack.extend(self.element(id).children.iter().rev());
-        }
-        order
-    }
-
     /// The shape of patch `patch` (its root element's: the polygon's, oriented so that its normal
     /// points out of this side; kept once, with the element, not again with the patch).
     pub fn patch_shape(&self, patch: u32) -> &Shape {
@@ -1043,6 +1031,18 @@ impl Hierarchy {
                 stack.extend(children.iter().rev());
             }
         }
+    }
+
+    /// `root` and every element below it, in pre-order (an element, then its children's subtrees in
+    /// order): the order in which push-pull visits a patch's tree.
+    pub fn subtree(&self, root: ElementId) -> Vec<ElementId> {
+        let mut order = Vec::new();
+        let mut stack = vec![root];
+        while let Some(id) = stack.pop() {
+            order.push(id);
+            stack.extend(self.element(id).children.iter().rev());
+        }
+        order
     }
 
     /// The luminaire whose opening `polygon` is, if any.

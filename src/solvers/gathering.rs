@@ -82,22 +82,26 @@ fn relax(hierarchy: &Hierarchy, clusters: &ClusterSweep, patch: u32) -> PatchUpd
         out.iter_mut().zip(gathered).for_each(|(o, &g)| *o += g);
     };
     let root = hierarchy.patches[patch as usize].root;
-    let large = (!hierarchy.element(root).is_leaf())
-        .then(|| hierarchy.subtree(root))
-        .filter(|tree| tree.len() >= PARALLEL_GATHER_ELEMENTS);
-    let Some(tree) = large else {
+    if hierarchy.element(root).is_leaf() {
+        // Most patches of a furnished room: one element, gathered without a list.
         return push_pull(hierarchy, patch, &|id, out| {
             let mut gathered = [Rgb::BLACK; MAX_BASIS_SIZE];
             gather(hierarchy, clusters, id, &mut gathered[..size]);
             add(out, &gathered[..size]);
         });
-    };
+    }
+    let tree = hierarchy.subtree(root);
     let mut gathered = vec![Rgb::BLACK; tree.len() * size];
-    gathered
-        .par_chunks_mut(size)
-        .zip(tree.par_iter())
-        .with_min_len(PARALLEL_GATHER_ELEMENTS / 4)
-        .for_each(|(out, &id)| gather(hierarchy, clusters, id, out));
+    let gather_into = |(out, &id): (&mut [Rgb], &ElementId)| gather(hierarchy, clusters, id, out);
+    if tree.len() >= PARALLEL_GATHER_ELEMENTS {
+        gathered
+            .par_chunks_mut(size)
+            .zip(tree.par_iter())
+            .with_min_len(PARALLEL_GATHER_ELEMENTS / 4)
+            .for_each(gather_into);
+    } else {
+        gathered.chunks_mut(size).zip(&tree).for_each(gather_into);
+    }
     // Push-pull visits the tree in the same pre-order as `subtree`.
     let next = std::cell::Cell::new(0);
     push_pull(hierarchy, patch, &|id, out| {
