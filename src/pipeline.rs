@@ -527,6 +527,15 @@ pub fn simulate_observed(
             &mut |step, hierarchy| on_step(step, hierarchy, visibility.as_ref()),
         )?,
     };
+    if let (Some(pass), false) = (report.diverged_in_pass, progress.quiet) {
+        crate::progress::stderr_line(format_args!(
+            "warning: the sweeps of pass {pass} diverged (the change of the exitant power grew for {} \
+             sweeps in a row) and the solve stopped there, not converged: somewhere the scene sends \
+             back more light than it receives (surfaces at one place kept by --keep-duplicates, a \
+             reflectance of 1 or more)",
+            crate::solvers::DIVERGING_SWEEPS
+        ));
+    }
     if report.refused_by_budget > 0 && !progress.quiet {
         crate::progress::stderr_line(format_args!(
             "warning: the element and link budget ({} elements, {} links, from --max-elements and \

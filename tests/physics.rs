@@ -102,3 +102,30 @@ fn closed_box_with_one_emitter_absorbs_what_it_emits() {
         );
     }
 }
+
+/// A closed box whose walls reflect more than they receive (ρ = 1.2, not physical) has no solution:
+/// the sweeps' change grows by ρ per sweep, and the solve stops after `DIVERGING_SWEEPS` of them
+/// with the verdict, instead of sweeping to the iteration limit pass after pass. The same box at
+/// ρ = 0.9 converges without it.
+#[test]
+fn a_box_that_reflects_more_than_it_receives_stops_with_diverging_sweeps() {
+    use radiosity::solvers::DIVERGING_SWEEPS;
+    for (rho, diverges) in [(1.2, true), (0.9, false)] {
+        let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, 1.0);
+        let settings = SimulationSettings {
+            eps: 1e-3,
+            ..Default::default()
+        };
+        let r = simulate(&scene, &settings, &quiet()).expect("solve").report;
+        if diverges {
+            assert_eq!(r.diverged_in_pass, Some(1), "ρ {rho}");
+            assert_eq!(r.error.stopped_by, "diverging sweeps");
+            assert!(!r.converged);
+            // The first sweep has no change, the second none to compare with.
+            assert_eq!(r.iterations, DIVERGING_SWEEPS + 2);
+        } else {
+            assert_eq!(r.diverged_in_pass, None, "ρ {rho}");
+            assert!(r.converged, "ρ {rho}");
+        }
+    }
+}

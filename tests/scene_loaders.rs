@@ -187,7 +187,13 @@ fn mgf_entities() {
          m grey =\n c\n rd 0.2\n\
          f a b c d\n"
     );
-    let scene = load_mgf(&text);
+    // As read: the three squares in z = 0 overlap (scene::contacts::overlaps would keep one sheet).
+    let dir = temp_dir(&[("scene.mgf", &text)]);
+    let options = LoadOptions {
+        keep_duplicates: true,
+        ..LoadOptions::default()
+    };
+    let scene = scene::load(&dir.join("scene.mgf"), &options).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(scene.polygons.len(), 1 + 3 + 1 + 1);
     let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
     assert_eq!(names, ["room/floor", "lamps", "default"]);

@@ -34,7 +34,8 @@ pub struct SceneArgs {
     #[arg(long, default_value_t = 16, value_name = "N", value_parser = count(0, 1024))]
     pub tessellation: usize,
     /// Keep exact duplicate polygons (same vertices and material, e.g. furniture included twice)
-    /// instead of one of each.
+    /// instead of one of each, and coplanar polygons that overlap (a frame on a board) instead of
+    /// one surface where they overlap.
     #[arg(long)]
     pub keep_duplicates: bool,
     /// Adds an IES (LM-63) luminaire at X,Y,Z, aimed along DX,DY,DZ (default 0,0,-1: its nadir down a

@@ -40,7 +40,10 @@
 //! parallelograms ([`polygonize`], [`affine_pieces`]) with P's material, object, sidedness and origin.
 //! Luminaire openings are not split.
 
+mod overlaps;
 mod regions;
+
+pub use overlaps::{remove_covered, Covered};
 
 use super::polygonize::polygonize;
 use super::{Diagnostic, Polygon, Scene, MAX_POLYGONS};
@@ -123,6 +126,7 @@ struct Face {
     normal: DVec3,
     point: DVec3,
     diameter: f64,
+    area: f64,
     bounds: Aabb,
 }
 
@@ -132,6 +136,7 @@ impl Face {
             normal: shape.normal(),
             point: shape.vertices()[0],
             diameter: shape.diameter(),
+            area: shape.area(),
             bounds: shape.bounds(),
         }
     }
@@ -273,14 +278,7 @@ fn contact_outlines(
         (distances.iter().all(|d| d.abs() <= g) && (two_sided || offset >= -SNAP * p.diameter))
             .then_some(offset)
     };
-    // An outline's corners, counter-clockwise seen from P's front.
-    let facing_p = |corners: &[DVec3], normal: DVec3| {
-        let mut outline = corners.to_vec();
-        if normal.dot(p.normal) < 0.0 {
-            outline.reverse();
-        }
-        outline_planes(&outline, p.normal)
-    };
+    let facing_p = |corners: &[DVec3], normal: DVec3| outline_toward(p, corners, normal);
     let mut outlines = Vec::new();
     for r in emitters.grid.near(&p.bounds, emitter_gap * p.diameter) {
         let region = &emitters.regions[r];
@@ -342,6 +340,16 @@ fn contact_outlines(
     }
     outlines.extend(footprints(p, &edges));
     outlines
+}
+
+/// The cutting planes of the outline of a convex polygon with `corners` and `normal`, projected onto
+/// P's plane: the corners taken counter-clockwise seen from P's front.
+fn outline_toward(p: &Face, corners: &[DVec3], normal: DVec3) -> Vec<Plane> {
+    let mut outline = corners.to_vec();
+    if normal.dot(p.normal) < 0.0 {
+        outline.reverse();
+    }
+    outline_planes(&outline, p.normal)
 }
 
 /// The signed distance of largest magnitude (0 for none): on which side of a plane a polygon lies.

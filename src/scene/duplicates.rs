@@ -125,7 +125,7 @@ impl Origins {
         }
     }
 
-    fn place_of(&self, index: usize) -> usize {
+    pub(crate) fn place_of(&self, index: usize) -> usize {
         self.polygons
             .get(index)
             .map_or(usize::MAX, |&(place, _)| place as usize)
@@ -147,7 +147,7 @@ impl Origins {
         self.polygons = repeated;
     }
 
-    fn retain(&mut self, keep: &[bool]) {
+    pub(crate) fn retain(&mut self, keep: &[bool]) {
         let mut k = 0;
         self.polygons.retain(|_| {
             k += 1;

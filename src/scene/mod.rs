@@ -176,7 +176,8 @@ pub struct LoadOptions {
     /// (4 per quarter circle, RenderPark's setting) loses about 2.6% of a sphere's area; 64 loses 0.16%.
     /// Values below 3 are read as 3. See [`mgf::solids`].
     pub tessellation: usize,
-    /// Keep exact duplicate polygons (see [`duplicates`]) instead of one of each.
+    /// Keep exact duplicate polygons (see [`duplicates`]) instead of one of each, and coplanar
+    /// overlaps instead of one surface where they overlap (see [`contacts::remove_covered`]).
     pub keep_duplicates: bool,
 }
 
@@ -328,6 +329,7 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     }
     if !options.keep_duplicates {
         duplicates::remove_duplicates(&mut scene);
+        contacts::remove_covered(&mut scene);
     }
     Ok(scene)
 }

@@ -79,7 +79,7 @@ pub struct ErrorReport {
     /// The estimate over the leaves after the last pass.
     pub summary: ErrorSummary,
     /// Why refinement stopped: "accuracy reached", "element budget", "minimum element area", "pass
-    /// limit", "stable".
+    /// limit", "stable", "diverging sweeps".
     pub stopped_by: String,
     /// The estimate after each refine/solve pass: how error control (or refinement) progressed, and
     /// what each pass cost.
@@ -122,6 +122,8 @@ pub struct SolveReport {
     pub converged: bool,
     /// Relative change of the total exitant power after each sweep (the residual of the iteration).
     pub residuals: Vec<f64>,
+    /// The pass whose sweeps diverged, if one did ([`DIVERGING_SWEEPS`]): the solve stops there.
+    pub diverged_in_pass: Option<usize>,
     /// The a-posteriori error estimate and, under error control, how it ended.
     pub error: ErrorReport,
     /// Splits refused because the element budget was reached.
@@ -239,6 +241,13 @@ fn end_pass(
         refine_seconds: report.refine_seconds,
         solve_seconds: report.solve_seconds,
     });
+    if report.diverged_in_pass.is_some() {
+        if settings.error_control.is_some() {
+            report.error.summary = summary;
+        }
+        report.error.stopped_by = "diverging sweeps".into();
+        return true;
+    }
     if let Some(control) = &settings.error_control {
         // The pass's summary is the solve's so far (the same accuracy): one walk over the leaves.
         report.error.summary = summary;
@@ -311,9 +320,18 @@ fn refine_pass(
     (outcome, direct)
 }
 
+/// Sweeps in a row whose change of the total exitant power grew, after which a pass's iteration is
+/// taken to diverge: somewhere the scene sends back more light than it receives (two surfaces kept at
+/// one place, a reflectance of 1 or more), and more sweeps only make it worse. Converging solves of the
+/// Cornell box, cube.mgf, office2, office3 and the classroom, with and without error control, grow
+/// for at most 2 sweeps in a row (after a refinement); the classroom's coplanar window sills, kept,
+/// grew for more than 100 (BENCHMARKS.md, "Coplanar overlaps").
+pub const DIVERGING_SWEEPS: usize = 10;
+
 /// Sweeps with `solver` until the relative change of the total exitant power is below the tolerance
-/// (then returns true) or the iteration limit. The first sweep of a later pass is compared with the
-/// last of the pass before (the same iterate, refined): a pass that changed little ends after one.
+/// (then returns true), the iteration limit, or [`DIVERGING_SWEEPS`] sweeps of growing change (then
+/// `report.diverged_in_pass` is set). The first sweep of a later pass is compared with the last of the
+/// pass before (the same iterate, refined): a pass that changed little ends after one.
 fn sweep_to_tolerance(
     hierarchy: &mut Hierarchy,
     solver: &dyn GatheringSolver,
@@ -331,6 +349,9 @@ fn sweep_to_tolerance(
         f64::NAN
     };
     let mut swept_to_tolerance = false;
+    // The absolute change (not the relative: a system that diverges as a whole grows by a constant
+    // ratio, its relative change tending to a constant) and how many sweeps in a row it grew.
+    let (mut last_step, mut growing) = (f64::NAN, 0);
     for _ in 0..settings.max_iterations {
         let sweep = solver.sweep(hierarchy);
         report.iterations += 1;
@@ -341,9 +362,16 @@ fn sweep_to_tolerance(
         let change = ((total - previous) / total).abs();
         bar.set_message(format!("pass {pass}: relative power change {change:.2e}"));
         report.residuals.push(change);
+        let step = (total - previous).abs();
+        growing = if step > last_step { growing + 1 } else { 0 };
+        last_step = step;
         previous = total;
         if change < settings.tolerance || total == 0.0 {
             swept_to_tolerance = true;
+            break;
+        }
+        if growing >= DIVERGING_SWEEPS {
+            report.diverged_in_pass = Some(pass);
             break;
         }
     }

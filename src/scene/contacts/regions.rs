@@ -98,7 +98,7 @@ pub(super) fn emitting_regions(scene: &Scene, faces: &[Face], grid: &BoxGrid) ->
                 || !emits(j)
                 || openings[i] != openings[j]
                 || sides_as(j, i) != sides[i]
-                || !coplanar(scene, faces, i, j)
+                || !coplanar(scene, faces, i, j, COPLANAR)
                 || !touch_along_an_edge(scene, faces, i, j)
             {
                 continue;
@@ -130,15 +130,18 @@ fn find(root: &mut [usize], mut i: usize) -> usize {
     i
 }
 
-fn coplanar(scene: &Scene, faces: &[Face], i: usize, j: usize) -> bool {
-    let tolerance = COPLANAR * faces[i].diameter.max(faces[j].diameter);
-    faces[i].normal.dot(faces[j].normal).abs() >= (COPLANAR).cos()
+/// Whether polygons `i` and `j` lie in one plane: normals within `tolerance` radians, and every vertex
+/// of each within `tolerance` times the larger diameter of the other's plane.
+pub(super) fn coplanar(scene: &Scene, faces: &[Face], i: usize, j: usize, tolerance: f64) -> bool {
+    let distance = tolerance * faces[i].diameter.max(faces[j].diameter);
+    // cos(t) to within t⁴/24.
+    faces[i].normal.dot(faces[j].normal).abs() >= 1.0 - 0.5 * tolerance * tolerance
         && [(i, j), (j, i)].iter().all(|&(a, b)| {
             scene.polygons[a]
                 .shape
                 .vertices()
                 .iter()
-                .all(|&v| faces[b].distance(v).abs() <= tolerance)
+                .all(|&v| faces[b].distance(v).abs() <= distance)
         })
 }
 
@@ -279,6 +282,7 @@ fn region(
             normal,
             point: origin,
             diameter: size,
+            area: members.iter().map(|&m| faces[m].area).sum(),
             bounds,
         },
         shines,
