@@ -83,9 +83,42 @@ struct Uncovered {
 /// Candidate pairs come from a uniform grid over the polygons' boxes (no quadratic work).
 pub fn remove_covered(scene: &mut Scene) -> Covered {
     let mut notes = Notes::default();
-    cut_overlapped(scene, &mut notes, Step::SameMaterial);
-    cut_overlapped(scene, &mut notes, Step::Decals);
+    let mut planes = Planes::new(scene);
+    if cut_overlapped(scene, &planes, &mut notes, Step::SameMaterial) {
+        planes = Planes::new(scene);
+    }
+    cut_overlapped(scene, &planes, &mut notes, Step::Decals);
     notes.warn(scene)
+}
+
+/// Each polygon's plane and size, and the polygons in its plane whose boxes touch its own (found once
+/// through a uniform grid over the boxes, for both steps unless the first changes the scene).
+struct Planes {
+    faces: Vec<Face>,
+    coplanar: Vec<Vec<u32>>,
+}
+
+impl Planes {
+    fn new(scene: &Scene) -> Self {
+        let faces: Vec<Face> = scene.polygons.iter().map(|p| Face::new(&p.shape)).collect();
+        let grid = BoxGrid::new(&faces);
+        let openings = scene.opening_luminaires();
+        let coplanar = (0..faces.len())
+            .into_par_iter()
+            .map(|i| {
+                if openings[i].is_some() || faces[i].diameter <= 0.0 {
+                    return Vec::new();
+                }
+                grid.near(&faces[i].bounds, SNAP * faces[i].diameter)
+                    .into_iter()
+                    .filter(|&j| j != i && openings[j].is_none())
+                    .filter(|&j| coplanar(scene, &faces, i, j, SNAP))
+                    .map(|j| j as u32)
+                    .collect()
+            })
+            .collect();
+        Planes { faces, coplanar }
+    }
 }
 
 /// What was dropped, one group per pair of places (covered, covering).
@@ -165,25 +198,20 @@ enum Step {
     Decals,
 }
 
-/// Cuts every polygon that `step` lets another coplanar polygon cover ([`covers_of`], [`uncover`]).
-fn cut_overlapped(scene: &mut Scene, notes: &mut Notes, step: Step) {
-    let faces: Vec<Face> = scene.polygons.iter().map(|p| Face::new(&p.shape)).collect();
-    let grid = BoxGrid::new(&faces);
-    let openings = scene.opening_luminaires();
+/// Cuts every polygon that `step` lets another coplanar polygon cover ([`covers_of`], [`uncover`]);
+/// whether it changed anything.
+fn cut_overlapped(scene: &mut Scene, planes: &Planes, notes: &mut Notes, step: Step) -> bool {
     let results: Vec<Option<Uncovered>> = (0..scene.polygons.len())
         .into_par_iter()
         .map(|i| {
-            if openings[i].is_some() || faces[i].diameter <= 0.0 {
-                return None;
-            }
-            let covers = covers_of(scene, &faces, &grid, &openings, i, step);
+            let covers = covers_of(scene, planes, i, step);
             (!covers.is_empty())
-                .then(|| uncover(&scene.polygons[i], &faces[i], &covers))
+                .then(|| uncover(&scene.polygons[i], &planes.faces[i], &covers))
                 .flatten()
         })
         .collect();
     if results.iter().all(Option::is_none) {
-        return;
+        return false;
     }
     let mut polygons = Vec::with_capacity(scene.polygons.len());
     let mut counts = Vec::with_capacity(scene.polygons.len());
@@ -202,30 +230,24 @@ fn cut_overlapped(scene: &mut Scene, notes: &mut Notes, step: Step) {
     }
     scene.origins.repeat(&counts);
     scene.polygons = polygons;
+    true
 }
 
 /// The polygons that cover part of polygon `i` in `step`: coplanar with it, keeping the place over it,
 /// and covering one of its sides; their outlines may or may not cross it ([`uncover`] finds out).
-fn covers_of(
-    scene: &Scene,
-    faces: &[Face],
-    grid: &BoxGrid,
-    openings: &[Option<u32>],
-    i: usize,
-    step: Step,
-) -> Vec<Cover> {
+fn covers_of(scene: &Scene, planes: &Planes, i: usize, step: Step) -> Vec<Cover> {
+    let faces = &planes.faces;
     let p = &faces[i];
     let own = Sides::of(&scene.polygons[i], true);
-    grid.near(&p.bounds, SNAP * p.diameter)
-        .into_iter()
-        .filter(|&j| j != i && openings[j].is_none())
+    planes.coplanar[i]
+        .iter()
+        .map(|&j| j as usize)
         .filter(|&j| match step {
             Step::SameMaterial => {
                 scene.polygons[j].material == scene.polygons[i].material && precedes(faces, j, i)
             }
             Step::Decals => precedes(faces, i, j),
         })
-        .filter(|&j| coplanar(scene, faces, i, j, SNAP))
         .filter_map(|j| {
             let q = &scene.polygons[j];
             let sides = Sides::of(q, faces[j].normal.dot(p.normal) > 0.0);
