@@ -4,7 +4,7 @@
 //! its light; a reflecting cavity containing such a place can send back more than it receives, and the
 //! iteration diverges. The classroom's window sill, a closed 1 cm box of ρ 0.84 whose back face is
 //! coplanar with a strip of the window frame: under `--accuracy 10%` its elements grew by 2.3% per
-//! sweep (sweeps compared ρ² = 0.71 without the strip; BENCHMARKS.md, "Coplanar overlaps").
+//! sweep (without the strip they shrink by ρ² = 0.71 per sweep; BENCHMARKS.md, "Coplanar overlaps").
 //!
 //! Of two overlapping coplanar polygons one keeps the place whole and the other is cut along its
 //! outline ([`cut_polygon`]) and loses, inside it, the sides the first covers: a piece both of whose
