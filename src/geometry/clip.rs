@@ -113,6 +113,37 @@ pub fn split_by_outline(polygon: &[DVec3], planes: &[Plane], snap: f64) -> Optio
     Some(pieces)
 }
 
+/// Cuts the convex `polygon` along a convex outline given by its [`outline_planes`] like a pinwheel:
+/// for each edge k, the part of the polygon outside edge k and inside the line of edge k + 1 (the
+/// outside of a convex outline is split by which edge a point is last outside of, going round), then
+/// the part inside the outline. Each part is convex and reaches from the outline to the polygon's
+/// boundary; [`split_by_outline`] instead cuts the rest of the polygon along each edge's whole line,
+/// which around an outline inside the polygon leaves strips as wide as the outline across it (a
+/// chair's 2.5 cm foot cut a 4.5 m floor into 2.5 cm strips). `None` when the outline does not cross
+/// the polygon's interior.
+pub fn split_pinwheel(polygon: &[DVec3], planes: &[Plane], snap: f64) -> Option<Vec<Vec<DVec3>>> {
+    let mut inside = polygon.to_vec();
+    for plane in planes {
+        inside = split_by_plane(&inside, plane, snap).0;
+        if inside.is_empty() {
+            return None;
+        }
+    }
+    let n = planes.len();
+    let mut pieces: Vec<Vec<DVec3>> = (0..n)
+        .filter_map(|k| {
+            let outside = split_by_plane(polygon, &planes[k], snap).1;
+            let piece = split_by_plane(&outside, &planes[(k + 1) % n], snap).0;
+            (piece.len() >= 3 && polygon_area(&piece) > snap * snap).then_some(piece)
+        })
+        .collect();
+    if pieces.is_empty() {
+        return None;
+    }
+    pieces.push(inside);
+    Some(pieces)
+}
+
 /// Area of a planar polygon (Newell's vector area).
 pub fn polygon_area(polygon: &[DVec3]) -> f64 {
     let n = polygon.len();
@@ -185,7 +216,46 @@ mod tests {
         ] {
             let planes = outline_planes(&outline, DVec3::Z);
             assert!(split_by_outline(&polygon, &planes, 1e-9).is_none());
+            assert!(split_pinwheel(&polygon, &planes, 1e-9).is_none());
         }
+    }
+
+    /// A 0.1 square foot inside a 4 × 4 floor: the pinwheel's four pieces are each at least as wide as
+    /// the foot's distance to the floor's edges (no strip as narrow as the foot, which the straight cut
+    /// leaves), and with the foot they tile the floor; a foot across the floor's edge cuts it too.
+    #[test]
+    fn a_pinwheel_cut_leaves_no_strip_as_narrow_as_the_outline() {
+        let floor = square(0.0, 0.0, 4.0);
+        let foot = outline_planes(&square(1.0, 2.0, 0.1), DVec3::Z);
+        let pinwheel = split_pinwheel(&floor, &foot, 1e-9).unwrap();
+        assert_eq!(pinwheel.len(), 5);
+        let areas: Vec<f64> = pinwheel.iter().map(|p| polygon_area(p)).collect();
+        assert!((areas.iter().sum::<f64>() - 16.0).abs() < 1e-12);
+        assert!((areas[4] - 0.01).abs() < 1e-12, "the foot last");
+        // Bottom [0, 1.1] × [0, 2], right [1.1, 4] × [0, 2.1], top [1, 4] × [2.1, 4], left [0, 1] × [2, 4].
+        for (area, expected) in areas.iter().zip([2.2, 6.09, 5.7, 2.0]) {
+            assert!((area - expected).abs() < 1e-12, "{areas:?}");
+        }
+        let straight = split_by_outline(&floor, &foot, 1e-9).unwrap();
+        // Its pieces around the foot (the foot last) include 0.1-wide strips of area 0.2 and 0.19.
+        let around = &straight[..straight.len() - 1];
+        let narrowest = around
+            .iter()
+            .map(|p| polygon_area(p))
+            .fold(f64::MAX, f64::min);
+        assert!(
+            narrowest < 0.2 + 1e-12,
+            "the straight cut's strips: {narrowest}"
+        );
+        let across = split_pinwheel(
+            &floor,
+            &outline_planes(&square(3.5, 1.0, 1.0), DVec3::Z),
+            1e-9,
+        )
+        .unwrap();
+        let total: f64 = across.iter().map(|p| polygon_area(p)).sum();
+        assert!((total - 16.0).abs() < 1e-12);
+        assert!((polygon_area(across.last().unwrap()) - 0.5).abs() < 1e-12);
     }
 
     #[test]

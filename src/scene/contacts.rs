@@ -496,6 +496,27 @@ fn footprints(p: &Face, edges: &[(usize, DVec3, DVec3, f64)]) -> Vec<Vec<Plane>>
 /// Cuts `polygon` along `outlines`; `None` when none crosses its interior.
 fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Option<Pieces> {
     let snap = SNAP * face.diameter;
+    cut_polygon_by(polygon, face, &outlines, &|piece, planes| {
+        split_by_outline(piece, planes, snap)
+    })
+}
+
+/// One convex piece cut by one outline's planes ([`split_by_outline`], [`split_pinwheel`]); `None`
+/// when the outline does not cross it.
+///
+/// [`split_pinwheel`]: crate::geometry::clip::split_pinwheel
+type OutlineSplit<'a> = dyn Fn(&[DVec3], &[Plane]) -> Option<Vec<Vec<DVec3>>> + 'a;
+
+/// Cuts `polygon` along `outlines` with `split` (one convex piece by one outline, `None` when it does
+/// not cross the piece), within [`MAX_OUTLINES`] and [`MAX_PIECES`]; the pieces as triangles and
+/// parallelograms, `None` when no outline crossed it.
+fn cut_polygon_by(
+    polygon: &Polygon,
+    face: &Face,
+    outlines: &[Vec<Plane>],
+    split: &OutlineSplit<'_>,
+) -> Option<Pieces> {
+    let snap = SNAP * face.diameter;
     let mut pieces = vec![polygon.shape.vertices().to_vec()];
     let mut used = 0;
     let mut warning = None;
@@ -509,7 +530,7 @@ fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Opt
         let mut next = Vec::with_capacity(pieces.len() + planes.len());
         let mut crossed = false;
         for piece in &pieces {
-            match split_by_outline(piece, planes, snap) {
+            match split(piece, planes) {
                 Some(parts) => {
                     crossed = true;
                     next.extend(parts);

@@ -7,9 +7,9 @@
 //! sweep (without the strip they shrink by ρ² = 0.71 per sweep; BENCHMARKS.md, "Coplanar overlaps").
 //!
 //! Of two overlapping coplanar polygons one keeps the place whole and the other is cut along its
-//! outline ([`cut_polygon`]) and loses, inside it, the sides the first covers: a piece both of whose
-//! sides are covered is dropped, a two-sided piece covered on one side becomes one-sided toward the
-//! other. Sides are judged in the cut polygon's frame: a one-sided polygon covers the side its normal
+//! outline (a pinwheel cut, [`split_pinwheel`]: no strips as narrow as a foot across a floor) and
+//! loses, inside it, the sides the first covers: a piece both of whose sides are covered is dropped,
+//! a two-sided piece covered on one side becomes one-sided toward the other. Sides are judged in the cut polygon's frame: a one-sided polygon covers the side its normal
 //! points to, a two-sided one both. Two steps, each by a strict order of the polygons, so that no
 //! place is left without a surface: first among polygons of one material the larger keeps the place
 //! (the window frame strip goes, the sill's face stays whole; office3's desk-top end pieces lose what
@@ -20,9 +20,9 @@
 //! overlap. Luminaire openings take no part.
 
 use super::regions::coplanar;
-use super::{cut_polygon, outline_toward, BoxGrid, Face, SNAP};
-use crate::geometry::clip::Plane;
-use crate::geometry::Shape;
+use super::{cut_polygon_by, outline_toward, BoxGrid, Face, SNAP};
+use crate::geometry::clip::{split_pinwheel, Plane};
+use crate::geometry::{DVec3, Shape};
 use crate::scene::{Diagnostic, Polygon, Scene};
 use rayon::prelude::*;
 
@@ -263,8 +263,10 @@ fn covers_of(scene: &Scene, planes: &Planes, i: usize, step: Step) -> Vec<Cover>
 /// `polygon` cut along the outlines of `covers`, each piece with the sides no cover of it leaves; `None`
 /// when no piece lies inside a cover (the outlines only touch it).
 fn uncover(polygon: &Polygon, face: &Face, covers: &[Cover]) -> Option<Uncovered> {
-    let outlines = covers.iter().map(|c| c.outline.clone()).collect();
-    let shapes = match cut_polygon(polygon, face, outlines) {
+    let outlines: Vec<Vec<Plane>> = covers.iter().map(|c| c.outline.clone()).collect();
+    let snap = SNAP * face.diameter;
+    let pinwheel = |piece: &[DVec3], planes: &[Plane]| split_pinwheel(piece, planes, snap);
+    let shapes = match cut_polygon_by(polygon, face, &outlines, &pinwheel) {
         Some(pieces) => pieces.shapes,
         None => vec![polygon.shape],
     };
