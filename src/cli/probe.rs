@@ -78,7 +78,8 @@ impl ProbeCommand {
                 );
                 if points.len() < n {
                     crate::progress::stderr_line(format_args!(
-                        "warning: {name}: only {} of {n} points found (the camera sees mostly                          background or emitters)",
+                        "warning: {name}: only {} of {n} points found (the camera sees mostly \
+                         background or emitters)",
                         points.len()
                     ));
                 }

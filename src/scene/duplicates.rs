@@ -147,7 +147,7 @@ impl Origins {
         self.polygons = repeated;
     }
 
-    pub(crate) fn retain(&mut self, keep: &[bool]) {
+    fn retain(&mut self, keep: &[bool]) {
         let mut k = 0;
         self.polygons.retain(|_| {
             k += 1;

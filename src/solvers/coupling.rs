@@ -19,10 +19,11 @@
 //!
 //! Near sources: where the source lies within half the receiver's diameter of its centroid or of a
 //! corner and the exact point factor varies more than twofold over the receiver's nodes, the light may
-//! arrive in a band the nodes miss (a lamp hung just under a ceiling). [`crate::geometry::near_field`] then integrates the
-//! point factor adaptively, and where the regular rule is off by more than [`NEAR_FIELD_MISS`] the
-//! block, the unoccluded and the visible transfer come from its composite rule; the error
-//! coefficients and node factors stay at the regular nodes, where the error estimate reads them.
+//! arrive in a band the nodes miss (a lamp hung just under a ceiling).
+//! [`crate::geometry::near_field`] then integrates the point factor adaptively, and where the regular
+//! rule is off by more than [`NEAR_FIELD_MISS`] the block, the unoccluded and the visible transfer
+//! come from its composite rule; the error coefficients and node factors stay at the regular nodes,
+//! where the error estimate reads them.
 //!
 //! Visibility reuse: where the visibility back end offers shaft tests ([`Visibility::shafts`]), a
 //! surface link whose shaft is Clear takes transmittance 1 at every node pair and a Blocked one 0,
