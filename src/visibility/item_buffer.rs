@@ -367,6 +367,8 @@ fn end_centre_to(v: f64, n: usize) -> usize {
 #[derive(Debug, Default)]
 struct Cache {
     clusters: HashMap<u32, ClusterBuffers, BuildHasherDefault<KeyHasher>>,
+    /// Exposure bits per (cluster, bucket) ([`ItemBuffers::exposure`]).
+    exposures: HashMap<(u32, u16), Box<[u64]>, BuildHasherDefault<KeyHasher>>,
     bytes: usize,
 }
 
@@ -431,7 +433,65 @@ pub struct ItemBuffers {
 /// the allocator's rounding.
 const ENTRY_OVERHEAD: usize = 64;
 
+/// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
+/// reach from outside the cluster, one bit each ([`ItemBuffers::exposure`]).
+pub type Exposure = Box<[u64]>;
+
+/// Whether bit `k` of `exposure` is set.
+pub fn exposed(exposure: &[u64], k: usize) -> bool {
+    exposure
+        .get(k / 64)
+        .is_some_and(|word| word >> (k % 64) & 1 == 1)
+}
+
+/// Packs one flag per patch into an [`Exposure`].
+pub fn pack_exposure(flags: impl ExactSizeIterator<Item = bool>) -> Exposure {
+    let mut words = vec![0u64; flags.len().div_ceil(64)];
+    for (k, flag) in flags.enumerate() {
+        if flag {
+            words[k / 64] |= 1 << (k % 64);
+        }
+    }
+    words.into_boxed_slice()
+}
+
 impl ItemBuffers {
+    /// Whether the exposure of `cluster` along `bucket` is stored.
+    pub fn has_exposure(&self, cluster: u32, bucket: u16) -> bool {
+        self.cache
+            .read()
+            .expect("item buffer cache")
+            .exposures
+            .contains_key(&(cluster, bucket))
+    }
+
+    /// The exposure of `cluster` along `bucket`, when stored: which of its patches a ray from their
+    /// centroid reaches the bucket's nearest link source by, past the cluster's own contents (the
+    /// item buffer answers for those). See `solvers::clustering::expose`.
+    pub fn exposure(&self, cluster: u32, bucket: u16) -> Option<Exposure> {
+        self.cache
+            .read()
+            .expect("item buffer cache")
+            .exposures
+            .get(&(cluster, bucket))
+            .cloned()
+    }
+
+    /// Stores exposures, in order, while they fit in the cache's bytes (past that, sharing goes on
+    /// without them, the same whatever the threads).
+    pub fn store_exposures(&self, exposures: Vec<((u32, u16), Exposure)>) {
+        let mut cache = self.cache.write().expect("item buffer cache");
+        for (key, bits) in exposures {
+            let bytes = ENTRY_OVERHEAD + 8 * bits.len();
+            if cache.bytes + bytes > self.max_bytes {
+                break;
+            }
+            if cache.exposures.insert(key, bits).is_none() {
+                cache.bytes += bytes;
+            }
+        }
+    }
+
     /// An empty cache that holds at most `max_bytes`.
     pub fn new(max_bytes: usize) -> Self {
         ItemBuffers {
