@@ -50,7 +50,11 @@
 //! otherwise count its hiding twice, darkening furniture by ~2% on a chair's own parts), so that `v`
 //! only counts occluders outside them; and, taken along the item buffer's direction bucket once per
 //! sweep ([`ClusterSweep`]), the shares of received irradiance (hidden patches get none) and the
-//! weights of the radiance it sends (hidden patches send none).
+//! weights of the radiance it sends (hidden patches send none). The item buffer sees only the
+//! cluster's contents; what stands outside it between a patch and the source only the link's one
+//! average visibility knew, so the shares of received irradiance go to the patches *exposed* toward
+//! the source (a ray from each patch's centroid, [`expose`]), which keeps every link's power and
+//! moves it to where it arrives.
 //!
 //! Cost: a coupling reads its cluster ends by normal group ([`groups_toward`]: each group's visible
 //! area, cached per (cluster, bucket) with the fractions, [`VisibleAreas`]), so a cluster link costs
