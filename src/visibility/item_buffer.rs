@@ -370,6 +370,9 @@ struct Cache {
     /// Exposure bits per (cluster, bucket) ([`ItemBuffers::exposure`]).
     exposures: HashMap<(u32, u16), Box<[u64]>, BuildHasherDefault<KeyHasher>>,
     bytes: usize,
+    /// Bytes of `exposures`, counted apart: which buffers the threads happened to cache first must
+    /// not decide which exposures fit, since those change the answer.
+    exposure_bytes: usize,
 }
 
 /// One cluster's cached buffers, sorted by direction bucket (two lists rather than one of pairs,
@@ -422,6 +425,10 @@ impl Hasher for KeyHasher {
 /// A buffer's answer is kept with each normal group's visible area beside the patches' fractions
 /// ([`VisibleAreas`]): a link then finds its cluster end's visible projected area in O(groups), where
 /// the bare fractions cost a walk over every patch of the cluster for every link.
+///
+/// Beside the buffers it keeps the clusters' exposures ([`ItemBuffers::exposure`]) in a share of the
+/// bytes of their own: unlike a buffer, an exposure that does not fit changes the answer, so which
+/// ones fit must not depend on which buffers the threads cached first.
 #[derive(Debug)]
 pub struct ItemBuffers {
     cache: RwLock<Cache>,
@@ -432,6 +439,10 @@ pub struct ItemBuffers {
 /// and pointer in its cluster's lists with their spare room, a share of the cluster's map entry, and
 /// the allocator's rounding.
 const ENTRY_OVERHEAD: usize = 64;
+
+/// The cache's bytes kept for exposures are `1 / EXPOSURE_SHARE` of them, the buffers' the rest (a bit
+/// per patch against a buffer's fractions: a small share holds them all).
+const EXPOSURE_SHARE: usize = 8;
 
 /// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
 /// reach from outside the cluster, one bit each ([`ItemBuffers::exposure`]).
@@ -477,17 +488,17 @@ impl ItemBuffers {
             .cloned()
     }
 
-    /// Stores exposures, in order, while they fit in the cache's bytes (past that, sharing goes on
-    /// without them, the same whatever the threads).
+    /// Stores exposures, in order, while they fit in their share of the cache's bytes
+    /// ([`EXPOSURE_SHARE`]), counted apart from the buffers (past that, sharing goes on without them, the same whatever the threads).
     pub fn store_exposures(&self, exposures: Vec<((u32, u16), Exposure)>) {
         let mut cache = self.cache.write().expect("item buffer cache");
         for (key, bits) in exposures {
             let bytes = ENTRY_OVERHEAD + 8 * bits.len();
-            if cache.bytes + bytes > self.max_bytes {
+            if cache.exposure_bytes + bytes > self.max_bytes / EXPOSURE_SHARE {
                 break;
             }
             if cache.exposures.insert(key, bits).is_none() {
-                cache.bytes += bytes;
+                cache.exposure_bytes += bytes;
             }
         }
     }
@@ -522,7 +533,7 @@ impl ItemBuffers {
         let visible = draw(bucket_direction(bucket));
         let mut cache = self.cache.write().expect("item buffer cache");
         let bytes = ENTRY_OVERHEAD + visible.bytes();
-        if cache.bytes + bytes <= self.max_bytes {
+        if cache.bytes + bytes <= self.max_bytes - self.max_bytes / EXPOSURE_SHARE {
             let buffers = cache.clusters.entry(cluster).or_default();
             if let Err(at) = buffers.get(bucket) {
                 buffers.buckets.insert(at, bucket);
