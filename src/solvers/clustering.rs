@@ -50,11 +50,7 @@
 //! otherwise count its hiding twice, darkening furniture by ~2% on a chair's own parts), so that `v`
 //! only counts occluders outside them; and, taken along the item buffer's direction bucket once per
 //! sweep ([`ClusterSweep`]), the shares of received irradiance (hidden patches get none) and the
-//! weights of the radiance it sends (hidden patches send none). The item buffer sees only the
-//! cluster's contents; what stands outside it between a patch and the source only the link's one
-//! average visibility knew, so the shares of received irradiance go to the patches *exposed* toward
-//! the source (a ray from each patch's centroid, [`expose`]), which keeps every link's power and
-//! moves it to where it arrives.
+//! weights of the radiance it sends (hidden patches send none).
 //!
 //! Cost: a coupling reads its cluster ends by normal group ([`groups_toward`]: each group's visible
 //! area, cached per (cluster, bucket) with the fractions, [`VisibleAreas`]), so a cluster link costs
@@ -79,8 +75,7 @@ use crate::geometry::{DVec2, DVec3};
 use crate::hierarchy::clusters::{ClusteringKind, Orientation, VisibleAreas};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
 use crate::visibility::item_buffer::{
-    bucket_direction, direction_bucket, exposed, pack_exposure, visible_fractions, Exposure,
-    ItemBuffers,
+    bucket_direction, direction_bucket, visible_fractions, ItemBuffers,
 };
 use crate::visibility::Visibility;
 use rand::Rng;
@@ -754,18 +749,7 @@ impl ClusterSweep {
                     // Stable: equal buckets keep link order, so the sums below do too.
                     by_bucket.sort_by_key(|&(bucket, _, _)| bucket);
                     for run in by_bucket.chunk_by(|a, b| a.0 == b.0) {
-                        let mut areas =
-                            visible_areas_along(h, &self.contents, buffers, id, run[0].0);
-                        if let Some(exposure) = buffers.exposure(id, run[0].0) {
-                            let exposed_areas: Vec<f64> = areas
-                                .iter()
-                                .enumerate()
-                                .map(|(k, &w)| if exposed(&exposure, k) { w } else { 0.0 })
-                                .collect();
-                            if exposed_areas.iter().sum::<f64>() > 0.0 {
-                                areas = exposed_areas;
-                            }
-                        }
+                        let areas = visible_areas_along(h, &self.contents, buffers, id, run[0].0);
                         if areas.iter().sum::<f64>() > 0.0 {
                             let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
                             let geometry = self.contents.of(h, id);
@@ -836,96 +820,6 @@ impl ClusterSweep {
         }
         out
     }
-}
-
-/// Stores each cluster's *exposure* along the direction buckets of its links that carry light, where
-/// not stored yet: for every patch the bucket's item buffer leaves visible, whether a ray from its
-/// centroid reaches the centre of the bucket's nearest link source, past the cluster's own contents
-/// and the source's (their mutual hiding is the item buffer's, §6.1). [`ClusterSweep`] shares what the
-/// cluster gathers along the bucket among the exposed patches only.
-///
-/// Why: a cluster link's visibility is one average over the whole cluster (rays between random points
-/// of both ends), and the item buffer sees only the cluster's own contents, so the light a link
-/// delivers went to every visible patch by its projected area, whether or not something outside the
-/// cluster stands between it and the source. Where the visibility is partial the exposed patches got
-/// too little and the sheltered ones too much: the classroom's chair backs, at the height of the desks
-/// in front of them, read 60–68% too dark, while a final gather of the same solution at those points
-/// agrees with the reference (BENCHMARKS.md, "Exposure"). Sharing by exposure keeps each link's power
-/// and moves it to where it arrives. The sending side still weighs the patches by visible projected
-/// area alone. A single ray per patch: a partly exposed patch counts as its centroid does.
-pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
-    let Some(buffers) = h.item_buffers.as_deref() else {
-        return;
-    };
-    let Some(root) = h.root_cluster else {
-        return;
-    };
-    let clusters: Vec<ElementId> = (h.patches.len() as ElementId..=root)
-        .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
-        .collect();
-    let exposures: Vec<((u32, u16), Exposure)> = clusters
-        .par_iter()
-        .flat_map_iter(|&id| {
-            let centre = h.center_of(id);
-            // The nearest light-carrying source of each bucket (ties by element id).
-            let mut nearest: Vec<(u16, f64, ElementId)> = h
-                .element(id)
-                .links
-                .iter()
-                .filter(|l| carries_light(l))
-                .map(|l| {
-                    let target = h.center_of(l.source);
-                    (
-                        bucket_toward(h, id, target),
-                        (target - centre).length_squared(),
-                        l.source,
-                    )
-                })
-                .collect();
-            nearest.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
-            nearest.dedup_by_key(|n| n.0);
-            nearest
-                .into_iter()
-                .filter(|&(bucket, _, _)| !buffers.has_exposure(id, bucket))
-                .map(|(bucket, _, source)| {
-                    (
-                        (id, bucket),
-                        exposure(h, visibility, buffers, id, bucket, source),
-                    )
-                })
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    buffers.store_exposures(exposures);
-}
-
-/// [`expose`] for one (cluster, bucket) toward `source`.
-fn exposure(
-    h: &Hierarchy,
-    visibility: &dyn Visibility,
-    buffers: &ItemBuffers,
-    id: ElementId,
-    bucket: u16,
-    source: ElementId,
-) -> Exposure {
-    let along = bucket_direction(bucket);
-    let visible = visible_areas(h, buffers, id, bucket);
-    let target = h.center_of(source);
-    let transparent = |polygon: usize| {
-        h.cluster_holds_polygon(id, polygon)
-            || (h.is_cluster(source) && h.cluster_holds_polygon(source, polygon))
-    };
-    let contents = h.contents(h.cluster(id).expect("a cluster"));
-    pack_exposure(contents.iter().enumerate().map(|(k, &patch)| {
-        let facing = h.patches[patch as usize].normal.dot(along) > 0.0;
-        facing
-            && visible.fraction(k) > 0.0
-            && visibility.transmittance_past(
-                h.element(patch).shape().centroid(),
-                target,
-                &transparent,
-            ) >= 0.5
-    }))
 }
 
 /// Patch entries of the shares [`ClusterSweep`] computes at once when pushing what clusters gather to
