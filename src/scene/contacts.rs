@@ -496,6 +496,7 @@ fn footprints(p: &Face, edges: &[(usize, DVec3, DVec3, f64)]) -> Vec<Vec<Plane>>
 /// Cuts `polygon` along `outlines`; `None` when none crosses its interior.
 fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Option<Pieces> {
     let snap = SNAP * face.diameter;
+    let outlines: Vec<&[Plane]> = outlines.iter().map(Vec::as_slice).collect();
     cut_polygon_by(polygon, face, &outlines, &|piece, planes| {
         split_by_outline(piece, planes, snap)
     })
@@ -513,7 +514,7 @@ type OutlineSplit<'a> = dyn Fn(&[DVec3], &[Plane]) -> Option<Vec<Vec<DVec3>>> + 
 fn cut_polygon_by(
     polygon: &Polygon,
     face: &Face,
-    outlines: &[Vec<Plane>],
+    outlines: &[&[Plane]],
     split: &OutlineSplit<'_>,
 ) -> Option<Pieces> {
     let snap = SNAP * face.diameter;

@@ -9,12 +9,12 @@
 //! Of two overlapping coplanar polygons one keeps the place whole and the other is cut along its
 //! outline (a pinwheel cut, [`split_pinwheel`]: no strips as narrow as a foot across a floor) and
 //! loses, inside it, the sides the first covers: a piece both of whose sides are covered is dropped,
-//! a two-sided piece covered on one side becomes one-sided toward the other. Sides are judged in the cut polygon's frame: a one-sided polygon covers the side its normal
-//! points to, a two-sided one both. Two steps, each by a strict order of the polygons, so that no
-//! place is left without a surface: first among polygons of one material the larger keeps the place
-//! (the window frame strip goes, the sill's face stays whole; office3's desk-top end pieces lose what
-//! lies on the desk top), then among all the smaller does (a decal, a rug; the later one where the
-//! areas are equal). One order for both could not do it: with mixed rules three overlapping polygons
+//! a two-sided piece covered on one side becomes one-sided toward the other. Sides are judged in the
+//! cut polygon's frame: a one-sided polygon covers the side its normal points to, a two-sided one
+//! both. Two steps, each by a strict order of the polygons, so that no place is left without a
+//! surface: first among polygons of one material the larger keeps the place (the window frame strip
+//! goes, the sill's face stays whole; office3's desk-top end pieces lose what lies on the desk top),
+//! then among all the smaller does (a decal, a rug; the later one where the areas are equal). One order for both could not do it: with mixed rules three overlapping polygons
 //! can each lose to another. Coplanar means within [`SNAP`] of the larger diameter (0.1 mm in a 10 m
 //! room): `cube.mgf`'s lamp, 1 cm under its ceiling, is a contact ([`super::split_contacts`]), not an
 //! overlap. Luminaire openings take no part.
@@ -263,7 +263,7 @@ fn covers_of(scene: &Scene, planes: &Planes, i: usize, step: Step) -> Vec<Cover>
 /// `polygon` cut along the outlines of `covers`, each piece with the sides no cover of it leaves; `None`
 /// when no piece lies inside a cover (the outlines only touch it).
 fn uncover(polygon: &Polygon, face: &Face, covers: &[Cover]) -> Option<Uncovered> {
-    let outlines: Vec<Vec<Plane>> = covers.iter().map(|c| c.outline.clone()).collect();
+    let outlines: Vec<&[Plane]> = covers.iter().map(|c| c.outline.as_slice()).collect();
     let snap = SNAP * face.diameter;
     let pinwheel = |piece: &[DVec3], planes: &[Plane]| split_pinwheel(piece, planes, snap);
     let shapes = match cut_polygon_by(polygon, face, &outlines, &pinwheel) {
