@@ -16,7 +16,10 @@
 //!
 //! Inner elements get the largest estimate below them (step 2e). Emission is constant per patch and so
 //! represented exactly by every basis: `δ_e = 0`. Links at clusters have no surface nodes: their
-//! maximum is added to every element below. To these we add the visibility sampling errors of the links
+//! maximum is added to every element below, and to each patch what sharing a cluster's received light
+//! by exposure moved to or from it (`solvers::clustering::moved_by_exposure`: the link's one average
+//! visibility says how much arrives, one ray per patch where; the patch's share is uncertain by as
+//! much as exposure moved it). To these we add the visibility sampling errors of the links
 //! (`LinkCoupling::visibility_error`, Bekaert–Willems §7), which are independent sampling errors of
 //! different links: in quadrature over a level's links (per level), or over all the links of the leaf
 //! and its ancestors (signed).
@@ -32,6 +35,7 @@ use crate::color::Rgb;
 use crate::geometry::cubature::{rule, MAX_POINTS};
 use crate::geometry::{DVec2, Domain};
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::solvers::clustering::moved_by_exposure;
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
@@ -54,10 +58,11 @@ const CONSERVATIVE_ITERATIONS: usize = 100;
 /// Computes the estimate of `kind` and stores it in `Element::error`.
 pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
     let signed = kind == EstimateKind::Signed;
-    let mut errors = estimate(hierarchy, None, signed);
+    let moved = moved_by_exposure(hierarchy);
+    let mut errors = estimate(hierarchy, None, signed, &moved);
     if kind == EstimateKind::Conservative {
         for _ in 0..CONSERVATIVE_ITERATIONS {
-            let next = estimate(hierarchy, Some(&errors), false);
+            let next = estimate(hierarchy, Some(&errors), false, &moved);
             let change = next
                 .iter()
                 .zip(&errors)
@@ -77,13 +82,18 @@ pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
 /// Every element's estimate: on a leaf, over its own and its ancestors' links, the sum of the levels'
 /// maxima over their nodes, or (`signed`) the maximum over its nodes of the levels' signed sum; on an
 /// inner element or cluster, the largest estimate below. `propagated` holds the sources' current
-/// conservative estimates (eq. (11)).
-fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool) -> Vec<f64> {
+/// conservative estimates (eq. (11)); `moved`, per patch root, what sharing by exposure moved
+/// ([`moved_by_exposure`]).
+fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &[Rgb]) -> Vec<f64> {
     let mut errors = vec![0.0; h.elements.len()];
     // What the clusters above each patch root add (their links have no surface nodes).
     let mut above = vec![Above::default(); h.patches.len()];
     if let Some(root) = h.root_cluster {
         clusters_down(h, root, Above::default(), propagated, &mut above);
+        for (above, patch) in above.iter_mut().zip(&h.patches) {
+            let rho = h.reflectance_of(patch.root);
+            *above = above.plus((rho * moved[patch.root as usize]).max_channel(), 0.0);
+        }
     }
     let trees: Vec<Vec<(ElementId, f64)>> = h
         .patches

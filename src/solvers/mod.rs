@@ -304,6 +304,7 @@ fn refine_pass(
         schedule,
     );
     hierarchy.shrink_link_lists();
+    clustering::expose(hierarchy, visibility);
     let direct = first_gather.refine_and_gather(
         hierarchy,
         visibility,

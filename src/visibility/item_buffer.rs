@@ -367,7 +367,12 @@ fn end_centre_to(v: f64, n: usize) -> usize {
 #[derive(Debug, Default)]
 struct Cache {
     clusters: HashMap<u32, ClusterBuffers, BuildHasherDefault<KeyHasher>>,
+    /// Exposure bits per (cluster, bucket) ([`ItemBuffers::exposure`]).
+    exposures: HashMap<(u32, u16), Box<[u64]>, BuildHasherDefault<KeyHasher>>,
     bytes: usize,
+    /// Bytes of `exposures`, counted apart: which buffers the threads happened to cache first must
+    /// not decide which exposures fit, since those change the answer.
+    exposure_bytes: usize,
 }
 
 /// One cluster's cached buffers, sorted by direction bucket (two lists rather than one of pairs,
@@ -420,6 +425,10 @@ impl Hasher for KeyHasher {
 /// A buffer's answer is kept with each normal group's visible area beside the patches' fractions
 /// ([`VisibleAreas`]): a link then finds its cluster end's visible projected area in O(groups), where
 /// the bare fractions cost a walk over every patch of the cluster for every link.
+///
+/// Beside the buffers it keeps the clusters' exposures ([`ItemBuffers::exposure`]) in a share of the
+/// bytes of their own: unlike a buffer, an exposure that does not fit changes the answer, so which
+/// ones fit must not depend on which buffers the threads cached first.
 #[derive(Debug)]
 pub struct ItemBuffers {
     cache: RwLock<Cache>,
@@ -431,7 +440,69 @@ pub struct ItemBuffers {
 /// the allocator's rounding.
 const ENTRY_OVERHEAD: usize = 64;
 
+/// The cache's bytes kept for exposures are `1 / EXPOSURE_SHARE` of them, the buffers' the rest (a bit
+/// per patch against a buffer's fractions: a small share holds them all).
+const EXPOSURE_SHARE: usize = 8;
+
+/// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
+/// reach from outside the cluster, one bit each ([`ItemBuffers::exposure`]).
+pub type Exposure = Box<[u64]>;
+
+/// Whether bit `k` of `exposure` is set.
+pub fn exposed(exposure: &[u64], k: usize) -> bool {
+    exposure
+        .get(k / 64)
+        .is_some_and(|word| word >> (k % 64) & 1 == 1)
+}
+
+/// Packs one flag per patch into an [`Exposure`].
+pub fn pack_exposure(flags: impl ExactSizeIterator<Item = bool>) -> Exposure {
+    let mut words = vec![0u64; flags.len().div_ceil(64)];
+    for (k, flag) in flags.enumerate() {
+        if flag {
+            words[k / 64] |= 1 << (k % 64);
+        }
+    }
+    words.into_boxed_slice()
+}
+
 impl ItemBuffers {
+    /// Whether the exposure of `cluster` along `bucket` is stored.
+    pub fn has_exposure(&self, cluster: u32, bucket: u16) -> bool {
+        self.cache
+            .read()
+            .expect("item buffer cache")
+            .exposures
+            .contains_key(&(cluster, bucket))
+    }
+
+    /// The exposure of `cluster` along `bucket`, when stored: which of its patches a ray from their
+    /// centroid reaches the bucket's nearest link source by, past the cluster's own contents (the
+    /// item buffer answers for those). See `solvers::clustering::expose`.
+    pub fn exposure(&self, cluster: u32, bucket: u16) -> Option<Exposure> {
+        self.cache
+            .read()
+            .expect("item buffer cache")
+            .exposures
+            .get(&(cluster, bucket))
+            .cloned()
+    }
+
+    /// Stores exposures, in order, while they fit in their share of the cache's bytes
+    /// ([`EXPOSURE_SHARE`]), counted apart from the buffers (past that, sharing goes on without them, the same whatever the threads).
+    pub fn store_exposures(&self, exposures: Vec<((u32, u16), Exposure)>) {
+        let mut cache = self.cache.write().expect("item buffer cache");
+        for (key, bits) in exposures {
+            let bytes = ENTRY_OVERHEAD + 8 * bits.len();
+            if cache.exposure_bytes + bytes > self.max_bytes / EXPOSURE_SHARE {
+                break;
+            }
+            if cache.exposures.insert(key, bits).is_none() {
+                cache.exposure_bytes += bytes;
+            }
+        }
+    }
+
     /// An empty cache that holds at most `max_bytes`.
     pub fn new(max_bytes: usize) -> Self {
         ItemBuffers {
@@ -462,7 +533,7 @@ impl ItemBuffers {
         let visible = draw(bucket_direction(bucket));
         let mut cache = self.cache.write().expect("item buffer cache");
         let bytes = ENTRY_OVERHEAD + visible.bytes();
-        if cache.bytes + bytes <= self.max_bytes {
+        if cache.bytes + bytes <= self.max_bytes - self.max_bytes / EXPOSURE_SHARE {
             let buffers = cache.clusters.entry(cluster).or_default();
             if let Err(at) = buffers.get(bucket) {
                 buffers.buckets.insert(at, bucket);
