@@ -930,8 +930,9 @@ pub fn moved_by_exposure(h: &Hierarchy) -> Vec<Rgb> {
     if h.item_buffers.is_none() || h.root_cluster.is_none() {
         return vec![Rgb::BLACK; h.patches.len()];
     }
-    // Without the sweep's table of what clusters send: the links of exposed clusters are few, and
-    // `radiance_toward` computes what it lacks on the spot, the same values.
+    // Without the sweep's table of what clusters send for every (cluster, bucket) in use:
+    // `radiance_toward` computes on the spot what the links met here ask for, the same values
+    // (office3: 0.33 s over the passes against 0.60 s with the table).
     let sweep = ClusterSweep {
         sent: Vec::new(),
         first: Vec::new(),
