@@ -17,10 +17,10 @@
 //! Inner elements get the largest estimate below them (step 2e). Emission is constant per patch and so
 //! represented exactly by every basis: `δ_e = 0`. Links at clusters have no surface nodes (their one
 //! `δ` is taken at the receiver's visibility sample points, `solvers::clustering::couple_cluster`):
-//! their maximum is added to every element below, and to each patch what sharing a cluster's received light
-//! by exposure moved to or from it (`solvers::clustering::moved_by_exposure`: the link's one average
-//! visibility says how much arrives, one ray per patch where; the patch's share is uncertain by as
-//! much as exposure moved it). To these we add the visibility sampling errors of the links
+//! their maximum is added to every element below, and to each patch what sharing a cluster's received
+//! light by exposure moved to or from it (`solvers::clustering::moved_by_exposure`: the link's one
+//! average visibility says how much arrives, one ray per patch where; the patch's share is uncertain
+//! by as much as exposure moved it). To these we add the visibility sampling errors of the links
 //! (`LinkCoupling::visibility_error`, Bekaert–Willems §7), which are independent sampling errors of
 //! different links: in quadrature over a level's links (per level), or over all the links of the leaf
 //! and its ancestors (signed).

@@ -489,7 +489,8 @@ impl ItemBuffers {
     }
 
     /// Stores exposures, in order, while they fit in their share of the cache's bytes
-    /// ([`EXPOSURE_SHARE`]), counted apart from the buffers (past that, sharing goes on without them, the same whatever the threads).
+    /// ([`EXPOSURE_SHARE`]), counted apart from the buffers (past that, sharing goes on without them,
+    /// the same whatever the threads).
     pub fn store_exposures(&self, exposures: Vec<((u32, u16), Exposure)>) {
         let mut cache = self.cache.write().expect("item buffer cache");
         for (key, bits) in exposures {
