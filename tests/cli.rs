@@ -465,8 +465,8 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
 }
 
 /// A reference path traced once (`probe --reference --json`) is compared with later solutions at the
-/// same points (`probe --against`): the same error summary as a fresh reference gives, and a clear
-/// error when the points are not the same.
+/// same points (`probe --against`): the same error summary (and count of points within their
+/// estimated error) as a fresh reference gives, and a clear error when the points are not the same.
 #[test]
 fn probe_compares_with_a_stored_reference_at_the_same_points() {
     let dir = temp_dir("against");
@@ -490,13 +490,17 @@ fn probe_compares_with_a_stored_reference_at_the_same_points() {
     let summary = |out: &std::process::Output| -> Vec<String> {
         String::from_utf8_lossy(&out.stdout)
             .lines()
-            .filter(|l| l.starts_with("# luminance error") || l.starts_with("# |error|"))
+            .filter(|l| {
+                l.starts_with("# luminance error")
+                    || l.starts_with("# |error|")
+                    || l.contains("within their a-posteriori error estimate")
+            })
             .map(str::to_owned)
             .collect()
     };
     assert_eq!(
         summary(&against).len(),
-        2,
+        3,
         "{}",
         String::from_utf8_lossy(&against.stdout)
     );

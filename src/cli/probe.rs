@@ -224,6 +224,21 @@ impl ProbeCommand {
                 results.len()
             )?;
         }
+        if compared {
+            // Whether the error bar holds: the estimate is realistic, not a bound (§4.3).
+            let within = results
+                .iter()
+                .filter(|r| {
+                    r.reference
+                        .is_some_and(|e| within_accuracy(r.radiosity, e, r.estimated_error))
+                })
+                .count();
+            outln!(
+                "# {within} of {} points within their a-posteriori error estimate (largest channel, \
+                 allowing two standard errors of the reference)",
+                results.len()
+            )?;
+        }
         let pairs = results
             .iter()
             .filter_map(|r| r.reference.map(|e| (r.radiosity, e.mean)));
@@ -253,8 +268,8 @@ impl ProbeCommand {
     }
 }
 
-/// Whether the solution is within `accuracy` of the reference in every channel, up to twice the
-/// reference's standard error (its resolution).
+/// Whether the solution is within `accuracy` (the one asked for, or a point's estimated error) of the
+/// reference in every channel, up to twice the reference's standard error (its resolution).
 fn within_accuracy(
     radiosity: crate::color::Rgb,
     reference: crate::reference::Estimate,
