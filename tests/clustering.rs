@@ -309,7 +309,6 @@ fn automatic_clustering_agrees_with_the_exact_count() {
 #[test]
 fn the_estimate_sees_what_a_cluster_link_misplaces_across_its_receiver() {
     use radiosity::color::Rgb;
-    use radiosity::geometry::DVec2;
     use radiosity::scene::Material;
     const PLATES: usize = 10;
     const RHO: f64 = 0.5;
@@ -321,22 +320,9 @@ fn the_estimate_sees_what_a_cluster_link_misplaces_across_its_receiver() {
         shapes.push(common::rectangle([x, x + 0.1, -0.05, 0.05], 0.0, true));
     }
     let scene = common::one_polygon_per_material(materials, shapes.clone(), |_| false);
-    let n = 10;
     let exact: Vec<f64> = shapes[1..]
         .iter()
-        .map(|plate| {
-            let factor: f64 = (0..n * n)
-                .map(|i| {
-                    let uv = DVec2::new((i % n) as f64 + 0.5, (i / n) as f64 + 0.5) / n as f64;
-                    radiosity::geometry::form_factor::point_to_polygon(
-                        plate.point_at(uv),
-                        DVec3::Z,
-                        &shapes[0],
-                    )
-                })
-                .sum();
-            RHO * factor / (n * n) as f64
-        })
+        .map(|plate| RHO * common::mean_factor_up(plate, &shapes[0], 10))
         .collect();
     let (mut covered, mut misplaced, mut total) = (0, 0, 0);
     for seed in 1..=16 {

@@ -21,7 +21,10 @@ use std::f64::consts::SQRT_2;
 
 #[allow(dead_code)] // each test file uses part of the shared module
 mod common;
-use common::{furnace_with_cubes, mean_radiance_of, one_polygon_per_material, quiet, rectangle};
+use common::{
+    furnace_with_cubes, mean_factor_up, mean_radiance_of, one_polygon_per_material, quiet,
+    rectangle,
+};
 
 /// Plates in the stack, their gap, and the height of the square above the lowest plate.
 const PLATES: usize = 8;
@@ -612,18 +615,7 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     let emitter = scene.polygons[0].shape;
     let right = scene.polygons[open].shape;
     // The right plate's exact mean factor from the emitter: the point factor over a 20 × 20 grid.
-    let n = 20;
-    let factor = (0..n * n)
-        .map(|i| {
-            let uv = DVec2::new((i % n) as f64 + 0.5, (i / n) as f64 + 0.5) / n as f64;
-            radiosity::geometry::form_factor::point_to_polygon(
-                right.point_at(uv),
-                DVec3::Z,
-                &emitter,
-            )
-        })
-        .sum::<f64>()
-        / (n * n) as f64;
+    let factor = mean_factor_up(&right, &emitter, 20);
     let analytic = RHO * factor;
     const SEEDS: u64 = 16;
     let (mut open_mean, mut cluster_links) = (0.0, 0);

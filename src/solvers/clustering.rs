@@ -814,15 +814,9 @@ impl ClusterSweep {
                             let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
                             let geometry = self.contents.of(h, id);
                             match (sharing, exposed_areas) {
-                                (Sharing::Pushed, Some(exposed_areas)) => share_by_areas(
-                                    geometry,
-                                    e.area,
-                                    total,
-                                    &exposed_areas,
-                                    &mut share,
-                                ),
-                                (Sharing::Pushed, None) => {
-                                    share_by_areas(geometry, e.area, total, &areas, &mut share)
+                                (Sharing::Pushed, exposed_areas) => {
+                                    let weights = exposed_areas.as_deref().unwrap_or(&areas);
+                                    share_by_areas(geometry, e.area, total, weights, &mut share)
                                 }
                                 (Sharing::MovedByExposure, Some(exposed_areas)) => {
                                     let mut plain = vec![Rgb::BLACK; share.len()];

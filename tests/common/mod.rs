@@ -97,3 +97,20 @@ pub fn one_polygon_per_material(
     }
     scene
 }
+
+/// The exact factor from `emitter` to `receiver` (facing `+z`), averaged over an `n × n` grid of
+/// the receiver: the point-to-polygon factor at each cell centre.
+pub fn mean_factor_up(receiver: &Shape, emitter: &Shape, n: usize) -> f64 {
+    (0..n * n)
+        .map(|i| {
+            let uv = radiosity::geometry::DVec2::new((i % n) as f64 + 0.5, (i / n) as f64 + 0.5)
+                / n as f64;
+            radiosity::geometry::form_factor::point_to_polygon(
+                receiver.point_at(uv),
+                DVec3::Z,
+                emitter,
+            )
+        })
+        .sum::<f64>()
+        / (n * n) as f64
+}
