@@ -683,7 +683,7 @@ impl Contents {
 pub struct ClusterSweep {
     /// (source cluster, direction bucket) in use by links, sorted, with the radiance sent along it;
     /// empty without item buffers.
-    sent: Vec<((ElementId, u16), Rgb)>,
+    sent: Vec<((ElementId, u16), Sent)>,
     /// Where each cluster's entries of `sent` begin, by cluster id less the first cluster's (clusters
     /// are the elements from the first after the patch roots up to the root), and where they end: a
     /// cluster link finds its source's few buckets without a binary search over every key (a cache
@@ -746,7 +746,13 @@ impl ClusterSweep {
 
     /// The (average) radiance that `source` sends toward the point `toward`, to multiply a link's
     /// coupling with (see the type's documentation).
-    pub fn radiance_toward(&self, h: &Hierarchy, source: ElementId, toward: DVec3) -> Rgb {
+    pub fn radiance_toward(
+        &self,
+        h: &Hierarchy,
+        source: ElementId,
+        toward: DVec3,
+        visibility: f32,
+    ) -> Rgb {
         let average = h.average_radiance(source);
         let Some(buffers) = h.item_buffers.as_deref().filter(|_| h.is_cluster(source)) else {
             return average;
@@ -762,6 +768,7 @@ impl ClusterSweep {
             // Not asked for by any link when the sweep began: computed on the spot, the same value.
             Err(_) => sent_along(h, &self.contents, buffers, source, bucket),
         }
+        .through(f64::from(visibility))
     }
 
     /// The irradiance (constant coefficient) pushed from the clusters to element `id`: non-zero at
@@ -783,7 +790,8 @@ impl ClusterSweep {
             let e = h.element(id);
             let centre = h.center_of(id);
             let gathered = |link: &crate::hierarchy::Link| {
-                self.radiance_toward(h, link.source, centre) * link.coupling.form_factor()
+                self.radiance_toward(h, link.source, centre, link.coupling.visibility)
+                    * link.coupling.form_factor()
             };
             let mut share = vec![Rgb::BLACK; h.contents(cluster).len()];
             match (&h.item_buffers, kind) {
@@ -949,8 +957,12 @@ pub fn moved_by_exposure(h: &Hierarchy) -> Vec<Rgb> {
 /// too little and the sheltered ones too much: the classroom's chair backs, at the height of the desks
 /// in front of them, read 60–68% too dark, while a final gather of the same solution at those points
 /// agrees with the reference (BENCHMARKS.md, "Exposure"). Sharing by exposure keeps each link's power
-/// and moves it to where it arrives. The sending side still weighs the patches by visible projected
-/// area alone. A single ray per patch: a partly exposed patch counts as its centroid does.
+/// and moves it to where it arrives.
+///
+/// The same for sending, keyed apart ([`sending_key`]): per (cluster, bucket) that links from the
+/// cluster use, which visible patches a ray from their centroid reaches the bucket's nearest
+/// *receiver* by; a partly blocked link then carries those patches' average radiance ([`Sent`]). A
+/// single ray per patch: a partly exposed patch counts as its centroid does.
 pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let Some(buffers) = h.item_buffers.as_deref() else {
         return;
@@ -961,7 +973,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let clusters: Vec<ElementId> = (h.patches.len() as ElementId..=root)
         .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
         .collect();
-    let exposures: Vec<((u32, u16), Exposure)> = clusters
+    let mut exposures: Vec<((u32, u16), Exposure)> = clusters
         .par_iter()
         .flat_map_iter(|&id| {
             let centre = h.center_of(id);
@@ -994,24 +1006,67 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
                 .collect::<Vec<_>>()
         })
         .collect();
+    // Sending: the nearest receiver of each (source cluster, bucket) of light-carrying links, which
+    // are stored at their receivers.
+    let mut toward: Vec<((ElementId, u16), f64, ElementId)> = (0..h.elements.len() as ElementId)
+        .into_par_iter()
+        .flat_map_iter(|receiver| {
+            h.element(receiver)
+                .links
+                .iter()
+                .filter(|l| h.is_cluster(l.source) && carries_light(l))
+                .map(move |l| {
+                    let (from, to) = (h.center_of(l.source), h.center_of(receiver));
+                    (
+                        (l.source, sending_key(direction_bucket(to - from))),
+                        (to - from).length_squared(),
+                        receiver,
+                    )
+                })
+        })
+        .collect();
+    toward.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+    toward.dedup_by_key(|t| t.0);
+    let sending: Vec<((u32, u16), Exposure)> = toward
+        .into_par_iter()
+        .filter(|&((id, key), _, _)| !buffers.has_exposure(id, key))
+        .map(|((id, key), _, receiver)| {
+            (
+                (id, key),
+                exposure(h, visibility, buffers, id, key & !SENDING, receiver),
+            )
+        })
+        .collect();
+    exposures.extend(sending);
     buffers.store_exposures(exposures);
 }
 
-/// [`expose`] for one (cluster, bucket) toward `source`.
+/// Marks an exposure key as toward the bucket's nearest *receiver* (what the cluster sends) rather than
+/// its nearest source (what it gathers): buckets are below `6 × 8² = 384`.
+const SENDING: u16 = 1 << 15;
+const _: () =
+    assert!(6 * crate::visibility::item_buffer::BUCKETS_PER_FACE.pow(2) < SENDING as usize);
+
+/// The exposure key of what a cluster sends along `bucket` ([`expose`]).
+fn sending_key(bucket: u16) -> u16 {
+    bucket | SENDING
+}
+
+/// [`expose`] for one (cluster, bucket) toward the link end `other` (a source, or a receiver).
 fn exposure(
     h: &Hierarchy,
     visibility: &dyn Visibility,
     buffers: &ItemBuffers,
     id: ElementId,
     bucket: u16,
-    source: ElementId,
+    other: ElementId,
 ) -> Exposure {
     let along = bucket_direction(bucket);
     let visible = visible_areas(h, buffers, id, bucket);
-    let target = h.center_of(source);
+    let target = h.center_of(other);
     let transparent = |polygon: usize| {
         h.cluster_holds_polygon(id, polygon)
-            || (h.is_cluster(source) && h.cluster_holds_polygon(source, polygon))
+            || (h.is_cluster(other) && h.cluster_holds_polygon(other, polygon))
     };
     let contents = h.contents(h.cluster(id).expect("a cluster"));
     pack_exposure(contents.iter().enumerate().map(|(k, &patch)| {
@@ -1043,26 +1098,81 @@ fn bucket_toward(h: &Hierarchy, id: ElementId, toward: DVec3) -> u16 {
     direction_bucket(toward - h.center_of(id))
 }
 
-/// Radiance cluster `id` sends along the centre direction of bucket `bucket`: its patches' radiances
-/// averaged over their visible projected areas along it; its average radiance when nothing faces that
-/// way.
+/// What cluster `id` sends along the centre direction of bucket `bucket`: its patches' radiances
+/// averaged over their visible projected areas along it (its average radiance when nothing faces that
+/// way), and averaged over the exposed ones only ([`expose`], toward the bucket's nearest receiver).
 fn sent_along(
     h: &Hierarchy,
     contents: &Contents,
     buffers: &ItemBuffers,
     id: ElementId,
     bucket: u16,
-) -> Rgb {
+) -> Sent {
     let areas = visible_areas_along(h, contents, buffers, id, bucket);
     let total: f64 = areas.iter().sum();
     if total <= 0.0 {
-        return h.average_radiance(id);
+        return Sent::even(h.average_radiance(id));
     }
-    contents.radiance[Contents::range(h, id)]
+    let radiances = &contents.radiance[Contents::range(h, id)];
+    let average = |weights: &[f64], total: f64| -> Rgb {
+        radiances
+            .iter()
+            .zip(weights)
+            .map(|(&radiance, &w)| radiance * (w / total))
+            .sum()
+    };
+    let visible = average(&areas, total);
+    let Some(exposure) = buffers.exposure(id, sending_key(bucket)) else {
+        return Sent::even(visible);
+    };
+    let exposed_areas: Vec<f64> = areas
         .iter()
-        .zip(&areas)
-        .map(|(&radiance, &w)| radiance * (w / total))
-        .sum()
+        .enumerate()
+        .map(|(k, &w)| if exposed(&exposure, k) { w } else { 0.0 })
+        .collect();
+    let exposed_total: f64 = exposed_areas.iter().sum();
+    if exposed_total <= 0.0 || exposed_total >= total {
+        return Sent::even(visible);
+    }
+    Sent {
+        visible,
+        exposed: average(&exposed_areas, exposed_total),
+    }
+}
+
+/// What a cluster sends along a direction bucket ([`sent_along`]), before a link's visibility picks
+/// the average it carries ([`Sent::through`]).
+#[derive(Clone, Copy, Debug)]
+struct Sent {
+    /// Radiance averaged over the visible projected areas of the patches facing the bucket.
+    visible: Rgb,
+    /// The same over the exposed patches only.
+    exposed: Rgb,
+}
+
+impl Sent {
+    fn even(radiance: Rgb) -> Self {
+        Sent {
+            visible: radiance,
+            exposed: radiance,
+        }
+    }
+
+    /// The radiance a link with visibility `v` carries: the visible average where every ray of the
+    /// link reached (`v = 1`), the exposed average where some were blocked. Why: the link multiplies
+    /// one average radiance by one average visibility, and where what its rays find blocked is the
+    /// bright part of the cluster (the ceiling over a lamp hung 2 cm under it, lit by the lamp's back)
+    /// the product of the averages sends the hidden light into the room (the corridor read 11% too
+    /// bright with clusters; BENCHMARKS.md, "Exposure of what clusters send"). Not a blend by `v`
+    /// between the two: `v` is sampled by 16 rays, and its noise above the exposed share would let the
+    /// hidden light through in proportion to the contrast (tried: the corridor +2.2% instead of 0).
+    fn through(self, v: f64) -> Rgb {
+        if v >= 1.0 {
+            self.visible
+        } else {
+            self.exposed
+        }
+    }
 }
 
 /// Adds irradiance `gathered` at a cluster of area `cluster_area` to its patches' `share`, each by its

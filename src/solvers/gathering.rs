@@ -46,7 +46,8 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
             // A cluster's coupling is constant in the source (column 0 only); with item buffers what
             // it sends this way comes from its visible patches (§6.1).
             let centre = *centre.get_or_insert_with(|| hierarchy.center_of(id));
-            let l = clusters.radiance_toward(hierarchy, link.source, centre);
+            let l =
+                clusters.radiance_toward(hierarchy, link.source, centre, link.coupling.visibility);
             for (alpha, h) in out.iter_mut().enumerate() {
                 *h += l * f64::from(link.coupling.block()[alpha * size]);
             }

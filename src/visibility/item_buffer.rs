@@ -445,7 +445,8 @@ const ENTRY_OVERHEAD: usize = 64;
 const EXPOSURE_SHARE: usize = 8;
 
 /// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
-/// reach from outside the cluster, one bit each ([`ItemBuffers::exposure`]).
+/// reach from outside the cluster, or which reach its link receivers, one bit each
+/// ([`ItemBuffers::exposure`]).
 pub type Exposure = Box<[u64]>;
 
 /// Whether bit `k` of `exposure` is set.
@@ -477,8 +478,9 @@ impl ItemBuffers {
     }
 
     /// The exposure of `cluster` along `bucket`, when stored: which of its patches a ray from their
-    /// centroid reaches the bucket's nearest link source by, past the cluster's own contents (the
-    /// item buffer answers for those). See `solvers::clustering::expose`.
+    /// centroid reaches the bucket's nearest link source by (or, for a sending key, its nearest
+    /// receiver), past the cluster's own contents (the item buffer answers for those). See
+    /// `solvers::clustering::expose`.
     pub fn exposure(&self, cluster: u32, bucket: u16) -> Option<Exposure> {
         self.cache
             .read()
