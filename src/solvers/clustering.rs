@@ -1006,15 +1006,18 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
                 .collect::<Vec<_>>()
         })
         .collect();
-    // Sending: the nearest receiver of each (source cluster, bucket) of light-carrying links, which
-    // are stored at their receivers.
+    // Sending: the nearest receiver of each (source cluster, bucket) of light-carrying links that
+    // some of their rays found blocked (a fully visible link carries the visible average), which are
+    // stored at their receivers.
     let mut toward: Vec<((ElementId, u16), f64, ElementId)> = (0..h.elements.len() as ElementId)
         .into_par_iter()
         .flat_map_iter(|receiver| {
             h.element(receiver)
                 .links
                 .iter()
-                .filter(|l| h.is_cluster(l.source) && carries_light(l))
+                .filter(|l| {
+                    h.is_cluster(l.source) && carries_light(l) && l.coupling.visibility < 1.0
+                })
                 .map(move |l| {
                     let (from, to) = (h.center_of(l.source), h.center_of(receiver));
                     (
