@@ -588,6 +588,56 @@ fn closed_box_lit_by_its_cubes_absorbs_what_they_emit_with_item_buffers() {
     );
 }
 
+/// The square at `HEIGHT` facing down (polygon 0), two small plates side by side on the ground facing
+/// up (polygons 1, the left, and 2, the right) and a black square 2.4 m wide at 0.2 m over the left
+/// plate (polygon 3) that hides the whole square above from it (large, so that the cluster hierarchy
+/// keeps it out of the plates' cluster); the right plate sees all of it past the black square.
+fn plates_under_a_square(square: Material, left: Material, right: Material) -> Scene {
+    one_polygon_per_material(
+        vec![
+            square,
+            left,
+            right,
+            Material::diffuse("black square", Rgb::BLACK),
+        ],
+        [
+            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
+            rectangle([-0.5, -0.3, -0.1, 0.1], 0.0, true),
+            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
+            rectangle([-2.5, -0.1, -1.2, 1.2], 0.2, false),
+        ],
+        |_| false,
+    )
+}
+
+/// Seeds of the cluster links' visibility samples over which the plate tests average.
+const PLATE_SEEDS: u64 = 16;
+
+/// Solves `scene` with item buffers (coarse: the plates and the square stay linked as clusters) for
+/// each of [`PLATE_SEEDS`] seeds, handing each solution to `each` with its seed.
+fn for_each_seed(scene: &Scene, mut each: impl FnMut(u64, &Hierarchy)) {
+    for seed in 1..=PLATE_SEEDS {
+        let settings = SimulationSettings {
+            seed,
+            ..settings(IntraClusterKind::ItemBuffer)
+        };
+        each(
+            seed,
+            &simulate(scene, &settings, &quiet())
+                .expect("solve")
+                .hierarchy,
+        );
+    }
+}
+
+/// Whether element `id` is a cluster holding both plates of [`plates_under_a_square`].
+fn holds_both_plates(h: &Hierarchy, id: ElementId) -> bool {
+    h.cluster(id).is_some_and(|c| {
+        let contents = h.contents(c);
+        contents.contains(&h.patches[1].root) && contents.contains(&h.patches[2].root)
+    })
+}
+
 /// Two small plates side by side on the ground under a unit emitter at `HEIGHT`, the left one under a
 /// black square 2.4 m wide at 0.2 m that hides the whole emitter from it (large, so that the cluster
 /// hierarchy keeps it out of the pair's cluster), the right one in the open: the pair receives through
@@ -602,20 +652,10 @@ fn closed_box_lit_by_its_cubes_absorbs_what_they_emit_with_item_buffers() {
 /// centre-to-centre kernel's 2% (the pair's centre 0.4 m from the plate's at a height of 4 m): 29%.
 #[test]
 fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
-    let scene = one_polygon_per_material(
-        vec![
-            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
-            Material::diffuse("shaded plate", Rgb::splat(RHO)),
-            Material::diffuse("open plate", Rgb::splat(RHO)),
-            Material::diffuse("black square", Rgb::BLACK),
-        ],
-        [
-            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
-            rectangle([-0.5, -0.3, -0.1, 0.1], 0.0, true),
-            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
-            rectangle([-2.5, -0.1, -1.2, 1.2], 0.2, false),
-        ],
-        |_| false,
+    let scene = plates_under_a_square(
+        Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
+        Material::diffuse("shaded plate", Rgb::splat(RHO)),
+        Material::diffuse("open plate", Rgb::splat(RHO)),
     );
     let (shaded, open) = (1, 2);
     let emitter = scene.polygons[0].shape;
@@ -623,29 +663,15 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     // The right plate's exact mean factor from the emitter: the point factor over a 20 × 20 grid.
     let factor = mean_factor_up(&right, &emitter, 20);
     let analytic = RHO * factor;
-    const SEEDS: u64 = 16;
     let (mut open_mean, mut cluster_links) = (0.0, 0);
-    for seed in 1..=SEEDS {
-        let settings = SimulationSettings {
-            seed,
-            ..settings(IntraClusterKind::ItemBuffer)
-        };
-        let solution = simulate(&scene, &settings, &quiet()).expect("solve");
-        let h = &solution.hierarchy;
-        let pair = |id: ElementId| {
-            h.cluster(id).is_some_and(|c| {
-                let contents = h.contents(c);
-                contents.contains(&h.patches[shaded].root)
-                    && contents.contains(&h.patches[open].root)
-            })
-        };
+    for_each_seed(&scene, |seed, h| {
         cluster_links += (0..h.elements.len() as ElementId)
-            .filter(|&id| pair(id) && !h.element(id).links.is_empty())
+            .filter(|&id| holds_both_plates(h, id) && !h.element(id).links.is_empty())
             .count();
         let dark = mean_radiance_of(h, |k| k == shaded);
         assert!(dark <= 1e-12, "seed {seed}: the hidden plate got {dark}");
-        open_mean += mean_radiance_of(h, |k| k == open) / SEEDS as f64;
-    }
+        open_mean += mean_radiance_of(h, |k| k == open) / PLATE_SEEDS as f64;
+    });
     assert!(cluster_links > 0, "no cluster holding both plates receives");
     assert!(
         (open_mean - analytic).abs() <= 0.29 * analytic,
@@ -667,50 +693,26 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
 #[test]
 fn a_cluster_sends_only_the_light_of_the_patches_that_reach_the_receiver() {
     const BRIGHT: f64 = 9.0;
-    let scene = one_polygon_per_material(
-        vec![
-            Material::diffuse("square", Rgb::splat(RHO)),
-            Material::emitter("hidden lamp", Rgb::BLACK, Rgb::splat(BRIGHT)),
-            Material::emitter("open lamp", Rgb::BLACK, Rgb::splat(1.0)),
-            Material::diffuse("black square", Rgb::BLACK),
-        ],
-        [
-            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
-            rectangle([-0.5, -0.3, -0.1, 0.1], 0.0, true),
-            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
-            rectangle([-2.5, -0.1, -1.2, 1.2], 0.2, false),
-        ],
-        |_| false,
+    let scene = plates_under_a_square(
+        Material::diffuse("square", Rgb::splat(RHO)),
+        Material::emitter("hidden lamp", Rgb::BLACK, Rgb::splat(BRIGHT)),
+        Material::emitter("open lamp", Rgb::BLACK, Rgb::splat(1.0)),
     );
-    let (square, hidden, open) = (0, 1, 2);
+    let (square, open) = (0, 2);
     let receiver = scene.polygons[square].shape;
     let lamp = scene.polygons[open].shape;
     // Reciprocity: A_square F_square→lamp = A_lamp F_lamp→square, the latter over a 20 × 20 grid.
     let analytic = RHO * lamp.area() * mean_factor_up(&lamp, &receiver, 20) / receiver.area();
-    const SEEDS: u64 = 16;
     let (mut mean, mut cluster_links) = (0.0, 0);
-    for seed in 1..=SEEDS {
-        let settings = SimulationSettings {
-            seed,
-            ..settings(IntraClusterKind::ItemBuffer)
-        };
-        let solution = simulate(&scene, &settings, &quiet()).expect("solve");
-        let h = &solution.hierarchy;
-        let pair = |id: ElementId| {
-            h.cluster(id).is_some_and(|c| {
-                let contents = h.contents(c);
-                contents.contains(&h.patches[hidden].root)
-                    && contents.contains(&h.patches[open].root)
-            })
-        };
+    for_each_seed(&scene, |_, h| {
         cluster_links += h
             .element(h.patches[square].root)
             .links
             .iter()
-            .filter(|l| pair(l.source))
+            .filter(|l| holds_both_plates(h, l.source))
             .count();
-        mean += mean_radiance_of(h, |k| k == square) / SEEDS as f64;
-    }
+        mean += mean_radiance_of(h, |k| k == square) / PLATE_SEEDS as f64;
+    });
     assert!(
         cluster_links > 0,
         "the square gathers from no cluster holding both lamps"
