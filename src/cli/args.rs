@@ -212,7 +212,9 @@ pub struct SolveArgs {
     #[arg(long, value_enum)]
     pub multires_averaging: Option<Averaging>,
     /// Clustering (Sillion–Drettakis §4): start from one self-link on the root cluster; clusters
-    /// exchange light as isotropic volumes or by the projected area of their patches.
+    /// exchange light as isotropic volumes or by the projected area of their patches (with
+    /// --intra-cluster item-buffer, the default, both by the visible projected area the buffer gives:
+    /// isotropic transfer needs --intra-cluster none).
     #[arg(long, value_enum, default_value_t = ClusteringKind::Auto)]
     pub clustering: ClusteringKind,
     /// How clusters are built: the paper's multi-level grid, a median-split k-d tree or an octree.

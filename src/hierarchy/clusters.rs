@@ -30,7 +30,9 @@ pub enum ClusteringKind {
     /// No clusters: every pair of patches that can interact starts linked (quadratic).
     #[default]
     None,
-    /// Clusters as isotropic volumes (Sillion 1995): mean cosine 1/4.
+    /// Clusters as isotropic volumes (Sillion 1995): mean cosine 1/4. With item buffers a cluster's
+    /// mean cosine is its visible projected area over its area for either kind
+    /// (`solvers::clustering::mean_cosine`), so this differs from `Oriented` only without them.
     Isotropic,
     /// Clusters by the projected area of their patches toward the other end (Smits et al. 1994).
     Oriented,
