@@ -1167,8 +1167,9 @@ impl Sent {
     /// bright part of the cluster (the ceiling over a lamp hung 2 cm under it, lit by the lamp's back)
     /// the product of the averages sends the hidden light into the room (the corridor read 11% too
     /// bright with clusters; BENCHMARKS.md, "Exposure of what clusters send"). Not a blend by `v`
-    /// between the two: `v` is sampled by 16 rays, and its noise above the exposed share would let the
-    /// hidden light through in proportion to the contrast (tried: the corridor +2.2% instead of 0).
+    /// between the two: `v` is sampled by a few rays per receiver node, and its noise above the exposed
+    /// share would let the hidden light through in proportion to the contrast (tried: the corridor
+    /// +2.2% instead of 0).
     fn through(self, v: f64) -> Rgb {
         if v >= 1.0 {
             self.visible
