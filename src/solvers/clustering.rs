@@ -810,14 +810,10 @@ impl ClusterSweep {
                     by_bucket.sort_by_key(|&(bucket, _, _)| bucket);
                     for run in by_bucket.chunk_by(|a, b| a.0 == b.0) {
                         let areas = visible_areas_along(h, &self.contents, buffers, id, run[0].0);
-                        let exposed_areas = buffers.exposure(id, run[0].0).and_then(|exposure| {
-                            let exposed_areas: Vec<f64> = areas
-                                .iter()
-                                .enumerate()
-                                .map(|(k, &w)| if exposed(&exposure, k) { w } else { 0.0 })
-                                .collect();
-                            (exposed_areas.iter().sum::<f64>() > 0.0).then_some(exposed_areas)
-                        });
+                        let exposed_areas = buffers
+                            .exposure(id, run[0].0)
+                            .and_then(|exposure| exposed_only(&areas, &exposure))
+                            .map(|(areas, _)| areas);
                         if areas.iter().sum::<f64>() > 0.0 {
                             let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
                             let geometry = self.contents.of(h, id);
@@ -1019,10 +1015,10 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
                     h.is_cluster(l.source) && carries_light(l) && l.coupling.visibility < 1.0
                 })
                 .map(move |l| {
-                    let (from, to) = (h.center_of(l.source), h.center_of(receiver));
+                    let target = h.center_of(receiver);
                     (
-                        (l.source, sending_key(direction_bucket(to - from))),
-                        (to - from).length_squared(),
+                        (l.source, sending_key(bucket_toward(h, l.source, target))),
+                        (target - h.center_of(l.source)).length_squared(),
                         receiver,
                     )
                 })
@@ -1125,22 +1121,30 @@ fn sent_along(
             .sum()
     };
     let visible = average(&areas, total);
-    let Some(exposure) = buffers.exposure(id, sending_key(bucket)) else {
+    // Where every visible patch is exposed, or none, both averages are the visible one.
+    let Some((exposed_areas, exposed_total)) = buffers
+        .exposure(id, sending_key(bucket))
+        .and_then(|exposure| exposed_only(&areas, &exposure))
+        .filter(|&(_, exposed_total)| exposed_total < total)
+    else {
         return Sent::even(visible);
     };
-    let exposed_areas: Vec<f64> = areas
-        .iter()
-        .enumerate()
-        .map(|(k, &w)| if exposed(&exposure, k) { w } else { 0.0 })
-        .collect();
-    let exposed_total: f64 = exposed_areas.iter().sum();
-    if exposed_total <= 0.0 || exposed_total >= total {
-        return Sent::even(visible);
-    }
     Sent {
         visible,
         exposed: average(&exposed_areas, exposed_total),
     }
+}
+
+/// `areas` with the patches `exposure` leaves unexposed set to 0, and their sum; `None` when no patch
+/// with an area is exposed (sharing and sending then fall back on all visible patches).
+fn exposed_only(areas: &[f64], exposure: &[u64]) -> Option<(Vec<f64>, f64)> {
+    let only: Vec<f64> = areas
+        .iter()
+        .enumerate()
+        .map(|(k, &w)| if exposed(exposure, k) { w } else { 0.0 })
+        .collect();
+    let total: f64 = only.iter().sum();
+    (total > 0.0).then_some((only, total))
 }
 
 /// What a cluster sends along a direction bucket ([`sent_along`]), before a link's visibility picks
