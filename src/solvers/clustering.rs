@@ -459,9 +459,10 @@ pub fn couple_cluster(
             // δ at the cluster's one node: the largest difference, over the receiver's sample
             // points, between the factor the sweep gives the point's patch (a patch shares the
             // cluster's irradiance by its cosine toward the source's centre, all at the centres'
-            // distance; evenly when isotropic) and the point kernel there (its own distance and
-            // cosine), times the link's visibility: what the centre-to-centre transfer misplaces
-            // across the cluster (eq. (6)'s δ_j for a receiver without surface nodes).
+            // distance; evenly when isotropic without item buffers) and the point kernel there (its
+            // own distance and cosine), times the link's visibility: what the centre-to-centre
+            // transfer misplaces across the cluster (eq. (6)'s δ_j for a receiver without surface
+            // nodes).
             let to_source = (s_centre - r_centre) / r2.sqrt();
             let factor = |cosines: f64, distance_squared: f64| {
                 (s.area * cosines.max(0.0) / (PI * distance_squared.max(1e-300))).min(1.0)
@@ -479,7 +480,7 @@ pub fn couple_cluster(
                 .iter()
                 .map(|&(x, n)| {
                     let shared = match kind {
-                        ClusteringKind::Isotropic => open,
+                        ClusteringKind::Isotropic if h.item_buffers.is_none() => open,
                         _ => factor(c_source * n.dot(to_source), r2),
                     };
                     let d = s_centre - x;
@@ -699,6 +700,14 @@ pub struct ClusterSweep {
 impl ClusterSweep {
     /// The exchange for the hierarchy's current radiances and links.
     pub fn new(h: &Hierarchy) -> Self {
+        let mut sweep = Self::sending(h);
+        sweep.pushed = sweep.push_from_clusters(h, Sharing::Pushed);
+        sweep
+    }
+
+    /// What the clusters send along every (cluster, bucket) that links carrying light use, without
+    /// what they push to their patches.
+    fn sending(h: &Hierarchy) -> Self {
         let mut sweep = ClusterSweep {
             sent: Vec::new(),
             first: Vec::new(),
@@ -740,7 +749,6 @@ impl ClusterSweep {
                 })
                 .collect();
         }
-        sweep.pushed = sweep.push_from_clusters(h, Sharing::Pushed);
         sweep
     }
 
@@ -753,22 +761,27 @@ impl ClusterSweep {
         toward: DVec3,
         visibility: f32,
     ) -> Rgb {
-        let average = h.average_radiance(source);
-        let Some(buffers) = h.item_buffers.as_deref().filter(|_| h.is_cluster(source)) else {
-            return average;
-        };
+        self.sent_toward(h, source, toward).map_or_else(
+            || h.average_radiance(source),
+            |sent| sent.through(f64::from(visibility)),
+        )
+    }
+
+    /// What cluster `source` sends toward the point `toward` ([`sent_along`]); `None` for a surface
+    /// source or without item buffers (it sends its average radiance).
+    fn sent_toward(&self, h: &Hierarchy, source: ElementId, toward: DVec3) -> Option<Sent> {
+        let buffers = h.item_buffers.as_deref().filter(|_| h.is_cluster(source))?;
         let bucket = bucket_toward(h, source, toward);
         let index = source as usize - h.patches.len();
         let own = match (self.first.get(index), self.first.get(index + 1)) {
             (Some(&start), Some(&end)) => &self.sent[start as usize..end as usize],
             _ => &[],
         };
-        match own.binary_search_by_key(&bucket, |&((_, b), _)| b) {
+        Some(match own.binary_search_by_key(&bucket, |&((_, b), _)| b) {
             Ok(k) => own[k].1,
             // Not asked for by any link when the sweep began: computed on the spot, the same value.
             Err(_) => sent_along(h, &self.contents, buffers, source, bucket),
-        }
-        .through(f64::from(visibility))
+        })
     }
 
     /// The irradiance (constant coefficient) pushed from the clusters to element `id`: non-zero at
@@ -938,6 +951,34 @@ pub fn moved_by_exposure(h: &Hierarchy) -> Vec<Rgb> {
         contents: Contents::new(h),
     };
     sweep.push_from_clusters(h, Sharing::MovedByExposure)
+}
+
+/// Per element (by id), the irradiance over π that sending by exposure ([`Sent::through`]) moved on
+/// the element's own links with the current radiances: `Σ_l F_l |L_exposed − L_visible|` over its
+/// partly blocked links from clusters. The link's visibility says how much of its source reaches, the
+/// one centroid ray per patch which part; the received light is uncertain by as much as that choice
+/// moved it, which the error estimate adds to the element's level (`solvers::error_estimate`), as it
+/// adds [`moved_by_exposure`] for the receiving side. Zero without item buffers.
+pub fn moved_by_sending(h: &Hierarchy) -> Vec<Rgb> {
+    if h.item_buffers.is_none() || h.root_cluster.is_none() {
+        return vec![Rgb::BLACK; h.elements.len()];
+    }
+    let sweep = ClusterSweep::sending(h);
+    (0..h.elements.len() as ElementId)
+        .into_par_iter()
+        .map(|id| {
+            let centre = h.center_of(id);
+            h.element(id)
+                .links
+                .iter()
+                .filter(|l| carries_light(l) && l.coupling.visibility < 1.0)
+                .filter_map(|l| {
+                    let sent = sweep.sent_toward(h, l.source, centre)?;
+                    Some((sent.exposed - sent.visible).map(f64::abs) * l.coupling.form_factor())
+                })
+                .sum()
+        })
+        .collect()
 }
 
 /// Stores each cluster's *exposure* along the direction buckets of its links that carry light, where

@@ -20,10 +20,14 @@
 //! their maximum is added to every element below, and to each patch what sharing a cluster's received
 //! light by exposure moved to or from it (`solvers::clustering::moved_by_exposure`: the link's one
 //! average visibility says how much arrives, one ray per patch where; the patch's share is uncertain
-//! by as much as exposure moved it). To these we add the visibility sampling errors of the links
-//! (`LinkCoupling::visibility_error`, Bekaert–Willems §7), which are independent sampling errors of
-//! different links: in quadrature over a level's links (per level), or over all the links of the leaf
-//! and its ancestors (signed).
+//! by as much as exposure moved it), and to each element what sending by exposure moved on its own
+//! partly blocked links from clusters (`solvers::clustering::moved_by_sending`: such a link carries
+//! the average of its source's patches that a ray reaches the receiver from, one ray per patch, and
+//! the received light is uncertain by as much as that choice moved it from all visible patches'
+//! average; a link whose rays all reached has neither this term nor a visibility error, a known gap).
+//! To these we add the visibility sampling errors of the links (`LinkCoupling::visibility_error`,
+//! Bekaert–Willems §7), which are independent sampling errors of different links: in quadrature over a
+//! level's links (per level), or over all the links of the leaf and its ancestors (signed).
 //!
 //! * [`EstimateKind::Realistic`]: `ε̃_i = max_k |δ_e(x_k) + Σ_j δ_j(x_k)|` per level, ignoring propagation
 //!   (§4.3: not conservative, but realistic, and what error control uses by default).
@@ -36,7 +40,7 @@ use crate::color::Rgb;
 use crate::geometry::cubature::{rule, MAX_POINTS};
 use crate::geometry::{DVec2, Domain};
 use crate::hierarchy::{ElementId, Hierarchy};
-use crate::solvers::clustering::moved_by_exposure;
+use crate::solvers::clustering::{moved_by_exposure, moved_by_sending};
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
@@ -59,7 +63,10 @@ const CONSERVATIVE_ITERATIONS: usize = 100;
 /// Computes the estimate of `kind` and stores it in `Element::error`.
 pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
     let signed = kind == EstimateKind::Signed;
-    let moved = moved_by_exposure(hierarchy);
+    let moved = Moved {
+        receiving: moved_by_exposure(hierarchy),
+        sending: moved_by_sending(hierarchy),
+    };
     let mut errors = estimate(hierarchy, None, signed, &moved);
     if kind == EstimateKind::Conservative {
         for _ in 0..CONSERVATIVE_ITERATIONS {
@@ -83,17 +90,19 @@ pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
 /// Every element's estimate: on a leaf, over its own and its ancestors' links, the sum of the levels'
 /// maxima over their nodes, or (`signed`) the maximum over its nodes of the levels' signed sum; on an
 /// inner element or cluster, the largest estimate below. `propagated` holds the sources' current
-/// conservative estimates (eq. (11)); `moved`, per patch root, what sharing by exposure moved
-/// ([`moved_by_exposure`]).
-fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &[Rgb]) -> Vec<f64> {
+/// conservative estimates (eq. (11)); `moved`, what exposure moved ([`Moved`]).
+fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &Moved) -> Vec<f64> {
     let mut errors = vec![0.0; h.elements.len()];
     // What the clusters above each patch root add (their links have no surface nodes).
     let mut above = vec![Above::default(); h.patches.len()];
     if let Some(root) = h.root_cluster {
-        clusters_down(h, root, Above::default(), propagated, &mut above);
+        clusters_down(h, root, Above::default(), propagated, moved, &mut above);
         for (above, patch) in above.iter_mut().zip(&h.patches) {
             let rho = h.reflectance_of(patch.root);
-            *above = above.plus((rho * moved[patch.root as usize]).max_channel(), 0.0);
+            *above = above.plus(
+                (rho * moved.receiving[patch.root as usize]).max_channel(),
+                0.0,
+            );
         }
     }
     let trees: Vec<Vec<(ElementId, f64)>> = h
@@ -106,6 +115,7 @@ fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &[Rg
                 h,
                 propagated,
                 signed,
+                moved,
             };
             walk.visit(patch.root, NodeSums::default(), above, &mut out);
             out
@@ -142,6 +152,23 @@ impl Above {
     }
 }
 
+/// What sending and sharing by exposure moved (`solvers::clustering`), the uncertainty of the choices
+/// one centroid ray per patch makes.
+struct Moved {
+    /// Per patch root, the irradiance over π that sharing by exposure moved ([`moved_by_exposure`]).
+    receiving: Vec<Rgb>,
+    /// Per element, the irradiance over π that sending by exposure moved on its own links
+    /// ([`moved_by_sending`]).
+    sending: Vec<Rgb>,
+}
+
+impl Moved {
+    /// What sending by exposure moved on element `id`'s links, times its reflectance (largest channel).
+    fn sent_to(&self, h: &Hierarchy, id: ElementId) -> f64 {
+        (h.reflectance_of(id) * self.sending[id as usize]).max_channel()
+    }
+}
+
 /// Walks the cluster tree from `id`, leaving in `above[patch]` what the clusters on the way to each
 /// patch root add.
 fn clusters_down(
@@ -149,6 +176,7 @@ fn clusters_down(
     id: ElementId,
     above: Above,
     propagated: Option<&[f64]>,
+    moved: &Moved,
     out: &mut [Above],
 ) {
     if !h.is_cluster(id) {
@@ -156,9 +184,12 @@ fn clusters_down(
         return;
     }
     let own = own_sums(h, id, propagated).map_or(0.0, |s| s.maximum());
-    let here = above.plus(own + visibility_squared(h, id).sqrt(), 0.0);
+    let here = above.plus(
+        own + visibility_squared(h, id).sqrt() + moved.sent_to(h, id),
+        0.0,
+    );
     for &child in &h.element(id).children {
-        clusters_down(h, child, here, propagated, out);
+        clusters_down(h, child, here, propagated, moved, out);
     }
 }
 
@@ -280,6 +311,7 @@ struct TreeWalk<'a> {
     h: &'a Hierarchy,
     propagated: Option<&'a [f64]>,
     signed: bool,
+    moved: &'a Moved,
 }
 
 impl TreeWalk<'_> {
@@ -299,7 +331,8 @@ impl TreeWalk<'_> {
             above.plus(0.0, visibility)
         } else {
             above.plus(visibility.sqrt(), 0.0)
-        };
+        }
+        .plus(self.moved.sent_to(h, id), 0.0);
         let mut sums = inherited;
         if let Some(own) = own_sums(h, id, self.propagated) {
             let placed = sums.signed.is_empty() || sums.signed.len() == own.signed.len();
