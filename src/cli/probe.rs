@@ -263,6 +263,14 @@ impl ProbeCommand {
                 100.0 * e.absolute_p95,
                 100.0 * e.absolute_max
             )?;
+            if e.black_points > 0 {
+                outln!(
+                    "# {} points the reference finds black, left out above: the solution's largest \
+                     luminance there is {:.2}% of the mean reference",
+                    e.black_points,
+                    100.0 * e.black_largest
+                )?;
+            }
         }
         Ok(())
     }

@@ -8,6 +8,11 @@
 //! `|L − L_ref| / mean(L_ref)`, count every point on one scale (the scale of `--accuracy P%`). The
 //! reference's own noise is not removed: with its standard error `σ` a point's error is
 //! overestimated by about `σ²/2|e|`, negligible once `σ` is well below the errors reported.
+//!
+//! Which points count is decided by the reference alone, so that two solutions compared at the same
+//! points are measured on the same set and the same mean: points the reference finds black (the back
+//! of a two-sided wall, where no path arrives) are left out of both views, and what a solution puts
+//! there (light leaking where none arrives) is reported apart ([`PointErrors::black_points`]).
 
 use crate::color::Rgb;
 
@@ -17,8 +22,12 @@ pub const LIT_FRACTION: f64 = 0.1;
 /// Error statistics over probe points (fractions, not percent).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct PointErrors {
-    /// Points compared (those where both values are zero, e.g. black back faces, are left out).
+    /// Points compared: those whose reference is not black.
     pub points: usize,
+    /// Points whose reference is black (luminance 0), left out of everything else here, and the
+    /// largest solution luminance at them relative to the mean reference (a leak; 0 without one).
+    pub black_points: usize,
+    pub black_largest: f64,
     /// Mean reference luminance over the points compared.
     pub mean_reference: f64,
     /// Points whose reference exceeds [`LIT_FRACTION`] of the mean.
@@ -36,13 +45,12 @@ pub struct PointErrors {
     pub absolute_max: f64,
 }
 
-/// The statistics of `(solution, reference)` radiance pairs; `None` if no point has light in it.
+/// The statistics of `(solution, reference)` radiance pairs; `None` if the reference finds no light.
 pub fn point_errors(pairs: impl IntoIterator<Item = (Rgb, Rgb)>) -> Option<PointErrors> {
-    let values: Vec<(f64, f64)> = pairs
+    let (values, black): (Vec<(f64, f64)>, Vec<(f64, f64)>) = pairs
         .into_iter()
         .map(|(solution, reference)| (solution.luminance(), reference.luminance()))
-        .filter(|&(l, r)| l != 0.0 || r != 0.0)
-        .collect();
+        .partition(|&(_, r)| r != 0.0);
     let mean_reference = values.iter().map(|&(_, r)| r).sum::<f64>() / values.len() as f64;
     if values.is_empty() || mean_reference <= 0.0 {
         return None;
@@ -61,6 +69,8 @@ pub fn point_errors(pairs: impl IntoIterator<Item = (Rgb, Rgb)>) -> Option<Point
     let rms = |v: &[f64]| mean(&v.iter().map(|e| e * e).collect::<Vec<_>>()).sqrt();
     Some(PointErrors {
         points: values.len(),
+        black_points: black.len(),
+        black_largest: black.iter().map(|&(l, _)| l.abs()).fold(0.0, f64::max) / mean_reference,
         mean_reference,
         lit_points: relative.len(),
         relative_rms: rms(&relative),
@@ -100,8 +110,9 @@ mod tests {
             .collect();
         pairs.push((grey(0.1), grey(0.05)));
         pairs.push((grey(0.0), grey(0.0)));
-        let e = point_errors(pairs).expect("lit points");
-        assert_eq!((e.points, e.lit_points), (10, 9));
+        let e = point_errors(pairs.clone()).expect("lit points");
+        assert_eq!((e.points, e.lit_points, e.black_points), (10, 9, 1));
+        assert_eq!(e.black_largest, 0.0);
         assert!((e.mean_reference - 0.905).abs() < 1e-12);
         assert!((e.relative_median - 0.05).abs() < 1e-12);
         assert!((e.relative_p90 - 0.09).abs() < 1e-12);
@@ -112,5 +123,16 @@ mod tests {
         // The largest error on the mean's scale is the +9% point's (the dark point is off by 0.05).
         assert!((e.absolute_max - 0.09 / 0.905).abs() < 1e-12);
         assert!(point_errors([(grey(0.0), grey(0.0))]).is_none());
+        // A solution with light where the reference has none is measured on the same points and
+        // mean as one without; the leak is reported apart, on the mean's scale.
+        let last = pairs.len() - 1;
+        pairs[last].0 = grey(0.181);
+        let leaking = point_errors(pairs).expect("lit points");
+        assert_eq!(
+            (leaking.points, leaking.mean_reference, leaking.absolute_rms),
+            (e.points, e.mean_reference, e.absolute_rms)
+        );
+        assert_eq!(leaking.black_points, 1);
+        assert!((leaking.black_largest - 0.181 / 0.905).abs() < 1e-12);
     }
 }
