@@ -414,6 +414,29 @@ pub fn simulate(
 pub type StepObserver<'a> =
     dyn FnMut(&StepReport, &Hierarchy, &dyn Visibility) -> anyhow::Result<()> + 'a;
 
+/// Unclustered initial links above which `--clustering auto` clusters whatever the memory budget.
+/// Measured (BENCHMARKS.md, "`--clustering auto` without the machine's memory"): the classroom's 39.9M
+/// initial links take 397 s and 3.0 GB unclustered against 18 s and 173 MB clustered. Before this
+/// bound the choice followed the budget alone, which `--max-memory`'s default takes from the machine's
+/// memory: a machine with more memory solved the classroom without clusters.
+pub const AUTO_CLUSTERING_LINKS: usize = 4_000_000;
+
+/// The same bound under the power oracle (the default), past which clusters cost no accuracy and
+/// save time (BENCHMARKS.md, "`--clustering auto` from ten thousand links"): at the seen points of six
+/// scenes clustered solves are as accurate or more (the corridor 4.7% → 3.4% RMS) and faster from
+/// floor_gloss's 19k initial links up (0.24 → 0.12 s; office2's 214k 4.3 → 3.7 s), equal at cube.mgf's
+/// 5k and below. Under error control clusters held its promise on office2 but took 16–25% more time
+/// and memory there, so the other oracles keep [`AUTO_CLUSTERING_LINKS`].
+pub const AUTO_CLUSTERING_LINKS_POWER: usize = 10_000;
+
+/// The bound on unclustered initial links past which `--clustering auto` clusters with `oracle`.
+pub fn auto_clustering_links(oracle: OracleKind) -> usize {
+    match oracle {
+        OracleKind::Power => AUTO_CLUSTERING_LINKS_POWER,
+        _ => AUTO_CLUSTERING_LINKS,
+    }
+}
+
 /// [`simulate`], with `on_step` called after every step of progressive multi-gridding.
 pub fn simulate_observed(
     scene: &Scene,
@@ -437,7 +460,10 @@ pub fn simulate_observed(
             let max_links = deterministic_settings(settings, &hierarchy, &budget)
                 .refine
                 .max_links;
-            crate::solvers::refine::automatic_clustering(&hierarchy, max_links)
+            crate::solvers::refine::automatic_clustering(
+                &hierarchy,
+                max_links.min(auto_clustering_links(settings.oracle)),
+            )
         }
         ClusteringKind::Auto => ClusteringKind::None,
         chosen => chosen,

@@ -253,45 +253,101 @@ fn clustered_solution_is_identical_for_any_thread_count() {
 
 /// `--clustering auto` estimates the unclustered initial links from a sample of patch rows and counts
 /// exactly only near the budget: its choice must be the one the exact count gives, for budgets from far
-/// below to far above the count (a generated hall of 3k polygons, 6k patches), and past
-/// [`AUTO_CLUSTERING_LINKS`] it clusters whatever the budget (which follows the machine's memory).
+/// below to far above the count (a generated hall of 3k polygons, 6k patches, and floor_gloss.mgf,
+/// whose two-sided polygons' two patches are consecutive: sampling every other row saw one side of
+/// each and estimated its 19k links as none). The bound the pipeline
+/// adds: past [`AUTO_CLUSTERING_LINKS`] it clusters under any oracle whatever the budget (which follows
+/// the machine's memory), and under the power oracle past [`AUTO_CLUSTERING_LINKS_POWER`], which the
+/// hall's count passes and the Cornell box's does not.
 #[test]
 fn automatic_clustering_agrees_with_the_exact_count() {
-    use radiosity::scene::generators::BoxHall;
-    use radiosity::solvers::refine::{
-        automatic_clustering, initial_link_count, AUTO_CLUSTERING_LINKS,
+    use radiosity::pipeline::{
+        auto_clustering_links, OracleKind, AUTO_CLUSTERING_LINKS, AUTO_CLUSTERING_LINKS_POWER,
     };
+    use radiosity::scene::generators::BoxHall;
+    use radiosity::solvers::refine::{automatic_clustering, initial_link_count};
+    let floor_gloss = radiosity::scene::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/scenes/renderpark/floor_gloss.mgf"),
+        &radiosity::scene::LoadOptions::default(),
+    )
+    .expect("floor_gloss.mgf");
+    for (name, scene) in [
+        ("hall", BoxHall::with_polygons(3000).scene()),
+        ("floor_gloss", floor_gloss),
+    ] {
+        let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
+        let total = initial_link_count(&h, usize::MAX);
+        assert!(total > AUTO_CLUSTERING_LINKS_POWER, "{name}: {total}");
+        for budget in [
+            total / 10,
+            total / 3,
+            total - 1,
+            total,
+            total * 3,
+            total * 10,
+            usize::MAX,
+        ] {
+            let exact = if total > budget {
+                ClusteringKind::Oriented
+            } else {
+                ClusteringKind::None
+            };
+            assert_eq!(
+                automatic_clustering(&h, budget),
+                exact,
+                "{name}: budget {budget}, count {total}"
+            );
+        }
+    }
     let scene = BoxHall::with_polygons(3000).scene();
     let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
-    let total = initial_link_count(&h, usize::MAX);
-    assert!(total > 0);
-    for budget in [
-        total / 10,
-        total / 3,
-        total - 1,
-        total,
-        total * 3,
-        total * 10,
-        usize::MAX,
-    ] {
-        let exact = if total > budget.min(AUTO_CLUSTERING_LINKS) {
-            ClusteringKind::Oriented
-        } else {
-            ClusteringKind::None
-        };
-        assert_eq!(
-            automatic_clustering(&h, budget),
-            exact,
-            "budget {budget}, count {total}"
-        );
-    }
-    // A hall whose initial links pass the bound: clustered even with no budget at all.
+    assert_eq!(
+        automatic_clustering(&h, auto_clustering_links(OracleKind::Power)),
+        ClusteringKind::Oriented
+    );
+    let cornell = Hierarchy::new(&cornell_box(), radiosity::bases::BasisKind::Linear);
+    assert!(initial_link_count(&cornell, usize::MAX) <= AUTO_CLUSTERING_LINKS_POWER);
+    assert_eq!(
+        automatic_clustering(&cornell, auto_clustering_links(OracleKind::Power)),
+        ClusteringKind::None
+    );
+    // A hall whose initial links pass the bound: clustered under every oracle.
     let scene = BoxHall::with_polygons(7000).scene();
     let h = Hierarchy::new(&scene, radiosity::bases::BasisKind::Linear);
     assert!(initial_link_count(&h, AUTO_CLUSTERING_LINKS) > AUTO_CLUSTERING_LINKS);
-    assert_eq!(
-        automatic_clustering(&h, usize::MAX),
-        ClusteringKind::Oriented
+    for oracle in [
+        OracleKind::Power,
+        OracleKind::Smoothness,
+        OracleKind::MutualInformation,
+        OracleKind::Error,
+    ] {
+        assert_eq!(
+            automatic_clustering(&h, auto_clustering_links(oracle)),
+            ClusteringKind::Oriented
+        );
+    }
+}
+
+/// The pipeline resolves `--clustering auto` with the oracle's bound: a hall over ten thousand initial
+/// links solves clustered under the power oracle, the Cornell box unclustered.
+#[test]
+fn automatic_clustering_under_the_power_oracle_clusters_past_ten_thousand_links() {
+    use radiosity::scene::generators::BoxHall;
+    let settings = SimulationSettings {
+        clustering: ClusteringKind::Auto,
+        max_passes: 1,
+        ..Default::default()
+    };
+    let hall = simulate(&BoxHall::with_polygons(3000).scene(), &settings, &quiet()).expect("hall");
+    assert!(
+        hall.hierarchy.root_cluster.is_some(),
+        "the hall was not clustered"
+    );
+    let cornell = simulate(&cornell_box(), &settings, &quiet()).expect("Cornell box");
+    assert!(
+        cornell.hierarchy.root_cluster.is_none(),
+        "the Cornell box was clustered"
     );
 }
 

@@ -36,10 +36,9 @@ pub enum ClusteringKind {
     Isotropic,
     /// Clusters by the projected area of their patches toward the other end (Smits et al. 1994).
     Oriented,
-    /// Oriented where the unclustered start (every facing pair of patches linked) would exceed 4M
-    /// links or the link budget of `--max-memory`, none otherwise (scenes up to the corridor's size
-    /// keep their unclustered solution; BENCHMARKS.md, "`--clustering auto` without the machine's
-    /// memory").
+    /// Oriented where the unclustered start (every facing pair of patches linked) would exceed the
+    /// link budget of `--max-memory` or a bound: 10k links under the power oracle (the default), 4M
+    /// under the others; none otherwise (`pipeline::auto_clustering_links`).
     Auto,
 }
 

@@ -47,7 +47,7 @@ pub struct PointErrors {
 
 /// The statistics of `(solution, reference)` radiance pairs; `None` if the reference finds no light.
 pub fn point_errors(pairs: impl IntoIterator<Item = (Rgb, Rgb)>) -> Option<PointErrors> {
-    let (values, black): (Vec<(f64, f64)>, Vec<(f64, f64)>) = pairs
+    let (values, black): (Vec<_>, Vec<_>) = pairs
         .into_iter()
         .map(|(solution, reference)| (solution.luminance(), reference.luminance()))
         .partition(|&(_, r)| r != 0.0);

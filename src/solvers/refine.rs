@@ -10,7 +10,7 @@ use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{
     couple_with_prior, shaft_test, visibility_error, visibility_spread, CouplingSettings,
 };
-use super::link_rng;
+use super::{link_rng, splitmix64};
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling, OracleFactor};
@@ -337,44 +337,40 @@ pub fn initial_link_count(hierarchy: &Hierarchy, limit: usize) -> usize {
 /// Rows of the patch-pair matrix [`automatic_clustering`] samples before counting exactly.
 const AUTO_CLUSTERING_SAMPLE_ROWS: usize = 256;
 
-/// Unclustered initial links above which `--clustering auto` clusters whatever the memory budget.
-/// Measured (BENCHMARKS.md, "`--clustering auto` without the machine's memory"): the classroom's 39.9M
-/// initial links take 397 s and 3.0 GB unclustered against 18 s and 173 MB clustered, while the
-/// corridor's 426k take 5.0 s unclustered against 3.8 s clustered but are twice as accurate (5.8%
-/// against 12.1% RMS at 187 probe points). Before this bound the choice followed the budget alone, which `--max-memory`'s
-/// default takes from the machine's memory: a machine with more memory solved the classroom without
-/// clusters.
-pub const AUTO_CLUSTERING_LINKS: usize = 4_000_000;
-
-/// What `--clustering auto` means for `hierarchy` (before clusters are added): oriented clusters when
-/// the unclustered initial links would exceed [`AUTO_CLUSTERING_LINKS`] or the link budget
-/// `max_links`, none otherwise.
+/// Oriented clusters when the unclustered initial links of `hierarchy` (before clusters are added)
+/// would exceed `max_links`, none otherwise: `--clustering auto`, whose bound the pipeline chooses
+/// (`pipeline::auto_clustering_links`).
 pub fn automatic_clustering(hierarchy: &Hierarchy, max_links: usize) -> ClusteringKind {
-    let max_links = max_links.min(AUTO_CLUSTERING_LINKS);
     let n = hierarchy.patches.len();
     if n.saturating_mul(n) <= max_links {
         return ClusteringKind::None;
     }
     // A deterministic sample of whole rows decides clear cases: office3's 25k patches would otherwise
     // cost 6·10⁸ pair tests (40% of its first 150 s) before refinement starts. Only estimates within a
-    // factor 2 of the budget are settled by the exact count.
-    let stride = n.div_ceil(AUTO_CLUSTERING_SAMPLE_ROWS);
+    // factor 2 of the budget are settled by the exact count. The rows are picked by a hash of their
+    // index, not every stride-th: a two-sided polygon's patches are consecutive, and an even stride
+    // sampled only one side of each (floor_gloss's 19k initial links were estimated as none).
+    let stride = n.div_ceil(AUTO_CLUSTERING_SAMPLE_ROWS) as u64;
     let facings = patch_facings(hierarchy);
-    let sampled: usize = (0..n)
-        .into_par_iter()
-        .step_by(stride)
-        .map(|i| {
+    let rows: Vec<usize> = (0..n)
+        .filter(|&i| splitmix64(i as u64).is_multiple_of(stride))
+        .collect();
+    let sampled: usize = rows
+        .par_iter()
+        .map(|&i| {
             (0..n)
                 .filter(|&j| initially_linked(hierarchy, &facings, i, j))
                 .count()
         })
         .sum();
-    let estimate = sampled.saturating_mul(stride);
-    if estimate > max_links.saturating_mul(2) {
-        return ClusteringKind::Oriented;
-    }
-    if estimate < max_links / 2 {
-        return ClusteringKind::None;
+    if !rows.is_empty() {
+        let estimate = sampled as u128 * n as u128 / rows.len() as u128;
+        if estimate > 2 * max_links as u128 {
+            return ClusteringKind::Oriented;
+        }
+        if estimate < max_links as u128 / 2 {
+            return ClusteringKind::None;
+        }
     }
     if initial_link_count(hierarchy, max_links) > max_links {
         ClusteringKind::Oriented
