@@ -18,6 +18,7 @@ pub mod oracles;
 pub mod output;
 pub mod pipeline;
 pub mod progress;
+pub mod random;
 pub mod reference;
 pub mod scene;
 pub mod solvers;

@@ -40,6 +40,7 @@ use crate::geometry::{DVec2, DVec3, Ray, Shape};
 use crate::output::camera::Camera;
 use crate::output::image::Image;
 use crate::progress::Progress;
+use crate::random::splitmix64;
 use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
 use crate::visibility::{Hit, Visibility};
@@ -693,13 +694,6 @@ fn stream(seed: u64, index: u64) -> Pcg64Mcg {
 /// The seed of sub-stream `index` of `seed`.
 pub(crate) fn derive_seed(seed: u64, index: u64) -> u64 {
     splitmix64(splitmix64(seed) ^ index)
-}
-
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// Veach's power heuristic (β = 2): the weight of the strategy with pdf `a` against one with pdf `b`.

@@ -17,6 +17,7 @@ use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::RefinementOracle;
 use crate::progress::Progress;
+use crate::random::splitmix64;
 use crate::visibility::Visibility;
 use error_estimate::{estimate_errors, summarize, ErrorSummary, EstimateKind};
 use gathering::GatheringSolver;
@@ -34,14 +35,6 @@ use std::time::Instant;
 pub fn link_rng(seed: u64, receiver: ElementId, source: ElementId, stream: u64) -> Pcg64Mcg {
     let key = ((receiver as u64) << 32) | source as u64;
     Pcg64Mcg::seed_from_u64(splitmix64(seed ^ splitmix64(key ^ splitmix64(stream))))
-}
-
-/// SplitMix64 finaliser: decorrelates nearby integers into seeds.
-pub fn splitmix64(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
 }
 
 /// Parameters of a hierarchical solve.

@@ -10,11 +10,12 @@ use super::clustering::{cluster_can_interact, transport_bound};
 use super::coupling::{
     couple_with_prior, shaft_test, visibility_error, visibility_spread, CouplingSettings,
 };
-use super::{link_rng, splitmix64};
+use super::link_rng;
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling, OracleFactor};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
+use crate::random::splitmix64;
 use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 use rayon::prelude::*;

@@ -31,12 +31,13 @@
 //! count.
 
 use super::push_pull::{push_pull, PatchUpdate};
-use super::{emitted_power, link_rng, splitmix64, SolveReport};
+use super::{emitted_power, link_rng, SolveReport};
 use crate::color::Rgb;
 use crate::geometry::{DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::{Decision, OracleContext, RefinementOracle};
 use crate::progress::Progress;
+use crate::random::splitmix64;
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
