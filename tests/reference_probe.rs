@@ -256,6 +256,57 @@ fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
     }
 }
 
+/// A thin object's two one-sided faces back to back in one plane (`--one-sided` makes the classroom's
+/// so): a probe facing up lies on the upward face, whatever the order of the polygons. The locating
+/// ray meets both at the same distance, and took the downward face's black back by chance, which
+/// failed `probe --seen 300 --one-sided` on the classroom ("the point is on the back of one-sided
+/// polygon").
+#[test]
+fn a_probe_between_back_to_back_faces_takes_the_side_that_radiates() {
+    use radiosity::color::Rgb;
+    use radiosity::geometry::Shape;
+    use radiosity::reference::probe::{find_surface, ProbePoint};
+    use radiosity::scene::{Material, Object, Polygon, Scene};
+    let p = |x: f64, y: f64| DVec3::new(x, y, 0.0);
+    let up = Shape::Quad([p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)]);
+    let down = Shape::Quad([p(0.0, 0.0), p(0.0, 1.0), p(1.0, 1.0), p(1.0, 0.0)]);
+    assert!(up.normal().z > 0.0 && down.normal().z < 0.0);
+    for (probe_normal, side) in [(DVec3::Z, up), (-DVec3::Z, down)] {
+        for order in [[up, down], [down, up]] {
+            let scene = Scene {
+                materials: vec![Material::diffuse("grey", Rgb::splat(0.5))],
+                objects: vec![Object {
+                    name: "plate".into(),
+                }],
+                polygons: order
+                    .iter()
+                    .map(|&shape| Polygon {
+                        shape,
+                        material: 0,
+                        object: 0,
+                        two_sided: false,
+                    })
+                    .collect(),
+                ..Default::default()
+            };
+            let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+            let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
+            // Points over the whole plate, so that the ray's tie falls both ways.
+            for k in 0..25 {
+                let probe = ProbePoint {
+                    line: k + 1,
+                    point: p(0.1 + 0.2 * (k % 5) as f64, 0.1 + 0.2 * (k / 5) as f64),
+                    normal: probe_normal,
+                };
+                let found = find_surface(&scene, &visibility, &probe)
+                    .unwrap_or_else(|e| panic!("point {k}, normal {probe_normal}: {e}"));
+                assert!(found.front, "point {k}: on a back");
+                assert_eq!(scene.polygons[found.polygon].shape, side);
+            }
+        }
+    }
+}
+
 /// Points the Cornell box's camera sees: seeded, on non-emitting polygons facing the eye, and nothing
 /// between the eye and each of them.
 #[test]

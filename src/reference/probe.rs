@@ -200,8 +200,9 @@ const NORMAL_AGREEMENT: f64 = 0.5;
 /// Finds the polygon side a probe lies on: first by a ray from `point + δ normal` back along `-normal`
 /// (δ = 10⁻³ of the scene diagonal), then, for points on a crack between polygons or where another
 /// surface crosses that ray with a normal that does not agree, the nearest polygon whose plane is within
-/// δ, whose normal agrees and which contains the point's projection. Fails for points
-/// on no surface and for the black back of one-sided polygons.
+/// δ, whose normal agrees and which contains the point's projection, a radiating side taken over the
+/// black back of a one-sided polygon. Fails for points on no surface and for the black back of
+/// one-sided polygons.
 pub fn find_surface(
     scene: &Scene,
     visibility: &dyn Visibility,
@@ -276,7 +277,10 @@ fn nearest_containing(
         let shape = &polygon.shape;
         let normal = shape.normal();
         let cos = normal.dot(probe.normal);
-        if cos.abs() < NORMAL_AGREEMENT {
+        // The black back of a one-sided polygon is never the side a probe means when another
+        // polygon's radiating side lies in the same place (a thin object's two one-sided faces back to
+        // back): the locating ray settles such a tie by chance.
+        if cos.abs() < NORMAL_AGREEMENT || (cos < 0.0 && !polygon.two_sided) {
             continue;
         }
         let distance = normal.dot(probe.point - shape.vertices()[0]);
