@@ -256,11 +256,9 @@ fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
     }
 }
 
-/// A thin object's two one-sided faces back to back in one plane (`--one-sided` makes the classroom's
-/// so): a probe facing up lies on the upward face, whatever the order of the polygons. The locating
-/// ray meets both at the same distance, and took the downward face's black back by chance, which
-/// failed `probe --seen 300 --one-sided` on the classroom ("the point is on the back of one-sided
-/// polygon").
+/// A thin object's two one-sided faces back to back in one plane: a probe facing up lies on the upward
+/// face, whatever the order of the polygons. The locating ray meets both at the same distance and may
+/// take the downward face's black back, and the search for the probe's own plane took either.
 #[test]
 fn a_probe_between_back_to_back_faces_takes_the_side_that_radiates() {
     use radiosity::color::Rgb;
@@ -304,6 +302,62 @@ fn a_probe_between_back_to_back_faces_takes_the_side_that_radiates() {
                 assert_eq!(scene.polygons[found.polygon].shape, side);
             }
         }
+    }
+}
+
+/// Two one-sided faces 1 cm apart looking at each other (as a leg of the classroom's desks with
+/// `--one-sided`), in a scene whose δ (10⁻³ of its diagonal) is 2 cm: the locating ray from δ in front
+/// of a point on one face meets the back of the other first, and that black back failed the probe
+/// ("the point is on the back of one-sided polygon"); the point's own face is found instead.
+#[test]
+fn a_probe_looks_past_the_black_back_of_a_face_in_front_of_it() {
+    use radiosity::color::Rgb;
+    use radiosity::geometry::Shape;
+    use radiosity::reference::probe::{find_surface, ProbePoint};
+    use radiosity::scene::{Material, Object, Polygon, Scene};
+    let wall = |x: f64, facing_minus_x: bool| {
+        let p = |y: f64, z: f64| DVec3::new(x, y, z);
+        let mut corners = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
+        if facing_minus_x {
+            corners.reverse();
+        }
+        Shape::Quad(corners)
+    };
+    let (near, far) = (wall(0.0, false), wall(0.01, true));
+    assert!(near.normal().x > 0.0 && far.normal().x < 0.0);
+    let p = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+    let floor = Shape::Quad([
+        p(-10.0, -10.0, -5.0),
+        p(10.0, -10.0, -5.0),
+        p(10.0, 10.0, -5.0),
+        p(-10.0, 10.0, -5.0),
+    ]);
+    let scene = Scene {
+        materials: vec![Material::diffuse("grey", Rgb::splat(0.5))],
+        objects: vec![Object { name: "gap".into() }],
+        polygons: [near, far, floor]
+            .into_iter()
+            .map(|shape| Polygon {
+                shape,
+                material: 0,
+                object: 0,
+                two_sided: false,
+            })
+            .collect(),
+        ..Default::default()
+    };
+    assert!(1e-3 * scene.bounds().diagonal() > 0.015);
+    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
+    for (x, normal, polygon) in [(0.01, -DVec3::X, 1), (0.0, DVec3::X, 0)] {
+        let probe = ProbePoint {
+            line: 1,
+            point: p(x, 0.5, 0.5),
+            normal,
+        };
+        let found = find_surface(&scene, &visibility, &probe)
+            .unwrap_or_else(|e| panic!("face {polygon}: {e}"));
+        assert_eq!((found.polygon, found.front), (polygon, true));
     }
 }
 

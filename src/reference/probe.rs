@@ -222,16 +222,22 @@ pub fn find_surface(
     let hit = visibility
         .intersect(&ray, 0.0, 2.0 * delta)
         .map(|hit| (hit.polygon, hit.front, ray.at(hit.t)));
+    let radiates = |polygon: usize, front: bool| front || scene.polygons[polygon].two_sided;
     let found = match hit {
         // Coplanar overlapping polygons at the hit (z-fighting, which the ray settles by chance) are
         // settled as in `nearest_containing`.
-        Some((polygon, front, at)) if side_normal(polygon, front).dot(n) >= NORMAL_AGREEMENT => {
+        Some((polygon, front, at))
+            if radiates(polygon, front)
+                && side_normal(polygon, front).dot(n) >= NORMAL_AGREEMENT =>
+        {
             nearest_containing(scene, probe, delta)
                 .filter(|&(_, _, p)| p.distance(at) <= 1e-6 * delta)
                 .or(hit)
         }
-        // Nothing, or another surface crossing the short ray (a steep object standing on the surface
-        // within δ of the point): look for the probe's own plane, and report the hit only if there is none.
+        // Nothing, another surface crossing the short ray (a steep object standing on the surface
+        // within δ of the point), or the black back of a one-sided polygon within δ in front of the
+        // point (the other face of a thin object whose faces look at each other): look for the
+        // probe's own plane, and report the hit only if there is none.
         _ => nearest_containing(scene, probe, delta).or(hit),
     };
     let Some((polygon, front, point)) = found else {
