@@ -256,39 +256,44 @@ fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
     }
 }
 
+/// A scene of one grey object made of one-sided `shapes`, with a BVH over them.
+fn one_sided_grey(
+    shapes: &[radiosity::geometry::Shape],
+) -> (radiosity::scene::Scene, radiosity::visibility::bvh::Bvh) {
+    use radiosity::scene::{Material, Object, Polygon, Scene};
+    let scene = Scene {
+        materials: vec![Material::diffuse("grey", radiosity::color::Rgb::splat(0.5))],
+        objects: vec![Object {
+            name: "object".into(),
+        }],
+        polygons: shapes
+            .iter()
+            .map(|&shape| Polygon {
+                shape,
+                material: 0,
+                object: 0,
+                two_sided: false,
+            })
+            .collect(),
+        ..Default::default()
+    };
+    (scene, radiosity::visibility::bvh::Bvh::new(shapes))
+}
+
 /// A thin object's two one-sided faces back to back in one plane: a probe facing up lies on the upward
 /// face, whatever the order of the polygons. The locating ray meets both at the same distance and may
 /// take the downward face's black back, and the search for the probe's own plane took either.
 #[test]
 fn a_probe_between_back_to_back_faces_takes_the_side_that_radiates() {
-    use radiosity::color::Rgb;
     use radiosity::geometry::Shape;
     use radiosity::reference::probe::{find_surface, ProbePoint};
-    use radiosity::scene::{Material, Object, Polygon, Scene};
     let p = |x: f64, y: f64| DVec3::new(x, y, 0.0);
     let up = Shape::Quad([p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)]);
     let down = Shape::Quad([p(0.0, 0.0), p(0.0, 1.0), p(1.0, 1.0), p(1.0, 0.0)]);
     assert!(up.normal().z > 0.0 && down.normal().z < 0.0);
     for (probe_normal, side) in [(DVec3::Z, up), (-DVec3::Z, down)] {
         for order in [[up, down], [down, up]] {
-            let scene = Scene {
-                materials: vec![Material::diffuse("grey", Rgb::splat(0.5))],
-                objects: vec![Object {
-                    name: "plate".into(),
-                }],
-                polygons: order
-                    .iter()
-                    .map(|&shape| Polygon {
-                        shape,
-                        material: 0,
-                        object: 0,
-                        two_sided: false,
-                    })
-                    .collect(),
-                ..Default::default()
-            };
-            let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
-            let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
+            let (scene, visibility) = one_sided_grey(&order);
             // Points over the whole plate, so that the ray's tie falls both ways.
             for k in 0..25 {
                 let probe = ProbePoint {
@@ -311,10 +316,8 @@ fn a_probe_between_back_to_back_faces_takes_the_side_that_radiates() {
 /// ("the point is on the back of one-sided polygon"); the point's own face is found instead.
 #[test]
 fn a_probe_looks_past_the_black_back_of_a_face_in_front_of_it() {
-    use radiosity::color::Rgb;
     use radiosity::geometry::Shape;
     use radiosity::reference::probe::{find_surface, ProbePoint};
-    use radiosity::scene::{Material, Object, Polygon, Scene};
     let wall = |x: f64, facing_minus_x: bool| {
         let p = |y: f64, z: f64| DVec3::new(x, y, z);
         let mut corners = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
@@ -332,23 +335,8 @@ fn a_probe_looks_past_the_black_back_of_a_face_in_front_of_it() {
         p(10.0, 10.0, -5.0),
         p(-10.0, 10.0, -5.0),
     ]);
-    let scene = Scene {
-        materials: vec![Material::diffuse("grey", Rgb::splat(0.5))],
-        objects: vec![Object { name: "gap".into() }],
-        polygons: [near, far, floor]
-            .into_iter()
-            .map(|shape| Polygon {
-                shape,
-                material: 0,
-                object: 0,
-                two_sided: false,
-            })
-            .collect(),
-        ..Default::default()
-    };
+    let (scene, visibility) = one_sided_grey(&[near, far, floor]);
     assert!(1e-3 * scene.bounds().diagonal() > 0.015);
-    let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
-    let visibility = radiosity::visibility::bvh::Bvh::new(&shapes);
     for (x, normal, polygon) in [(0.01, -DVec3::X, 1), (0.0, DVec3::X, 0)] {
         let probe = ProbePoint {
             line: 1,
