@@ -14,7 +14,7 @@ use crate::oracles::smoothness::SmoothnessOracle;
 use crate::oracles::{power::PowerOracle, RefinementOracle};
 use crate::progress::Progress;
 use crate::scene::Scene;
-use crate::solvers::coupling::CouplingSettings;
+use crate::solvers::coupling::{CouplingSettings, SourceRule};
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};
 use crate::solvers::multigrid::{solve_progressive, MultigridSettings, StepReport};
@@ -155,6 +155,8 @@ pub struct SimulationSettings {
     /// How the receiver side of links to a near source is integrated (couplings and the power
     /// oracle's transport, [`crate::geometry::near_field`]).
     pub near_field: NearField,
+    /// Where partly visible sources are sampled ([`SourceRule`]).
+    pub source_rule: SourceRule,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
     /// Radiance basis on every element (Bekaert–Willems §2).
@@ -239,6 +241,7 @@ impl Default for SimulationSettings {
             eps: 1e-3,
             shadow_levels: 0.0,
             near_field: NearField::Adaptive,
+            source_rule: SourceRule::Fixed,
             min_area: 1e-5,
             basis: BasisKind::Constant,
             cubature_degree: None,
@@ -347,6 +350,7 @@ pub fn make_oracle(
                 seed: settings.seed,
                 error_storage: settings.error_storage,
                 near_field: settings.near_field,
+                source_rule: settings.source_rule,
             },
         }),
     }
@@ -386,6 +390,7 @@ pub fn deterministic_settings(
                 seed: settings.seed,
                 error_storage: settings.error_storage,
                 near_field: settings.near_field,
+                source_rule: settings.source_rule,
             },
             seed: settings.seed,
         },

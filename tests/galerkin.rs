@@ -609,3 +609,84 @@ fn push_pull_on_trapezoids_keeps_constants_constant_and_power_unchanged() {
         assert!((update.exitant.g - total).abs() <= 1e-11 * total);
     }
 }
+
+/// A shadow boundary across the source (Bekaert–Willems Algorithm 4.1 samples visibility between
+/// cubature nodes): a black strip 1 cm under the emitter hides its first 30% along `x` from every
+/// point of the receiver below. The linear basis's 2 × 2 source nodes lie at 21% and 79%, so with
+/// fixed nodes every receiver sees half the emitter instead of about 70% of its light, and the total
+/// transfer comes out a quarter low however finely the receiver is split. With `--source-rule
+/// shifted` each receiver node sees its own random shift of the nodes, which is unbiased: over the
+/// 576 receiver nodes of 64 leaves, whose single estimates are ½ or 1, the transfer's relative
+/// standard error is about 1.5%, and the test allows four of them. Exact: the midpoint rule with
+/// visibility over 16 × 16 receiver points and 80 × 80 emitter points (discretisation error near 1%
+/// at the shadow's edge of the emitter, far below the bias it separates).
+#[test]
+fn shifted_source_nodes_see_a_shadow_boundary_across_the_source_without_bias() {
+    use radiosity::solvers::coupling::SourceRule;
+    let mut scene = generators::parallel_plates(1.0, 1.0, RHO, EMISSION);
+    let material = scene.materials.len();
+    scene
+        .materials
+        .push(Material::diffuse("blocker", Rgb::BLACK));
+    let z = 0.99;
+    scene.polygons.push(Polygon {
+        shape: Shape::Quad([
+            DVec3::new(-0.1, -0.1, z),
+            DVec3::new(-0.1, 1.1, z),
+            DVec3::new(0.3, 1.1, z),
+            DVec3::new(0.3, -0.1, z),
+        ]),
+        material,
+        object: 0,
+        two_sided: true,
+    });
+    let vis = brute_force(&scene);
+    let emitter = emitter_shape(&scene);
+    let (n_x, n_y) = (16, 80);
+    let mut exact = 0.0;
+    for a in 0..n_x * n_x {
+        let x = DVec3::new(
+            ((a % n_x) as f64 + 0.5) / n_x as f64,
+            ((a / n_x) as f64 + 0.5) / n_x as f64,
+            0.0,
+        );
+        for b in 0..n_y * n_y {
+            let y = emitter.point_at(DVec2::new(
+                ((b % n_y) as f64 + 0.5) / n_y as f64,
+                ((b / n_y) as f64 + 0.5) / n_y as f64,
+            ));
+            let g = point_to_point(x, DVec3::Z, y, -DVec3::Z);
+            if g > 0.0 && !vis.segment_occluded(x, y) {
+                exact += g * emitter.area() / (n_y * n_y) as f64;
+            }
+        }
+    }
+    exact /= (n_x * n_x) as f64;
+    let transfer = |source_rule: SourceRule| {
+        let mut h = Hierarchy::new(&scene, BasisKind::Linear);
+        subdivide_uniformly(&mut h, 0, 3);
+        let settings = CouplingSettings {
+            cubature_degree: BasisKind::Linear.default_cubature_degree(),
+            source_rule,
+            ..CouplingSettings::default()
+        };
+        let mut leaves = Vec::new();
+        h.collect_leaves(h.patches[0].root, &mut leaves);
+        leaves
+            .iter()
+            .map(|&leaf| {
+                let k = couple(&h, &vis, leaf, h.patches[1].root, &settings, None);
+                h.element(leaf).area * k.coupling.form_factor()
+            })
+            .sum::<f64>()
+    };
+    let (fixed, shifted) = (transfer(SourceRule::Fixed), transfer(SourceRule::Shifted));
+    assert!(
+        fixed < 0.85 * exact,
+        "fixed nodes {fixed:.4}, exact {exact:.4}: the configuration no longer shows their bias"
+    );
+    assert!(
+        (shifted / exact - 1.0).abs() < 0.06,
+        "shifted nodes {shifted:.4}, exact {exact:.4} (fixed {fixed:.4})"
+    );
+}

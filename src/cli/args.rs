@@ -10,6 +10,7 @@ use crate::pipeline::{
     VisibilityKind, DEFAULT_RELATIVE_ACCURACY,
 };
 use crate::scene::{self, LoadOptions, Scene};
+use crate::solvers::coupling::SourceRule;
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::multigrid::MultigridSettings;
 use crate::visibility::item_buffer::IntraClusterKind;
@@ -241,6 +242,11 @@ pub struct SolveArgs {
     /// centre estimate.
     #[arg(long, value_enum, default_value_t = NearField::Adaptive)]
     pub near_field: NearField,
+    /// Where visibility rays of a link whose shaft is partly blocked end on its source: fixed, the
+    /// source cubature nodes (Bekaert–Willems); shifted, a random shift of them per receiver node,
+    /// unbiased across a shadow boundary on the source (a reflector hidden behind its tube) but noisier.
+    #[arg(long, value_enum, default_value_t = SourceRule::Fixed)]
+    pub source_rule: SourceRule,
     /// Smallest splittable element area, relative to the total surface area.
     #[arg(long, default_value_t = 1e-5)]
     pub min_area: f64,
@@ -331,6 +337,7 @@ impl SolveArgs {
             eps: self.eps,
             shadow_levels: self.shadow_levels,
             near_field: self.near_field,
+            source_rule: self.source_rule,
             min_area: self.min_area,
             basis: self.basis,
             cubature_degree: self.cubature_degree.map(usize::from),

@@ -115,6 +115,40 @@ pub fn nodes_on(shape: &Shape, rule: &Rule) -> Vec<Node> {
         .collect()
 }
 
+/// Part of an element's parameter domain kept clear by [`shifted_nodes`] along its edges: a point on an
+/// edge that a neighbouring polygon touches (a wall's foot on the floor) is hidden by that polygon from
+/// rays meant for the element.
+const SHIFT_INSET: f64 = 0.01;
+
+/// A randomly shifted copy of `nodes` (a rule mapped onto `shape` by [`nodes_on`]), the
+/// Cranley–Patterson rotation of randomized quasi-Monte Carlo: every node's parameters moved by `shift`
+/// modulo 1 (on a triangle, the half of the unit square beyond the diagonal folded back onto it), pulled
+/// [`SHIFT_INSET`] toward the centre, and weighted by the Jacobian where it lands. Each shifted node is
+/// uniform over the element, so a sum over them of a discontinuous integrand (a shadow boundary
+/// crossing the element) is unbiased, where the fixed nodes err the same way for every receiver that
+/// sees the boundary in the same place.
+pub fn shifted_nodes(shape: &Shape, nodes: &[Node], shift: DVec2) -> Vec<Node> {
+    let centre = match shape {
+        Shape::Triangle(_) => DVec2::splat(1.0 / 3.0),
+        Shape::Quad(_) => DVec2::splat(0.5),
+    };
+    nodes
+        .iter()
+        .map(|node| {
+            let mut uv = DVec2::new((node.uv.x + shift.x).fract(), (node.uv.y + shift.y).fract());
+            if matches!(shape, Shape::Triangle(_)) && uv.x + uv.y > 1.0 {
+                uv = DVec2::ONE - uv;
+            }
+            uv = centre + (uv - centre) * (1.0 - SHIFT_INSET);
+            Node {
+                point: shape.point_at(uv),
+                uv,
+                weight: node.weight / shape.jacobian(node.uv) * shape.jacobian(uv),
+            }
+        })
+        .collect()
+}
+
 /// Gauss–Legendre nodes and weights on [0, 1], for 1 to 5 points (`n` clamped), computed once.
 pub fn gauss_legendre_unit(n: usize) -> (&'static [f64], &'static [f64]) {
     static TABLE: OnceLock<Vec<(Vec<f64>, Vec<f64>)>> = OnceLock::new();
