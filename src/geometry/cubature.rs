@@ -115,23 +115,16 @@ pub fn nodes_on(shape: &Shape, rule: &Rule) -> Vec<Node> {
         .collect()
 }
 
-/// Part of an element's parameter domain kept clear by [`shifted_nodes`] along its edges: a point on an
-/// edge that a neighbouring polygon touches (a wall's foot on the floor) is hidden by that polygon from
-/// rays meant for the element.
-const SHIFT_INSET: f64 = 0.01;
-
 /// A randomly shifted copy of `nodes` (a rule mapped onto `shape` by [`nodes_on`]), the
 /// Cranley–Patterson rotation of randomized quasi-Monte Carlo: every node's parameters moved by `shift`
-/// modulo 1 (on a triangle, the half of the unit square beyond the diagonal folded back onto it), pulled
-/// [`SHIFT_INSET`] toward the centre, and weighted by the Jacobian where it lands. Each shifted node is
-/// uniform over the element, so a sum over them of a discontinuous integrand (a shadow boundary
-/// crossing the element) is unbiased, where the fixed nodes err the same way for every receiver that
-/// sees the boundary in the same place.
+/// modulo 1 (on a triangle, the half of the unit square beyond the diagonal folded back onto it), and
+/// weighted by the Jacobian where it lands. Each shifted node is uniform over the element, so a sum over
+/// them of a discontinuous integrand (a shadow boundary crossing the element) is unbiased, where the
+/// fixed nodes err the same way for every receiver that sees the boundary in the same place. Keeping
+/// the shifted nodes 1% inside the edges (against rays that a touching neighbour would stop) changed
+/// no measured point and missed light seen through a sliver at an element's edge (BENCHMARKS.md,
+/// "Shadow boundaries across sources").
 pub fn shifted_nodes(shape: &Shape, nodes: &[Node], shift: DVec2) -> Vec<Node> {
-    let centre = match shape {
-        Shape::Triangle(_) => DVec2::splat(1.0 / 3.0),
-        Shape::Quad(_) => DVec2::splat(0.5),
-    };
     nodes
         .iter()
         .map(|node| {
@@ -139,7 +132,6 @@ pub fn shifted_nodes(shape: &Shape, nodes: &[Node], shift: DVec2) -> Vec<Node> {
             if matches!(shape, Shape::Triangle(_)) && uv.x + uv.y > 1.0 {
                 uv = DVec2::ONE - uv;
             }
-            uv = centre + (uv - centre) * (1.0 - SHIFT_INSET);
             Node {
                 point: shape.point_at(uv),
                 uv,

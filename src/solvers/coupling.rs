@@ -17,10 +17,10 @@
 //! the bilinear map's varying Jacobian makes it `A_i G` with a full `G` ([`crate::bases::Overlap`]),
 //! which step 4a solves with (else a uniformly lit trapezoid would get a false gradient).
 //!
-//! Partly visible sources (`--source-rule shifted`): where the shaft test leaves visibility open, each receiver node sees the
-//! source through a random shift of the source rule (Cranley–Patterson rotation,
-//! [`shifted_nodes`]), so that a shadow boundary across the source is sampled without a bias common to
-//! all receivers (`SourceSampler::rows`).
+//! Partly visible sources (`--source-rule shifted`): where the shaft test leaves visibility open,
+//! each receiver node sees the source through a random shift of the source rule (Cranley–Patterson
+//! rotation, [`shifted_nodes`]), so that a shadow boundary across the source is sampled without a bias
+//! common to all receivers (`SourceSampler::rows`).
 //!
 //! Near sources: where the source lies within half the receiver's diameter of its centroid or of a
 //! corner and the exact point factor varies more than twofold over the receiver's nodes, the light may
@@ -322,14 +322,16 @@ impl SourceSampler<'_> {
     /// Step 1 (the kernel at each node pair, with its transmittance) and step 2 at `nodes`.
     ///
     /// With [`SourceRule::Shifted`], where the shaft test left the source's visibility open, each
-    /// receiver node sees the source through its own random shift of the source rule ([`shifted_nodes`], seeded by `--seed` and the
-    /// node's position), not through the fixed nodes: with fixed nodes a shadow boundary across the
-    /// source is sampled at the same places from every receiver, and the error adds up instead of
-    /// averaging out. A lamp housing's reflector above its tube, 4 cm wide with nodes at 21% and 79% of
-    /// its width, was seen 10% brighter from the whole floor below, the housing sent 1–2% too much light,
-    /// and the classroom read 2% bright (BENCHMARKS.md, "Shadow boundaries across sources"). Links with
-    /// a Clear or Blocked shaft keep the fixed rule, whose higher-order moments are exact. Not the
-    /// default: the noise costs the Cornell box and floor_gloss more than the bias did.
+    /// receiver node sees the source through its own random shift of the source rule
+    /// ([`shifted_nodes`], seeded by `--seed` and the node's position), not through the fixed nodes:
+    /// with fixed nodes a shadow boundary across the source is sampled at the same places from every
+    /// receiver, and the error adds up instead of averaging out. A lamp housing's reflector above its
+    /// tube, 4 cm wide with nodes at 21% and 79% of its width, was seen 10% brighter from the whole
+    /// floor below, the housing sent 1–2% too much light, and the classroom read 2% bright; a
+    /// corridor's ceiling pieces beside its lamps were seen from a wall with 27% of their light
+    /// (shifted: 77%; BENCHMARKS.md, "Shadow boundaries across sources"). Links with a Clear or
+    /// Blocked shaft keep the fixed rule, whose higher-order moments are exact. Not the default: the
+    /// noise costs the Cornell box and floor_gloss more than the bias did.
     fn rows(&self, nodes: &[Node]) -> NodeRows {
         let size = self.basis.size();
         let mut out = NodeRows {
