@@ -242,10 +242,11 @@ pub struct SolveArgs {
     /// centre estimate.
     #[arg(long, value_enum, default_value_t = NearField::Adaptive)]
     pub near_field: NearField,
-    /// Where visibility rays of a link whose shaft is partly blocked end on its source: fixed, the
-    /// source cubature nodes (Bekaert–Willems); shifted, a random shift of them per receiver node,
-    /// unbiased across a shadow boundary on the source (a reflector hidden behind its tube) but noisier.
-    #[arg(long, value_enum, default_value_t = SourceRule::Fixed)]
+    /// Where visibility rays of a link whose shaft is partly blocked end on its source: shifted (the
+    /// default), a random shift of the source's cubature nodes per receiver node, unbiased across a
+    /// shadow boundary on the source (a lamp reflector hidden behind its tube, a ceiling seen past a
+    /// fixture); fixed, the nodes themselves (Bekaert–Willems as published), less noisy but biased there.
+    #[arg(long, value_enum, default_value_t = SourceRule::Shifted)]
     pub source_rule: SourceRule,
     /// Smallest splittable element area, relative to the total surface area.
     #[arg(long, default_value_t = 1e-5)]

@@ -124,21 +124,22 @@ pub fn nodes_on(shape: &Shape, rule: &Rule) -> Vec<Node> {
 /// the shifted nodes 1% inside the edges (against rays that a touching neighbour would stop) changed
 /// no measured point and missed light seen through a sliver at an element's edge (BENCHMARKS.md,
 /// "Shadow boundaries across sources").
-pub fn shifted_nodes(shape: &Shape, nodes: &[Node], shift: DVec2) -> Vec<Node> {
-    nodes
-        .iter()
-        .map(|node| {
-            let mut uv = DVec2::new((node.uv.x + shift.x).fract(), (node.uv.y + shift.y).fract());
-            if matches!(shape, Shape::Triangle(_)) && uv.x + uv.y > 1.0 {
-                uv = DVec2::ONE - uv;
-            }
-            Node {
-                point: shape.point_at(uv),
-                uv,
-                weight: node.weight / shape.jacobian(node.uv) * shape.jacobian(uv),
-            }
-        })
-        .collect()
+pub fn shifted_nodes<'a>(
+    shape: &'a Shape,
+    nodes: &'a [Node],
+    shift: DVec2,
+) -> impl Iterator<Item = Node> + 'a {
+    nodes.iter().map(move |node| {
+        let mut uv = DVec2::new((node.uv.x + shift.x).fract(), (node.uv.y + shift.y).fract());
+        if matches!(shape, Shape::Triangle(_)) && uv.x + uv.y > 1.0 {
+            uv = DVec2::ONE - uv;
+        }
+        Node {
+            point: shape.point_at(uv),
+            uv,
+            weight: node.weight / shape.jacobian(node.uv) * shape.jacobian(uv),
+        }
+    })
 }
 
 /// Gauss–Legendre nodes and weights on [0, 1], for 1 to 5 points (`n` clamped), computed once.

@@ -68,13 +68,14 @@ pub struct CouplingSettings {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SourceRule {
-    /// At the source rule's fixed nodes (Bekaert–Willems Algorithm 4.1 as published): a shadow
-    /// boundary across the source is sampled at the same places from every receiver.
+    /// At the source rule's fixed nodes (Bekaert–Willems Algorithm 4.1 as published; the library's
+    /// default): a shadow boundary across the source is sampled at the same places from every
+    /// receiver.
     #[default]
     Fixed,
-    /// At a random shift of the source rule per receiver node ([`shifted_nodes`]): unbiased over a
-    /// shadow boundary across the source, at the price of noise (BENCHMARKS.md, "Shadow boundaries
-    /// across sources").
+    /// At a random shift of the source rule per receiver node ([`shifted_nodes`]; the command line's
+    /// default): unbiased over a shadow boundary across the source, at the price of noise
+    /// (BENCHMARKS.md, "Shadow boundaries across sources").
     Shifted,
 }
 
@@ -330,8 +331,9 @@ impl SourceSampler<'_> {
     /// floor below, the housing sent 1–2% too much light, and the classroom read 2% bright; a
     /// corridor's ceiling pieces beside its lamps were seen from a wall with 27% of their light
     /// (shifted: 77%; BENCHMARKS.md, "Shadow boundaries across sources"). Links with a Clear or
-    /// Blocked shaft keep the fixed rule, whose higher-order moments are exact. Not the default: the
-    /// noise costs the Cornell box and floor_gloss more than the bias did.
+    /// Blocked shaft keep the fixed rule, whose higher-order moments are exact. The command line's
+    /// default; the library's stays the published fixed rule, which is less noisy where occluders are
+    /// far from the sources they hide (the Cornell box: 1.78% against 1.9% |error|/mean).
     fn rows(&self, nodes: &[Node]) -> NodeRows {
         let size = self.basis.size();
         let mut out = NodeRows {
@@ -346,6 +348,8 @@ impl SourceSampler<'_> {
                 self.shaft,
                 Some(ShaftVerdict::Clear) | Some(ShaftVerdict::Blocked)
             );
+        // Shifted source nodes and their basis values, refilled for each receiver node.
+        let (mut shifted, mut phi) = (Vec::new(), Vec::new());
         for (k, x) in nodes.iter().enumerate() {
             let exact = point_to_polygon(x.point, self.n_r, self.source);
             out.factor_range = (out.factor_range.0.min(exact), out.factor_range.1.max(exact));
@@ -357,8 +361,16 @@ impl SourceSampler<'_> {
             let (rays, saved) = if decided {
                 self.row(x.point, exact, self.y_nodes, self.phi_y, row)
             } else {
-                let shifted = shifted_nodes(self.source, self.y_nodes, self.shift_at(x.point));
-                let phi = basis_values(self.basis, self.source, &shifted);
+                shifted.clear();
+                shifted.extend(shifted_nodes(
+                    self.source,
+                    self.y_nodes,
+                    self.shift_at(x.point),
+                ));
+                phi.resize(shifted.len() * size, 0.0);
+                for (node, values) in shifted.iter().zip(phi.chunks_exact_mut(size)) {
+                    self.basis.eval(self.source.domain(), node.uv, values);
+                }
                 self.row(x.point, exact, &shifted, &phi, row)
             };
             out.rays += rays;
