@@ -139,7 +139,7 @@ fn info_prints_counts_of_a_renderpark_scene() {
 
 #[test]
 fn every_subcommand_has_help() {
-    for sub in ["render", "info", "bench", "compare"] {
+    for sub in ["render", "info", "bench", "compare", "audit"] {
         let out = radiosity(&[sub, "--help"]);
         assert!(out.status.success(), "{sub} --help");
         assert!(
@@ -564,4 +564,25 @@ fn probe_at_points_the_camera_sees() {
     assert!(!away.status.success());
     let stderr = String::from_utf8_lossy(&away.stderr);
     assert!(stderr.contains("sees no surface"), "{stderr}");
+}
+
+#[test]
+fn audit_lists_the_sources_of_a_polygon_and_rejects_an_unknown_one() {
+    let out = radiosity(&["audit", "--polygon", "0", "--samples", "16", "--rows", "3"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("coupled") && text.contains("total"), "{text}");
+    // Header, column names, three sources and the total.
+    assert_eq!(text.lines().count(), 6, "{text}");
+    let out = radiosity(&["audit", "--polygon", "9999"]);
+    assert!(!out.status.success());
+    let error = String::from_utf8_lossy(&out.stderr);
+    assert!(error.contains("--polygon 9999"), "{error}");
+    let out = radiosity(&["audit", "--max-links", "10"]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--max-links"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

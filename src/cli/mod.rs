@@ -19,6 +19,7 @@ macro_rules! out {
 }
 
 mod args;
+mod audit;
 mod bench;
 mod compare;
 mod experiment;
@@ -75,6 +76,9 @@ pub enum Command {
     Probe(probe::ProbeCommand),
     /// Information-theoretic scene measures: discrete and continuous mutual information, Δ (Feixas et al.).
     Measure(measure::MeasureCommand),
+    /// Solve, then compare the couplings of the links into chosen polygons with an unbiased Monte Carlo
+    /// estimate with visibility, per source polygon.
+    Audit(audit::AuditCommand),
     /// Write a test scene with a known answer (plates, furnace, Cornell box, shadow groups) as MGF.
     Scene(scene::SceneCommand),
     /// Chart one field of run statistics against another (error vs time or elements) as SVG.
@@ -133,6 +137,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Reference(c) => c.run(seed, &progress),
         Command::Probe(c) => c.run(seed, &progress),
         Command::Measure(c) => c.run(seed, &progress),
+        Command::Audit(c) => c.run(seed, &progress),
         Command::Scene(c) => c.run(),
         Command::Plot(c) => c.run(),
         Command::Grid(c) => c.run(seed, &progress),

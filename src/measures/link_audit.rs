@@ -1,0 +1,189 @@
+//! Link audit: every surface link's coupled form factor against an unbiased Monte Carlo estimate of the
+//! same double integral with visibility, `F_ij = (1/A_i) ∫_i ∫_j G(x, y) V(x, y) dA_y dA_x`, with its
+//! standard error.
+//!
+//! A coupling (Bekaert–Willems Algorithm 4.1) samples the kernel and visibility at cubature nodes; its
+//! errors are systematic where the same geometry defeats the same nodes for many links (a source half
+//! hidden behind a nearby occluder, seen through a sliver), and then they add up instead of averaging
+//! out. The probe (`radiosity probe`) shows that a solution is off at a point; the audit shows which
+//! links carry the error: per source polygon, the light the audited links carry, `Σ A_i F_ij L_j` with
+//! `L_j` the luminance of the source element's average radiance, as coupled and as estimated, with
+//! the estimate's standard error. It found the lamp reflectors of the classroom seen 10% too bright
+//! and a corridor's ceiling beside its lamps seen with a quarter of its light (BENCHMARKS.md, "Shadow
+//! boundaries across sources"). Links at a cluster are counted, not audited (their couplings sample
+//! their contents, not a surface pair).
+
+use crate::geometry::form_factor::point_to_point;
+use crate::geometry::DVec2;
+use crate::hierarchy::{ElementId, Hierarchy};
+use crate::solvers::link_rng;
+use crate::visibility::Visibility;
+use rand::Rng;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// What to audit and how finely.
+#[derive(Clone, Debug)]
+pub struct AuditSettings {
+    /// Polygons whose elements' incoming links are audited; empty: every polygon.
+    pub polygons: Vec<usize>,
+    /// Independent uniform point pairs (one ray each) per link.
+    pub samples: usize,
+    /// Most links audited; more stops the audit with an error (a budget, not a sample).
+    pub max_links: usize,
+    pub seed: u64,
+}
+
+/// Random stream of the audit's point pairs (apart from the solver's streams of the same link).
+const AUDIT_STREAM: u64 = 0xA0D1;
+
+/// The audited links from one side of one source polygon.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SourceRow {
+    pub polygon: usize,
+    pub front: bool,
+    pub links: usize,
+    /// `Σ A_i F_ij L_j` with the coupled form factors.
+    pub coupled: f64,
+    /// The same with the Monte Carlo form factors.
+    pub estimated: f64,
+    /// Standard error of `estimated`.
+    pub standard_error: f64,
+}
+
+impl SourceRow {
+    /// `(coupled − estimated) / standard error`: how many standard errors the couplings are off.
+    pub fn z(&self) -> f64 {
+        if self.standard_error > 0.0 {
+            (self.coupled - self.estimated) / self.standard_error
+        } else if self.coupled == self.estimated {
+            0.0
+        } else {
+            f64::INFINITY.copysign(self.coupled - self.estimated)
+        }
+    }
+}
+
+/// An audit's result: per source polygon side, sorted by `|coupled − estimated|`, largest first, and
+/// the total.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct LinkAudit {
+    pub rows: Vec<SourceRow>,
+    pub total: SourceRow,
+    /// Links with a cluster at either end into the audited elements, not audited.
+    pub cluster_links: usize,
+}
+
+/// Audits the surface links into the elements of `settings.polygons` (see the module doc).
+pub fn audit_links(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    settings: &AuditSettings,
+) -> anyhow::Result<LinkAudit> {
+    anyhow::ensure!(settings.samples >= 2, "at least 2 samples per link");
+    let audited = |id: usize| {
+        !h.is_cluster(id as ElementId)
+            && (settings.polygons.is_empty()
+                || settings
+                    .polygons
+                    .contains(&h.patch_of(id as ElementId).polygon))
+    };
+    let mut links = Vec::new();
+    let mut cluster_links = 0;
+    for (id, e) in h.elements.iter().enumerate().filter(|&(id, _)| audited(id)) {
+        for link in &e.links {
+            if h.is_cluster(link.source) {
+                cluster_links += 1;
+            } else {
+                links.push((id as ElementId, link.source, link.form_factor()));
+            }
+        }
+    }
+    anyhow::ensure!(
+        links.len() <= settings.max_links,
+        "{} links to audit, more than --max-links {}: name fewer receiving polygons (--polygon) or \
+         raise the bound",
+        links.len(),
+        settings.max_links
+    );
+    let audited: Vec<(ElementId, ElementId, f64, f64, f64)> = links
+        .par_iter()
+        .map(|&(receiver, source, coupled)| {
+            let (mean, standard_error) = estimate(h, visibility, receiver, source, settings);
+            (receiver, source, coupled, mean, standard_error)
+        })
+        .collect();
+    let mut by_source: BTreeMap<(usize, bool), SourceRow> = BTreeMap::new();
+    for (receiver, source, coupled, mean, standard_error) in audited {
+        let patch = h.patch_of(source);
+        let weight = h.element(receiver).area * h.average_radiance(source).luminance();
+        let row = by_source
+            .entry((patch.polygon, patch.front))
+            .or_insert_with(|| SourceRow {
+                polygon: patch.polygon,
+                front: patch.front,
+                ..SourceRow::default()
+            });
+        row.links += 1;
+        row.coupled += weight * coupled;
+        row.estimated += weight * mean;
+        // Variances add; the square root is taken below.
+        row.standard_error += (weight * standard_error).powi(2);
+    }
+    let mut rows: Vec<SourceRow> = by_source.into_values().collect();
+    let mut total = SourceRow::default();
+    for row in &mut rows {
+        total.links += row.links;
+        total.coupled += row.coupled;
+        total.estimated += row.estimated;
+        total.standard_error += row.standard_error;
+        row.standard_error = row.standard_error.sqrt();
+    }
+    total.standard_error = total.standard_error.sqrt();
+    rows.sort_by(|a, b| {
+        (b.coupled - b.estimated)
+            .abs()
+            .total_cmp(&(a.coupled - a.estimated).abs())
+            .then(a.polygon.cmp(&b.polygon))
+            .then(a.front.cmp(&b.front))
+    });
+    Ok(LinkAudit {
+        rows,
+        total,
+        cluster_links,
+    })
+}
+
+/// `A_j · mean(G V)` over independent uniform point pairs on the receiver and the source, and its
+/// standard error (the sample standard deviation over √n): an unbiased estimate of `F_ij` whatever the
+/// visibility, with a variance that the near-singular kernel of adjacent elements makes large (and
+/// that the standard error then shows).
+fn estimate(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    settings: &AuditSettings,
+) -> (f64, f64) {
+    let mut rng = link_rng(settings.seed, receiver, source, AUDIT_STREAM);
+    let (r, s) = (h.element(receiver), h.element(source));
+    let (n_r, n_s) = (h.patch_of(receiver).normal, h.patch_of(source).normal);
+    let (mut sum, mut sum2) = (0.0, 0.0);
+    for _ in 0..settings.samples {
+        let x = r.shape().sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let y = s.shape().sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let g = point_to_point(x, n_r, y, n_s);
+        let value = if g > 0.0 {
+            s.area * g * visibility.transmittance(x, y)
+        } else {
+            0.0
+        };
+        sum += value;
+        sum2 += value * value;
+    }
+    let n = settings.samples as f64;
+    let mean = sum / n;
+    let variance = ((sum2 - n * mean * mean) / (n - 1.0)).max(0.0);
+    (mean, (variance / n).sqrt())
+}
