@@ -569,7 +569,11 @@ fn probe_at_points_the_camera_sees() {
 #[test]
 fn audit_lists_the_sources_of_a_polygon_and_rejects_an_unknown_one() {
     let out = radiosity(&["audit", "--polygon", "0", "--samples", "16", "--rows", "3"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("coupled") && text.contains("total"), "{text}");
     // Header, column names, three sources and the total.

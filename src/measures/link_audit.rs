@@ -171,8 +171,12 @@ fn estimate(
     let (n_r, n_s) = (h.patch_of(receiver).normal, h.patch_of(source).normal);
     let (mut sum, mut sum2) = (0.0, 0.0);
     for _ in 0..settings.samples {
-        let x = r.shape().sample_uniform(DVec2::new(rng.random(), rng.random()));
-        let y = s.shape().sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let x = r
+            .shape()
+            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let y = s
+            .shape()
+            .sample_uniform(DVec2::new(rng.random(), rng.random()));
         let g = point_to_point(x, n_r, y, n_s);
         let value = if g > 0.0 {
             s.area * g * visibility.transmittance(x, y)
