@@ -3,6 +3,8 @@
 //! point-to-polygon factor (and, with a blocker, the same integral with visibility, computed by a fine
 //! midpoint rule over the emitter), the white furnace, and energy balance.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 use radiosity::bases::BasisKind;
 use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::{point_to_point, point_to_polygon};
@@ -623,23 +625,7 @@ fn push_pull_on_trapezoids_keeps_constants_constant_and_power_unchanged() {
 #[test]
 fn shifted_source_nodes_see_a_shadow_boundary_across_the_source_without_bias() {
     use radiosity::solvers::coupling::SourceRule;
-    let mut scene = generators::parallel_plates(1.0, 1.0, RHO, EMISSION);
-    let material = scene.materials.len();
-    scene
-        .materials
-        .push(Material::diffuse("blocker", Rgb::BLACK));
-    let z = 0.99;
-    scene.polygons.push(Polygon {
-        shape: Shape::Quad([
-            DVec3::new(-0.1, -0.1, z),
-            DVec3::new(-0.1, 1.1, z),
-            DVec3::new(0.3, 1.1, z),
-            DVec3::new(0.3, -0.1, z),
-        ]),
-        material,
-        object: 0,
-        two_sided: true,
-    });
+    let scene = common::emitter_hidden_by_a_near_strip(RHO, EMISSION);
     let vis = brute_force(&scene);
     let emitter = emitter_shape(&scene);
     let (n_x, n_y) = (16, 80);

@@ -4,15 +4,15 @@
 //! under it, it finds the fixed source nodes' bias (Bekaert–Willems Algorithm 4.1 as published) many
 //! standard errors away, and none beyond the noise of shifted ones.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 use radiosity::bases::BasisKind;
-use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::parallel_rectangles;
-use radiosity::geometry::{DVec3, Shape};
 use radiosity::hierarchy::{Hierarchy, Link, OracleFactor};
 use radiosity::measures::link_audit::{audit_links, AuditSettings};
 use radiosity::pipeline::{simulate, SimulationSettings};
 use radiosity::progress::Progress;
-use radiosity::scene::{generators, Material, Polygon};
+use radiosity::scene::generators;
 use radiosity::solvers::coupling::{couple, CouplingSettings, SourceRule};
 use radiosity::visibility::brute_force::BruteForce;
 
@@ -64,23 +64,7 @@ fn the_audit_of_two_parallel_plates_matches_the_closed_form() {
 
 #[test]
 fn the_audit_finds_the_bias_of_fixed_source_nodes_behind_a_near_occluder() {
-    let mut scene = generators::parallel_plates(1.0, 1.0, 0.5, 1.0);
-    let material = scene.materials.len();
-    scene
-        .materials
-        .push(Material::diffuse("blocker", Rgb::BLACK));
-    let z = 0.99;
-    scene.polygons.push(Polygon {
-        shape: Shape::Quad([
-            DVec3::new(-0.1, -0.1, z),
-            DVec3::new(-0.1, 1.1, z),
-            DVec3::new(0.3, 1.1, z),
-            DVec3::new(0.3, -0.1, z),
-        ]),
-        material,
-        object: 0,
-        two_sided: true,
-    });
+    let scene = common::emitter_hidden_by_a_near_strip(0.5, 1.0);
     let vis = BruteForce::new(scene.polygons.iter().map(|p| p.shape).collect());
     let audited = |source_rule: SourceRule| {
         let mut h = Hierarchy::new(&scene, BasisKind::Linear);

@@ -13,12 +13,10 @@
 //! boundaries across sources"). Links at a cluster are counted, not audited (their couplings sample
 //! their contents, not a surface pair).
 
-use crate::geometry::form_factor::point_to_point;
-use crate::geometry::DVec2;
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::oracles::{sample_kernel, OracleContext};
 use crate::solvers::link_rng;
 use crate::visibility::Visibility;
-use rand::Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -155,10 +153,11 @@ pub fn audit_links(
     })
 }
 
-/// `A_j · mean(G V)` over independent uniform point pairs on the receiver and the source, and its
-/// standard error (the sample standard deviation over √n): an unbiased estimate of `F_ij` whatever the
-/// visibility, with a variance that the near-singular kernel of adjacent elements makes large (and
-/// that the standard error then shows).
+/// `A_j · mean(G V)` over independent uniform point pairs on the receiver and the source, with exact
+/// occlusion ([`sample_kernel`], the smoothness and MI oracles' samples), and its standard error (the
+/// sample standard deviation over √n): an unbiased estimate of `F_ij` whatever the visibility, with a
+/// variance that the near-singular kernel of adjacent elements makes large (and that the standard
+/// error then shows).
 fn estimate(
     h: &Hierarchy,
     visibility: &dyn Visibility,
@@ -167,27 +166,14 @@ fn estimate(
     settings: &AuditSettings,
 ) -> (f64, f64) {
     let mut rng = link_rng(settings.seed, receiver, source, AUDIT_STREAM);
-    let (r, s) = (h.element(receiver), h.element(source));
-    let (n_r, n_s) = (h.patch_of(receiver).normal, h.patch_of(source).normal);
-    let (mut sum, mut sum2) = (0.0, 0.0);
-    for _ in 0..settings.samples {
-        let x = r
-            .shape()
-            .sample_uniform(DVec2::new(rng.random(), rng.random()));
-        let y = s
-            .shape()
-            .sample_uniform(DVec2::new(rng.random(), rng.random()));
-        let g = point_to_point(x, n_r, y, n_s);
-        let value = if g > 0.0 {
-            s.area * g * visibility.transmittance(x, y)
-        } else {
-            0.0
-        };
-        sum += value;
-        sum2 += value * value;
-    }
-    let n = settings.samples as f64;
-    let mean = sum / n;
-    let variance = ((sum2 - n * mean * mean) / (n - 1.0)).max(0.0);
-    (mean, (variance / n).sqrt())
+    let context = OracleContext {
+        hierarchy: h,
+        visibility,
+    };
+    let area = h.element(source).area;
+    let values = sample_kernel(&context, receiver, source, settings.samples, &mut rng).values;
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (area * mean, area * (variance / n).sqrt())
 }

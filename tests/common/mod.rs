@@ -114,3 +114,28 @@ pub fn mean_factor_up(receiver: &Shape, emitter: &Shape, n: usize) -> f64 {
         .sum::<f64>()
         / (n * n) as f64
 }
+
+/// Two parallel unit plates a unit apart (receiver polygon 0, emitter polygon 1, `generators::
+/// parallel_plates`) and a black two-sided strip 1 cm under the emitter that hides its first 30% along
+/// `x` from every point of the receiver: a shadow boundary across the source, at the same place for
+/// every receiver.
+pub fn emitter_hidden_by_a_near_strip(reflectance: f64, emission: f64) -> Scene {
+    let mut scene = generators::parallel_plates(1.0, 1.0, reflectance, emission);
+    let material = scene.materials.len();
+    scene
+        .materials
+        .push(Material::diffuse("blocker", radiosity::color::Rgb::BLACK));
+    let z = 0.99;
+    scene.polygons.push(Polygon {
+        shape: Shape::Quad([
+            DVec3::new(-0.1, -0.1, z),
+            DVec3::new(-0.1, 1.1, z),
+            DVec3::new(0.3, 1.1, z),
+            DVec3::new(0.3, -0.1, z),
+        ]),
+        material,
+        object: 0,
+        two_sided: true,
+    });
+    scene
+}
