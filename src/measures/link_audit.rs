@@ -8,10 +8,12 @@
 //! out. The probe (`radiosity probe`) shows that a solution is off at a point; the audit shows which
 //! links carry the error: per source polygon, the light the audited links carry, `Σ A_i F_ij L_j` with
 //! `L_j` the luminance of the source element's average radiance, as coupled and as estimated, with
-//! the estimate's standard error. It found the lamp reflectors of the classroom seen 10% too bright
-//! and a corridor's ceiling beside its lamps seen with a quarter of its light (BENCHMARKS.md, "Shadow
-//! boundaries across sources"). Links at a cluster are counted, not audited (their couplings sample
-//! their contents, not a surface pair).
+//! the estimate's standard error. It found a classroom lamp housing's reflector seen 3% too bright
+//! from the floor below and a corridor's ceiling beside its lamps seen with a quarter of its light
+//! (BENCHMARKS.md, "`radiosity audit`"). Links at a cluster are counted, not audited (their couplings
+//! sample their contents, not a surface pair). Between elements that share an edge the kernel's
+//! variance is unbounded (`1/r²` at the edge), so there the standard error understates the estimate's
+//! spread.
 
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::{sample_kernel, OracleContext};
