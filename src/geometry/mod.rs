@@ -281,6 +281,16 @@ impl Shape {
     }
 }
 
+/// Cosine-distributed unit direction about the unit `normal` from a uniform sample `s` of the unit
+/// square (Malley's method: a uniform point on the disc lifted to the hemisphere); density `cos θ / π`.
+pub fn cosine_direction(normal: DVec3, s: DVec2) -> DVec3 {
+    let r = s.x.sqrt();
+    let phi = 2.0 * std::f64::consts::PI * s.y;
+    let (t, b) = normal.any_orthonormal_pair();
+    let z = (1.0 - s.x).max(0.0).sqrt();
+    r * phi.cos() * t + r * phi.sin() * b + z * normal
+}
+
 /// Children parameter domains of a regular split, matching [`Shape::subdivide`] for the same kind of shape
 /// (none for a domain that is not a triangle or quad).
 pub fn subdivide_parameters(corners: &[DVec2]) -> Vec<Vec<DVec2>> {

@@ -36,7 +36,7 @@
 pub mod probe;
 
 use crate::color::Rgb;
-use crate::geometry::{DVec2, DVec3, Ray, Shape};
+use crate::geometry::{cosine_direction, DVec2, DVec3, Ray, Shape};
 use crate::output::camera::Camera;
 use crate::output::image::Image;
 use crate::progress::Progress;
@@ -340,7 +340,7 @@ impl<'a> PathTracer<'a> {
                 }
                 throughput *= 1.0 / survival;
             }
-            let direction = cosine_direction(vertex.normal, bounce_u.x, bounce_u.y);
+            let direction = cosine_direction(vertex.normal, bounce_u);
             let ray = Ray::new(vertex.point, direction);
             let Some(hit) = self.visibility.intersect(&ray, self.t_min, f64::INFINITY) else {
                 break;
@@ -727,15 +727,6 @@ fn unit_square(a: u32, b: u32) -> DVec2 {
     DVec2::new(a as f64 * SCALE, b as f64 * SCALE)
 }
 
-/// Cosine-weighted direction about the unit `normal` from two uniform numbers (Malley's method).
-fn cosine_direction(normal: DVec3, u1: f64, u2: f64) -> DVec3 {
-    let r = u1.sqrt();
-    let phi = 2.0 * PI * u2;
-    let (t, b) = normal.any_orthonormal_pair();
-    let z = (1.0 - u1).max(0.0).sqrt();
-    r * phi.cos() * t + r * phi.sin() * b + z * normal
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -776,7 +767,7 @@ mod tests {
         let count = 20_000;
         let mut total = 0.0;
         for _ in 0..count {
-            let d = cosine_direction(n, rng.random(), rng.random());
+            let d = cosine_direction(n, DVec2::new(rng.random(), rng.random()));
             assert!((d.length() - 1.0).abs() < 1e-9);
             let c = d.dot(n);
             assert!(c >= 0.0);

@@ -33,7 +33,7 @@
 use super::push_pull::{push_pull, PatchUpdate};
 use super::{emitted_power, link_rng, SolveReport};
 use crate::color::Rgb;
-use crate::geometry::{DVec2, DVec3, Ray};
+use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::{Decision, OracleContext, RefinementOracle};
 use crate::progress::Progress;
@@ -131,15 +131,6 @@ fn batch_rng(seed: u64, iteration: usize, batch: u64) -> Pcg64Mcg {
     Pcg64Mcg::seed_from_u64(splitmix64(
         seed ^ splitmix64(iteration as u64 ^ splitmix64(batch)),
     ))
-}
-
-/// Cosine-distributed unit direction about `normal` (Malley's method).
-fn cosine_direction(normal: DVec3, s: DVec2) -> DVec3 {
-    let (t, b) = normal.any_orthonormal_pair();
-    let r = s.x.sqrt();
-    let phi = 2.0 * PI * s.y;
-    let z = (1.0 - s.x).max(0.0).sqrt();
-    (r * phi.cos()) * t + (r * phi.sin()) * b + z * normal
 }
 
 /// Traces lines `first..first + count` of the `n` lines of an iteration.
