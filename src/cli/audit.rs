@@ -3,7 +3,7 @@
 //! bright or too dark, by how many standard errors.
 
 use super::args::{SceneArgs, SolveArgs};
-use crate::measures::link_audit::{audit_links, AuditSettings, SourceRow};
+use crate::measures::link_audit::{audit_links, audit_transport, AuditSettings, SourceRow};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use anyhow::Result;
@@ -28,6 +28,13 @@ pub struct AuditCommand {
     /// Source polygons listed (largest differences first).
     #[arg(long, default_value_t = 20, value_name = "N")]
     pub rows: usize,
+    /// Audit the transport instead: each polygon side's reflected light as solved against one
+    /// unbiased gather of the solution by cosine rays (all couplings, cluster links included).
+    #[arg(long)]
+    pub transport: bool,
+    /// Cosine rays per polygon side for --transport.
+    #[arg(long, default_value_t = 4096, value_name = "N", value_parser = super::args::count(2, 100_000_000))]
+    pub transport_rays: usize,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -45,6 +52,9 @@ impl AuditCommand {
         }
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
+        if self.transport {
+            return self.print_transport(&name, &scene, &solution, seed);
+        }
         let audit = audit_links(
             &solution.hierarchy,
             solution.visibility.as_ref(),
@@ -94,6 +104,74 @@ impl AuditCommand {
             )?;
         }
         line("total".to_string(), &audit.total)?;
+        Ok(())
+    }
+
+    fn print_transport(
+        &self,
+        name: &str,
+        scene: &crate::scene::Scene,
+        solution: &crate::pipeline::Solution,
+        seed: u64,
+    ) -> Result<()> {
+        let polygons: Vec<usize> = if self.polygons.is_empty() {
+            (0..scene.polygons.len()).collect()
+        } else {
+            self.polygons.clone()
+        };
+        let mut rows = audit_transport(
+            &solution.hierarchy,
+            solution.visibility.as_ref(),
+            &polygons,
+            self.transport_rays,
+            seed,
+        )?;
+        if self.json {
+            outln!("{}", serde_json::to_string_pretty(&rows)?)?;
+            return Ok(());
+        }
+        rows.sort_by(|a, b| {
+            (b.solved - b.gathered)
+                .abs()
+                .total_cmp(&(a.solved - a.gathered).abs())
+        });
+        outln!(
+            "# {name}: reflected light per polygon side (luminance × area) as solved against one gather \
+             of the solution by {} cosine rays per side",
+            self.transport_rays
+        )?;
+        outln!(
+            "{:>9} {:>12} {:>12} {:>10} {:>8} {:>7}",
+            "side",
+            "solved",
+            "gathered",
+            "std.err",
+            "ratio",
+            "z"
+        )?;
+        let line = |label: String, solved: f64, gathered: f64, error: f64| {
+            outln!(
+                "{label:>9} {solved:>12.4e} {gathered:>12.4e} {error:>10.2e} {:>8.4} {:>7.1}",
+                solved / gathered,
+                (solved - gathered) / error
+            )
+        };
+        for row in rows.iter().take(self.rows) {
+            line(
+                format!("{}{}", row.polygon, if row.front { "" } else { "b" }),
+                row.solved,
+                row.gathered,
+                row.standard_error,
+            )?;
+        }
+        let solved: f64 = rows.iter().map(|r| r.solved).sum();
+        let gathered: f64 = rows.iter().map(|r| r.gathered).sum();
+        let error = rows
+            .iter()
+            .map(|r| r.standard_error.powi(2))
+            .sum::<f64>()
+            .sqrt();
+        line("total".to_string(), solved, gathered, error)?;
         Ok(())
     }
 }

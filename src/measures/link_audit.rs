@@ -14,11 +14,18 @@
 //! sample their contents, not a surface pair). Between elements that share an edge the kernel's
 //! variance is unbounded (`1/r²` at the edge), so there the standard error understates the estimate's
 //! spread.
+//!
+//! [`audit_transport`] checks the whole transport instead, whatever the link structure: each polygon
+//! side's reflected light as solved against one unbiased gather of the solution's own radiance field
+//! by cosine rays (cluster links, what clusters share and push down included).
 
+use crate::color::Rgb;
+use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::{sample_kernel, OracleContext};
 use crate::solvers::link_rng;
 use crate::visibility::Visibility;
+use rand::Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -178,4 +185,97 @@ fn estimate(
     let mean = values.iter().sum::<f64>() / n;
     let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
     (area * mean, area * (variance / n).sqrt())
+}
+
+/// One polygon side's reflected light, as solved and as gathered anew from the solution.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct TransportRow {
+    pub polygon: usize,
+    pub front: bool,
+    /// `∫ (L − E) dA` over the side's leaves (luminance): the light the solution reflects there.
+    pub solved: f64,
+    /// `∫ ρ/π ∫ L(hit(x, ω)) cos θ dω dA` by Monte Carlo with the solution's own radiance `L` where
+    /// cosine-distributed rays land: what one exact gather of that solution reflects.
+    pub gathered: f64,
+    /// Standard error of `gathered`.
+    pub standard_error: f64,
+}
+
+/// The transport audit of the polygon sides of `polygons`: the solution's reflected light against an
+/// unbiased one-bounce gather of the same solution (`samples` cosine rays from uniform points per
+/// side). Where they differ the solver's transport is off — couplings, cluster links and what they
+/// share, visibility — whatever the link structure, since the gather reads the solution's radiance
+/// field and nothing else. Light from goniometric luminaires is not in the gather: scenes with them
+/// are refused.
+pub fn audit_transport(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    polygons: &[usize],
+    samples: usize,
+    seed: u64,
+) -> anyhow::Result<Vec<TransportRow>> {
+    anyhow::ensure!(samples >= 2, "at least 2 samples per polygon side");
+    anyhow::ensure!(
+        h.luminaires.is_empty(),
+        "the transport audit does not gather the direct light of IES luminaires yet"
+    );
+    let patches: Vec<u32> = (0..h.patches.len() as u32)
+        .filter(|&p| polygons.contains(&h.patches[p as usize].polygon))
+        .collect();
+    // Hits nearer than this (relative to the scene's size) are the surface the ray leaves.
+    let t_min = 1e-9 * h.patch_bounds().diagonal().max(f64::MIN_POSITIVE);
+    Ok(patches
+        .par_iter()
+        .map(|&patch| {
+            let p = &h.patches[patch as usize];
+            let mut leaves = Vec::new();
+            h.collect_leaves(p.root, &mut leaves);
+            let solved: f64 = leaves
+                .iter()
+                .map(|&id| h.element(id).area * (h.average_radiance(id) - p.emission).luminance())
+                .sum();
+            let shape = h.patch_shape(patch);
+            let area = shape.area();
+            let mut rng = link_rng(seed, p.root, p.root, AUDIT_STREAM);
+            let values: Vec<f64> = (0..samples)
+                .map(|_| {
+                    let x = shape.sample_uniform(DVec2::new(rng.random(), rng.random()));
+                    let direction =
+                        cosine_direction(p.normal, DVec2::new(rng.random(), rng.random()));
+                    (p.reflectance * radiance_seen(h, visibility, x, direction, t_min)).luminance()
+                })
+                .collect();
+            let n = samples as f64;
+            let mean = values.iter().sum::<f64>() / n;
+            let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            TransportRow {
+                polygon: p.polygon,
+                front: p.front,
+                solved,
+                gathered: area * mean,
+                standard_error: area * (variance / n).sqrt(),
+            }
+        })
+        .collect())
+}
+
+/// The solution's exitant radiance where the ray from `x` along `direction` first meets a polygon
+/// (black past the scene, on a side without a patch, or on a luminaire's opening).
+fn radiance_seen(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    x: DVec3,
+    direction: DVec3,
+    t_min: f64,
+) -> Rgb {
+    let ray = Ray::new(x, direction);
+    let Some(hit) = visibility.intersect(&ray, t_min, f64::INFINITY) else {
+        return Rgb::BLACK;
+    };
+    let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
+        return Rgb::BLACK;
+    };
+    let point = x + hit.t * direction;
+    let (id, uv) = h.locate_with_parameters(patch, point);
+    h.exitant_radiance_at_parameters(id, uv)
 }
