@@ -578,6 +578,24 @@ fn audit_lists_the_sources_of_a_polygon_and_rejects_an_unknown_one() {
     assert!(text.contains("coupled") && text.contains("total"), "{text}");
     // Header, column names, three sources and the total.
     assert_eq!(text.lines().count(), 6, "{text}");
+    let out = radiosity(&[
+        "audit",
+        "--transport",
+        "--polygon",
+        "0",
+        "--transport-rays",
+        "64",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("gathered") && text.contains("total"),
+        "{text}"
+    );
     let out = radiosity(&["audit", "--polygon", "9999"]);
     assert!(!out.status.success());
     let error = String::from_utf8_lossy(&out.stderr);
