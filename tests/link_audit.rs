@@ -116,7 +116,8 @@ fn the_audit_finds_the_bias_of_fixed_source_nodes_behind_a_near_occluder() {
 /// The transport audit of a closed white furnace: every ray of the gather meets a surface of radiance
 /// `E / (1 − ρ)`, so both the gathered and the solved light are `ρ E / (1 − ρ) A`, each within the
 /// solution's own uniformity (every leaf within 10⁻³ of `E / (1 − ρ)` at these settings:
-/// `scene_generators.rs::furnace_mgf_solves_to_e_over_one_minus_rho`): 2·10⁻³ allowed.
+/// `scene_generators.rs::furnace_mgf_solves_to_e_over_one_minus_rho`): 2·10⁻³ allowed, besides four
+/// standard errors of the gather's direct part (a point on the emitting walls per ray).
 #[test]
 fn the_transport_audit_of_a_furnace_is_exact() {
     let (rho, emission) = (0.6, 2.0);
@@ -136,7 +137,7 @@ fn the_transport_audit_of_a_furnace_is_exact() {
         &solution.hierarchy,
         solution.visibility.as_ref(),
         &polygons,
-        64,
+        1 << 14,
         3,
     )
     .expect("audit");
@@ -144,7 +145,10 @@ fn the_transport_audit_of_a_furnace_is_exact() {
     for row in rows {
         let exact = rho * emission / (1.0 - rho) * scene.polygons[row.polygon].shape.area();
         assert!((row.solved / exact - 1.0).abs() < 1e-3, "{row:?}");
-        assert!((row.gathered / row.solved - 1.0).abs() < 2e-3, "{row:?}");
+        assert!(
+            (row.gathered - row.solved).abs() < 2e-3 * row.solved + 4.0 * row.standard_error,
+            "{row:?}"
+        );
     }
 }
 

@@ -17,9 +17,11 @@
 //!
 //! [`audit_transport`] checks the whole transport instead, whatever the link structure: each polygon
 //! side's reflected light as solved against one unbiased gather of the solution's own radiance field
-//! by cosine rays (cluster links, what clusters share and push down included).
+//! (cosine rays for the reflected part, a point on the emitters for the emitted part), cluster links,
+//! what clusters share and push down included.
 
 use crate::color::Rgb;
+use crate::geometry::form_factor::point_to_point;
 use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::{sample_kernel, OracleContext};
@@ -195,7 +197,8 @@ pub struct TransportRow {
     /// `∫ (L − E) dA` over the side's leaves (luminance): the light the solution reflects there.
     pub solved: f64,
     /// `∫ ρ/π ∫ L(hit(x, ω)) cos θ dω dA` by Monte Carlo with the solution's own radiance `L` where
-    /// cosine-distributed rays land: what one exact gather of that solution reflects.
+    /// cosine-distributed rays land (its emitted part by a point on the emitters instead): what one
+    /// exact gather of that solution reflects.
     pub gathered: f64,
     /// Standard error of `gathered`.
     pub standard_error: f64,
@@ -224,6 +227,7 @@ pub fn audit_transport(
         .collect();
     // Hits nearer than this (relative to the scene's size) are the surface the ray leaves.
     let t_min = 1e-9 * h.patch_bounds().diagonal().max(f64::MIN_POSITIVE);
+    let emitters = Emitters::of(h);
     Ok(patches
         .par_iter()
         .map(|&patch| {
@@ -242,7 +246,9 @@ pub fn audit_transport(
                     let x = shape.sample_uniform(DVec2::new(rng.random(), rng.random()));
                     let direction =
                         cosine_direction(p.normal, DVec2::new(rng.random(), rng.random()));
-                    (p.reflectance * radiance_seen(h, visibility, x, direction, t_min)).luminance()
+                    let reflected = radiance_seen(h, visibility, x, direction, t_min);
+                    let direct = emitters.direct(h, visibility, x, p.normal, &mut rng);
+                    (p.reflectance * (reflected + direct)).luminance()
                 })
                 .collect();
             let n = samples as f64;
@@ -259,8 +265,66 @@ pub fn audit_transport(
         .collect())
 }
 
-/// The solution's exitant radiance where the ray from `x` along `direction` first meets a polygon
-/// (black past the scene, on a side without a patch, or on a luminaire's opening).
+/// The emitting patches, for the direct part of the transport audit's gather (next-event estimation:
+/// a cosine ray alone rarely finds a small lamp).
+struct Emitters {
+    patches: Vec<u32>,
+    /// Cumulative areas of `patches`.
+    cumulative: Vec<f64>,
+}
+
+impl Emitters {
+    fn of(h: &Hierarchy) -> Self {
+        let patches: Vec<u32> = (0..h.patches.len() as u32)
+            .filter(|&p| h.patches[p as usize].emission.max_channel() > 0.0)
+            .collect();
+        let cumulative = patches
+            .iter()
+            .scan(0.0, |total, &p| {
+                *total += h.patch_shape(p).area();
+                Some(*total)
+            })
+            .collect();
+        Emitters {
+            patches,
+            cumulative,
+        }
+    }
+
+    /// `∫ E(y) G(x, y) V(x, y) dA_y` over the emitters, by one point chosen in proportion to area:
+    /// the emitted part of what the cosine ray's hit stands for (`radiance_seen` leaves it out).
+    fn direct(
+        &self,
+        h: &Hierarchy,
+        visibility: &dyn Visibility,
+        x: DVec3,
+        normal: DVec3,
+        rng: &mut impl Rng,
+    ) -> Rgb {
+        let Some(&total) = self.cumulative.last() else {
+            return Rgb::BLACK;
+        };
+        let pick = rng.random::<f64>() * total;
+        let index = self
+            .cumulative
+            .partition_point(|&c| c <= pick)
+            .min(self.patches.len() - 1);
+        let emitter = &h.patches[self.patches[index] as usize];
+        let y = h
+            .patch_shape(self.patches[index])
+            .sample_uniform(DVec2::new(rng.random(), rng.random()));
+        let g = point_to_point(x, normal, y, emitter.normal);
+        if g > 0.0 && !visibility.segment_occluded(x, y) {
+            emitter.emission * (g * total)
+        } else {
+            Rgb::BLACK
+        }
+    }
+}
+
+/// The solution's reflected radiance (exitant less emitted: the emitted part is gathered directly,
+/// [`Emitters::direct`]) where the ray from `x` along `direction` first meets a polygon (black past
+/// the scene, on a side without a patch, or on a luminaire's opening).
 fn radiance_seen(
     h: &Hierarchy,
     visibility: &dyn Visibility,
@@ -277,5 +341,5 @@ fn radiance_seen(
     };
     let point = x + hit.t * direction;
     let (id, uv) = h.locate_with_parameters(patch, point);
-    h.exitant_radiance_at_parameters(id, uv)
+    h.exitant_radiance_at_parameters(id, uv) - h.patches[patch as usize].emission
 }
