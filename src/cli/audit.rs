@@ -32,8 +32,9 @@ pub struct AuditCommand {
     /// unbiased gather of the solution by cosine rays (all couplings, cluster links included).
     #[arg(long)]
     pub transport: bool,
-    /// Cosine rays per polygon side for --transport.
-    #[arg(long, default_value_t = 4096, value_name = "N", value_parser = super::args::count(2, 100_000_000))]
+    /// Cosine rays per polygon side for --transport (each with a point on the emitters). Near a small
+    /// lamp the direct part's kernel is heavy-tailed and few rays understate the standard error.
+    #[arg(long, default_value_t = 65_536, value_name = "N", value_parser = super::args::count(2, 100_000_000))]
     pub transport_rays: usize,
     /// Print JSON instead of a table.
     #[arg(long)]

@@ -183,10 +183,16 @@ fn estimate(
     };
     let area = h.element(source).area;
     let values = sample_kernel(&context, receiver, source, settings.samples, &mut rng).values;
+    let (mean, standard_error) = mean_and_standard_error(&values);
+    (area * mean, area * standard_error)
+}
+
+/// The sample mean of `values` (at least two) and its standard error, `s / √n`.
+fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;
     let mean = values.iter().sum::<f64>() / n;
     let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (area * mean, area * (variance / n).sqrt())
+    (mean, (variance / n).sqrt())
 }
 
 /// One polygon side's reflected light, as solved and as gathered anew from the solution.
@@ -251,15 +257,13 @@ pub fn audit_transport(
                     (p.reflectance * (reflected + direct)).luminance()
                 })
                 .collect();
-            let n = samples as f64;
-            let mean = values.iter().sum::<f64>() / n;
-            let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            let (mean, standard_error) = mean_and_standard_error(&values);
             TransportRow {
                 polygon: p.polygon,
                 front: p.front,
                 solved,
                 gathered: area * mean,
-                standard_error: area * (variance / n).sqrt(),
+                standard_error: area * standard_error,
             }
         })
         .collect())
