@@ -1,6 +1,8 @@
 //! Probe points: file parsing with line numbers, locating points on surfaces, and the radiosity solution
 //! against the path-traced reference there.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 use radiosity::geometry::form_factor::point_to_polygon;
 use radiosity::geometry::DVec3;
 use radiosity::pipeline::{simulate, SimulationSettings};
@@ -256,27 +258,15 @@ fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
     }
 }
 
-/// A scene of one grey object made of one-sided `shapes`, with a BVH over them.
+/// A scene of one-sided grey `shapes` (`common::one_polygon_per_material`), with a BVH over them.
 fn one_sided_grey(
     shapes: &[radiosity::geometry::Shape],
 ) -> (radiosity::scene::Scene, radiosity::visibility::bvh::Bvh) {
-    use radiosity::scene::{Material, Object, Polygon, Scene};
-    let scene = Scene {
-        materials: vec![Material::diffuse("grey", radiosity::color::Rgb::splat(0.5))],
-        objects: vec![Object {
-            name: "object".into(),
-        }],
-        polygons: shapes
-            .iter()
-            .map(|&shape| Polygon {
-                shape,
-                material: 0,
-                object: 0,
-                two_sided: false,
-            })
-            .collect(),
-        ..Default::default()
-    };
+    let grey = radiosity::scene::Material::diffuse("grey", radiosity::color::Rgb::splat(0.5));
+    let scene =
+        common::one_polygon_per_material(vec![grey; shapes.len()], shapes.iter().copied(), |_| {
+            false
+        });
     (scene, radiosity::visibility::bvh::Bvh::new(shapes))
 }
 

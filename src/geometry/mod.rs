@@ -422,6 +422,26 @@ impl Aabb {
 mod tests {
     use super::*;
 
+    #[test]
+    fn cosine_directions_have_the_lambertian_moments() {
+        use rand::{Rng, SeedableRng};
+        let normal = DVec3::new(1.0, 2.0, -0.5).normalize();
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let n = 200_000;
+        let (mut cos, mut cos2) = (0.0, 0.0);
+        for _ in 0..n {
+            let d = cosine_direction(normal, DVec2::new(rng.random(), rng.random()));
+            assert!((d.length() - 1.0).abs() < 1e-12);
+            let c = d.dot(normal);
+            assert!(c >= 0.0);
+            cos += c;
+            cos2 += c * c;
+        }
+        // For p(ω) = cos θ / π: E[cos θ] = 2/3, E[cos² θ] = 1/2.
+        assert!((cos / n as f64 - 2.0 / 3.0).abs() < 3e-3);
+        assert!((cos2 / n as f64 - 0.5).abs() < 3e-3);
+    }
+
     fn unit_quad() -> Shape {
         Shape::Quad([DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y])
     }

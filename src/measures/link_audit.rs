@@ -91,12 +91,10 @@ pub fn audit_links(
     settings: &AuditSettings,
 ) -> anyhow::Result<LinkAudit> {
     anyhow::ensure!(settings.samples >= 2, "at least 2 samples per link");
+    let chosen = polygon_mask(h, &settings.polygons);
     let audited = |id: usize| {
         !h.is_cluster(id as ElementId)
-            && (settings.polygons.is_empty()
-                || settings
-                    .polygons
-                    .contains(&h.patch_of(id as ElementId).polygon))
+            && (settings.polygons.is_empty() || chosen[h.patch_of(id as ElementId).polygon])
     };
     let mut links = Vec::new();
     let mut cluster_links = 0;
@@ -195,6 +193,17 @@ fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
     (mean, (variance / n).sqrt())
 }
 
+/// Per polygon of the scene, whether it is among `polygons` (indices past the scene are ignored).
+fn polygon_mask(h: &Hierarchy, polygons: &[usize]) -> Vec<bool> {
+    let mut chosen = vec![false; h.polygon_patches.len()];
+    for &p in polygons {
+        if let Some(c) = chosen.get_mut(p) {
+            *c = true;
+        }
+    }
+    chosen
+}
+
 /// One polygon side's reflected light, as solved and as gathered anew from the solution.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct TransportRow {
@@ -228,8 +237,9 @@ pub fn audit_transport(
         h.luminaires.is_empty(),
         "the transport audit does not gather the direct light of IES luminaires yet"
     );
+    let chosen = polygon_mask(h, polygons);
     let patches: Vec<u32> = (0..h.patches.len() as u32)
-        .filter(|&p| polygons.contains(&h.patches[p as usize].polygon))
+        .filter(|&p| chosen[h.patches[p as usize].polygon])
         .collect();
     // Hits nearer than this (relative to the scene's size) are the surface the ray leaves.
     let t_min = 1e-9 * h.patch_bounds().diagonal().max(f64::MIN_POSITIVE);
