@@ -9,7 +9,7 @@ use radiosity::output::camera::Camera;
 use radiosity::output::image::Image;
 use radiosity::output::tonemap::{to_srgb8, write_png, Curve, Exposure, ToneMap};
 use radiosity::output::{
-    render, render_with, write_glb, write_ply, RenderOptions, Shading, VertexRadiosity,
+    render, render_with, write_glb, write_ply, Antialias, RenderOptions, Shading, VertexRadiosity,
 };
 use radiosity::scene::{CameraSpec, Material, Object, Polygon, Scene};
 use radiosity::visibility::brute_force::BruteForce;
@@ -75,9 +75,23 @@ fn top_camera() -> Camera {
     Camera::new(&spec, 64, 64)
 }
 
+/// `work` on a pool of `threads` threads.
+fn on_threads<T: Send>(threads: usize, work: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("thread pool")
+        .install(work)
+}
+
 /// Where the centre ray of pixel (x, y) meets the plane z = 0: (t, point).
 fn floor_hit(camera: &Camera, x: usize, y: usize) -> (f64, DVec3) {
-    let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
+    floor_hit_at(camera, x as f64 + 0.5, y as f64 + 0.5)
+}
+
+/// Where the ray through image position (x, y) in pixels meets the plane z = 0: (t, point).
+fn floor_hit_at(camera: &Camera, x: f64, y: f64) -> (f64, DVec3) {
+    let ray = camera.ray(x, y);
     let t = -ray.origin.z / ray.direction.z;
     (t, ray.at(t))
 }
@@ -173,13 +187,7 @@ fn images_do_not_depend_on_thread_count_and_jitter_is_seeded() {
         mesh_colour: Rgb::new(9.0, 0.0, 0.0),
         ..Default::default()
     };
-    let in_pool = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| render(&h, &vis, &camera, &options))
-    };
+    let in_pool = |threads: usize| on_threads(threads, || render(&h, &vis, &camera, &options));
     let one = in_pool(1);
     assert_eq!(one, in_pool(3));
     assert_ne!(
@@ -196,6 +204,8 @@ fn images_do_not_depend_on_thread_count_and_jitter_is_seeded() {
     );
 }
 
+/// Both antialiasing modes: stratified samples every pixel; adaptive averages the corners of pixels
+/// wholly on (or off) the floor, where they agree, and samples the pixels its edge crosses.
 #[test]
 fn supersampling_averages_inside_the_pixel() {
     let (s, mut h) = floor_setup(false);
@@ -203,43 +213,98 @@ fn supersampling_averages_inside_the_pixel() {
         h.radiance_mut(id)[0] = Rgb::splat(2.0);
     }
     let camera = top_camera();
+    for antialias in [Antialias::Stratified, Antialias::Adaptive] {
+        let options = RenderOptions {
+            samples_per_pixel: 16,
+            antialias,
+            ..Default::default()
+        };
+        let image = render(&h, &visibility(&s), &camera, &options);
+        // The image plane is parallel to the floor: a pixel covers an axis-aligned square of it, so its
+        // exact floor coverage is an overlap of intervals. 4 x 4 strata err by at most one column (or
+        // row) of strata.
+        let (mut partial, mut error_sum) = (0, 0.0);
+        for y in 0..64 {
+            for x in 0..64 {
+                let (_, a) = floor_hit_at(&camera, x as f64, y as f64);
+                let (_, b) = floor_hit_at(&camera, x as f64 + 1.0, y as f64 + 1.0);
+                let overlap = |lo: f64, hi: f64| {
+                    let (lo, hi) = (lo.min(hi), lo.max(hi));
+                    (hi.min(1.0) - lo.max(0.0)).max(0.0) / (hi - lo)
+                };
+                let coverage = overlap(a.x, b.x) * overlap(a.y, b.y);
+                let estimate = image.get(x, y).r / 2.0;
+                if coverage == 0.0 || coverage == 1.0 {
+                    assert_eq!(estimate, coverage, "{antialias:?} ({x}, {y})");
+                } else {
+                    assert!(
+                        (estimate - coverage).abs() <= 0.25 + 1e-12,
+                        "{antialias:?} ({x}, {y})"
+                    );
+                    partial += 1;
+                    error_sum += estimate - coverage;
+                }
+            }
+        }
+        // Jittered strata are unbiased: the errors average out along the border.
+        assert!(partial > 100, "{partial}");
+        assert!(
+            (error_sum / partial as f64).abs() < 0.03,
+            "{antialias:?}: {}",
+            error_sum / partial as f64
+        );
+    }
+}
+
+/// Adaptive antialiasing on a smooth field: a pixel whose corners differ by less than the contrast
+/// threshold is their mean, which for a field linear across the pixel is its box filter exactly; one
+/// across a step is sampled. The image does not depend on the thread count.
+#[test]
+fn adaptive_antialiasing_averages_smooth_pixels_and_samples_steps() {
+    let (s, mut h) = floor_setup(false);
+    // One leaf per quarter of the floor, each with its own constant radiance: a step of 40% between
+    // the left and right halves, none between top and bottom.
+    let leaves = h.leaves();
+    assert!(leaves.len() >= 4, "{} leaves", leaves.len());
+    for &id in &leaves {
+        let centre = h.element(id).shape().centroid();
+        h.radiance_mut(id)[0] = Rgb::splat(if centre.x < 0.5 { 1.0 } else { 1.4 });
+    }
+    let camera = top_camera();
+    let vis = visibility(&s);
     let options = RenderOptions {
         samples_per_pixel: 16,
+        antialias: Antialias::Adaptive,
+        seed: 3,
         ..Default::default()
     };
-    let image = render(&h, &visibility(&s), &camera, &options);
-    // The image plane is parallel to the floor: a pixel covers an axis-aligned square of it, so its exact
-    // floor coverage is an overlap of intervals. 4 x 4 strata err by at most one column (or row) of strata.
-    let (mut partial, mut error_sum) = (0, 0.0);
+    let in_pool = |threads: usize| on_threads(threads, || render(&h, &vis, &camera, &options));
+    let image = in_pool(1);
+    assert_eq!(image, in_pool(3));
+    let mut across = 0;
     for y in 0..64 {
         for x in 0..64 {
-            let corner = |dx: f64, dy: f64| {
-                let ray = camera.ray(x as f64 + dx, y as f64 + dy);
-                ray.at(-ray.origin.z / ray.direction.z)
-            };
-            let (a, b) = (corner(0.0, 0.0), corner(1.0, 1.0));
-            let overlap = |lo: f64, hi: f64| {
-                let (lo, hi) = (lo.min(hi), lo.max(hi));
-                (hi.min(1.0) - lo.max(0.0)).max(0.0) / (hi - lo)
-            };
-            let coverage = overlap(a.x, b.x) * overlap(a.y, b.y);
-            let estimate = image.get(x, y).r / 2.0;
-            if coverage == 0.0 || coverage == 1.0 {
-                assert_eq!(estimate, coverage, "({x}, {y})");
+            let (_, a) = floor_hit_at(&camera, x as f64, y as f64);
+            let (_, b) = floor_hit_at(&camera, x as f64 + 1.0, y as f64 + 1.0);
+            let inside = |p: f64| (0.0..=1.0).contains(&p);
+            if !(inside(a.x) && inside(b.x) && inside(a.y) && inside(b.y)) {
+                continue; // the floor's own border
+            }
+            let value = image.get(x, y).r;
+            let (lo, hi) = (a.x.min(b.x), a.x.max(b.x));
+            if hi <= 0.5 || lo >= 0.5 {
+                // Wholly on one side: the corners' mean is the leaf's radiance.
+                assert_eq!(value, if hi <= 0.5 { 1.0 } else { 1.4 }, "({x}, {y})");
             } else {
-                assert!((estimate - coverage).abs() <= 0.25 + 1e-12, "({x}, {y})");
-                partial += 1;
-                error_sum += estimate - coverage;
+                // Across the step: sampled, so near the covered fraction (one column of strata).
+                let right = (hi - 0.5) / (hi - lo);
+                let exact = 1.0 + 0.4 * right;
+                assert!((value - exact).abs() <= 0.4 * 0.25 + 1e-12, "({x}, {y})");
+                across += 1;
             }
         }
     }
-    // Jittered strata are unbiased: the errors average out along the border.
-    assert!(partial > 100, "{partial}");
-    assert!(
-        (error_sum / partial as f64).abs() < 0.03,
-        "{}",
-        error_sum / partial as f64
-    );
+    assert!(across > 10, "{across}");
 }
 
 #[test]

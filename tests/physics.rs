@@ -103,6 +103,43 @@ fn closed_box_with_one_emitter_absorbs_what_it_emits() {
     }
 }
 
+/// Passes that another may follow sweep only to a part in a thousand (the refinement after them changes
+/// the radiance by more); the last sweeps on to the tolerance asked for. Two solves that differ only in
+/// that tolerance refine alike, and their last passes converge to the same fixed point: a sweep that
+/// changes the power by less than `τ` leaves at most `τ q/(1 − q)` of it with the contraction
+/// `q ≤ ρ = 0.9`, 9τ. Stopping the last pass at 1e-3 would leave up to 9·10⁻³.
+#[test]
+fn the_last_pass_sweeps_to_the_tolerance_asked_for() {
+    let rho = 0.9;
+    let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, 1.0);
+    let solve_to = |tolerance: f64| {
+        let settings = SimulationSettings {
+            eps: 1e-4,
+            min_area: 1e-2,
+            tolerance,
+            ..Default::default()
+        };
+        simulate(&scene, &settings, &quiet()).expect("solve").report
+    };
+    let (tolerance, limit) = (1e-6, solve_to(1e-12));
+    let r = solve_to(tolerance);
+    assert!(r.converged && limit.converged);
+    assert!(r.passes > 1, "{} passes", r.passes);
+    let links = |r: &radiosity::solvers::SolveReport| r.error.passes.last().map(|p| p.links);
+    assert_eq!((r.passes, links(&r)), (limit.passes, links(&limit)));
+    assert!(*r.residuals.last().expect("sweeps") < tolerance);
+    let bound = tolerance * rho / (1.0 - rho);
+    for (power, converged) in r
+        .exitant_power
+        .to_array()
+        .iter()
+        .zip(limit.exitant_power.to_array())
+    {
+        let error = (power - converged).abs() / converged;
+        assert!(error < bound, "error {error:e}, bound {bound:e}");
+    }
+}
+
 /// A closed box whose walls reflect more than they receive (ρ = 1.2, not physical) has no solution:
 /// the sweeps' change grows by ρ per sweep, and the solve stops after `DIVERGING_SWEEPS` of them
 /// with the verdict, instead of sweeping to the iteration limit pass after pass. The same box at

@@ -491,16 +491,17 @@ impl Overlap {
         }
     }
 
-    /// The area moments `G c` of the function with coefficients `c`.
-    pub fn moments_rgb(&self, c: &[Rgb]) -> Vec<Rgb> {
+    /// The area moments `G c` of the function with coefficients `c`, into `out`.
+    pub fn moments_rgb(&self, c: &[Rgb], out: &mut [Rgb]) {
         let (n, l) = (self.size, &self.factor);
         // G c = L (Lᵀ c).
-        let lt: Vec<Rgb> = (0..n)
-            .map(|a| (a..n).map(|b| c[b] * l[b * n + a]).sum())
-            .collect();
-        (0..n)
-            .map(|a| (0..=a).map(|b| lt[b] * l[a * n + b]).sum())
-            .collect()
+        let mut lt = [Rgb::BLACK; MAX_BASIS_SIZE];
+        for (a, v) in lt[..n].iter_mut().enumerate() {
+            *v = (a..n).map(|b| c[b] * l[b * n + a]).sum();
+        }
+        for (a, v) in out[..n].iter_mut().enumerate() {
+            *v = (0..=a).map(|b| lt[b] * l[a * n + b]).sum();
+        }
     }
 
     /// Area average of the function with coefficients `c`: `(G c)_0 = Σ_α c_α (1/A) ∫ φ_α dA`.
@@ -594,19 +595,17 @@ impl Basis {
 
 impl Basis {
     /// Child `child`'s coefficients of the parent function with RGB `coefficients` (push, exact where
-    /// the span is closed under the child map): `P_k · c`.
-    pub fn push_rgb(&self, domain: Domain, child: usize, coefficients: &[Rgb]) -> Vec<Rgb> {
+    /// the span is closed under the child map): `P_k · c`, into `out`.
+    pub fn push_rgb(&self, domain: Domain, child: usize, coefficients: &[Rgb], out: &mut [Rgb]) {
         let size = coefficients.len();
         let p = self.push_matrix(domain, child);
-        (0..size)
-            .map(|alpha| {
-                p[alpha * size..(alpha + 1) * size]
-                    .iter()
-                    .zip(coefficients)
-                    .map(|(&m, &c)| c * m)
-                    .sum()
-            })
-            .collect()
+        for (alpha, value) in out[..size].iter_mut().enumerate() {
+            *value = p[alpha * size..(alpha + 1) * size]
+                .iter()
+                .zip(coefficients)
+                .map(|(&m, &c)| c * m)
+                .sum();
+        }
     }
 
     /// Adds `weight · P_kᵀ · m` to `parent`: the area moments `m` of a function given on child `child`
@@ -900,7 +899,8 @@ mod tests {
             }
             let rgb: Vec<Rgb> = coefficients.iter().map(|&c| Rgb::splat(c)).collect();
             assert!((overlap.mean(&rgb).r - mean).abs() < 1e-12, "{kind:?} mean");
-            let back = overlap.moments_rgb(&rgb);
+            let mut back = vec![Rgb::BLACK; n];
+            overlap.moments_rgb(&rgb, &mut back);
             let mut solved = back.clone();
             overlap.solve_rgb(&mut solved);
             for a in 0..n {

@@ -146,9 +146,7 @@ pub fn split_pinwheel(polygon: &[DVec3], planes: &[Plane], snap: f64) -> Option<
 
 /// Area of a planar polygon (Newell's vector area).
 pub fn polygon_area(polygon: &[DVec3]) -> f64 {
-    let n = polygon.len();
-    let sum: DVec3 = (0..n).map(|k| polygon[k].cross(polygon[(k + 1) % n])).sum();
-    0.5 * sum.length()
+    super::vector_area(polygon).length()
 }
 
 /// Convex hull of points in the plane (Andrew's monotone chain), counter-clockwise, without collinear

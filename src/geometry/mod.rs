@@ -73,6 +73,19 @@ pub enum Shape {
     Quad([DVec3; 4]),
 }
 
+/// Vector area of a closed polygon (Newell's method): its length is the area and its direction the
+/// normal of the side its corners turn counter-clockwise around.
+pub fn vector_area(corners: &[DVec3]) -> DVec3 {
+    0.5 * edges(corners).map(|(a, b)| a.cross(b)).sum::<DVec3>()
+}
+
+/// The edges of a closed polygon: each corner with the next, the last with the first (without a `%`
+/// per edge, an integer division that cost the contour integral a fifth of its time).
+pub fn edges<T: Copy>(corners: &[T]) -> impl Iterator<Item = (T, T)> + '_ {
+    let next = corners.iter().skip(1).chain(corners.first());
+    corners.iter().copied().zip(next.copied())
+}
+
 impl Shape {
     pub fn vertices(&self) -> &[DVec3] {
         match self {
@@ -87,12 +100,7 @@ impl Shape {
 
     /// Vector area (Newell's method): its length is the area and its direction the front normal.
     pub fn vector_area(&self) -> DVec3 {
-        let v = self.vertices();
-        let mut sum = DVec3::ZERO;
-        for k in 0..v.len() {
-            sum += v[k].cross(v[(k + 1) % v.len()]);
-        }
-        0.5 * sum
+        vector_area(self.vertices())
     }
 
     pub fn area(&self) -> f64 {

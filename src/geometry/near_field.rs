@@ -77,9 +77,19 @@ pub const MAX_CELLS: usize = 64;
 /// end (the classroom's lamp housings over their tubes, BENCHMARKS.md).
 pub fn is_near(receiver: &Shape, source: &Shape) -> bool {
     let reach = 0.5 * receiver.diameter();
-    std::iter::once(receiver.centroid())
-        .chain(receiver.vertices().iter().copied())
-        .any(|x| distance_to_polygon(x, source) < reach)
+    // Most links are far: no point of the receiver within reach of the source's bounding sphere.
+    let centre = source.centroid();
+    let radius = source
+        .vertices()
+        .iter()
+        .map(|v| v.distance(centre))
+        .fold(0.0, f64::max);
+    let points = || std::iter::once(receiver.centroid()).chain(receiver.vertices().iter().copied());
+    if points().all(|x| x.distance(centre) - radius >= reach) {
+        return false;
+    }
+    let normal = source.normal();
+    points().any(|x| distance_to_plane_polygon(x, source, normal) < reach)
 }
 
 /// The receiver integral `∫_R F(x → S) dA_x` of the exact unoccluded point-to-source factor, with the
@@ -266,20 +276,20 @@ fn nodes_in<'a>(
 
 /// Distance from `p` to the convex planar polygon `shape`.
 pub fn distance_to_polygon(p: DVec3, shape: &Shape) -> f64 {
+    distance_to_plane_polygon(p, shape, shape.normal())
+}
+
+/// [`distance_to_polygon`] with the polygon's unit normal `n` known.
+fn distance_to_plane_polygon(p: DVec3, shape: &Shape, n: DVec3) -> f64 {
     let v = shape.vertices();
-    let n = shape.normal();
     let height = n.dot(p - v[0]);
     let foot = p - height * n;
-    let inside = (0..v.len()).all(|k| {
-        let (a, b) = (v[k], v[(k + 1) % v.len()]);
-        (b - a).cross(foot - a).dot(n) >= 0.0
-    });
+    let inside = super::edges(v).all(|(a, b)| (b - a).cross(foot - a).dot(n) >= 0.0);
     if inside {
         return height.abs();
     }
-    (0..v.len())
-        .map(|k| {
-            let (a, b) = (v[k], v[(k + 1) % v.len()]);
+    super::edges(v)
+        .map(|(a, b)| {
             let ab = b - a;
             let t = ((p - a).dot(ab) / ab.length_squared().max(1e-300)).clamp(0.0, 1.0);
             p.distance(a + t * ab)

@@ -982,8 +982,10 @@ impl Hierarchy {
         let domain = surface.shape.domain();
         let first = self.elements.len() as ElementId;
         for (k, shape) in surface.shape.subdivide().into_iter().enumerate() {
-            let radiance = self.basis.push_rgb(domain, k, self.radiance(id));
-            self.radiance.extend_from_slice(&radiance);
+            let mut radiance = [Rgb::BLACK; crate::bases::MAX_BASIS_SIZE];
+            let radiance = &mut radiance[..self.basis_size()];
+            self.basis.push_rgb(domain, k, self.radiance(id), radiance);
+            self.radiance.extend_from_slice(radiance);
             self.elements.push(Element {
                 kind: ElementKind::Surface(Surface {
                     patch: surface.patch,

@@ -72,5 +72,5 @@ impl WritePng for ::image::GrayImage {
 
 pub use export::{write_glb, write_ply};
 pub use mesh_values::{ShadedMesh, VertexRadiosity};
-pub use render::{render, render_with, RenderOptions, Shading};
+pub use render::{render, render_with, Antialias, RenderOptions, Shading};
 pub use tonemap::{to_srgb8, write_png, Curve, Exposure, ToneMap};

@@ -481,8 +481,8 @@ fn footprints(p: &Face, edges: &[(usize, DVec3, DVec3, f64)]) -> Vec<Vec<Plane>>
                 .map(|x| DVec2::new((x - p.point).dot(u), (x - p.point).dot(v)))
                 .collect();
             let hull = convex_hull(&flat);
-            let area2: f64 = (0..hull.len())
-                .map(|k| hull[k].perp_dot(hull[(k + 1) % hull.len()]))
+            let area2: f64 = crate::geometry::edges(&hull)
+                .map(|(a, b)| a.perp_dot(b))
                 .sum();
             (hull.len() >= 3 && area2 > (SNAP * p.diameter).powi(2)).then(|| {
                 let outline: Vec<DVec3> =

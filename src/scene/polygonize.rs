@@ -7,7 +7,7 @@
 //! along the same edge) are weakly simple polygons: vertices coincident with an ear's corners are copies
 //! of the same seam point and are not counted as "inside", which lets the clipper walk around the hole.
 
-use crate::geometry::{DVec2, DVec3, Shape};
+use crate::geometry::{vector_area, DVec2, DVec3, Shape};
 use std::fmt;
 
 /// Vertices closer than this fraction of the polygon's size are the same vertex.
@@ -68,8 +68,8 @@ pub fn polygonize(points: &[DVec3]) -> Result<Polygonized, PolygonError> {
     if pts.len() < 3 {
         return Err(PolygonError::TooFewVertices(pts.len()));
     }
-    let normal = newell(&pts);
-    let area = 0.5 * normal.length();
+    let normal = vector_area(&pts);
+    let area = normal.length();
     if area <= AREA_TOLERANCE * size * size || size == 0.0 {
         return Err(PolygonError::ZeroArea);
     }
@@ -154,14 +154,6 @@ fn merge_repeats(points: &[DVec3], tolerance: f64) -> Vec<DVec3> {
         out.pop();
     }
     out
-}
-
-fn newell(points: &[DVec3]) -> DVec3 {
-    let mut sum = DVec3::ZERO;
-    for k in 0..points.len() {
-        sum += points[k].cross(points[(k + 1) % points.len()]);
-    }
-    sum
 }
 
 /// Twice the signed area of triangle (a, b, c): positive when counter-clockwise.

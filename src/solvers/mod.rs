@@ -148,6 +148,12 @@ pub fn solve(
     let mut report = start_report(hierarchy, settings);
     report.error.stopped_by = "pass limit".into();
     let mut first_gather = direct::FirstGather::default();
+    // Without error control, passes that may be followed by another sweep to a looser tolerance: the
+    // refinement after them needs the radiance to about a part in a thousand, and changes it by more.
+    let pass_tolerance = match settings.error_control {
+        None => settings.tolerance.max(INTERMEDIATE_TOLERANCE),
+        Some(_) => settings.tolerance,
+    };
     for pass in 1..=settings.max_passes.max(1) {
         report.passes = pass;
         // Later passes re-judge every link with the new radiance; the links stay in the hierarchy
@@ -169,8 +175,15 @@ pub fn solve(
             &format!("pass {pass}"),
             None,
         );
-        let swept_to_tolerance =
-            sweep_to_tolerance(hierarchy, solver, settings, &mut report, progress, pass);
+        let swept_to_tolerance = sweep_to_tolerance(
+            hierarchy,
+            solver,
+            settings,
+            pass_tolerance,
+            &mut report,
+            progress,
+            pass,
+        );
         let changed = outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
         let refused = outcome.refused_by_budget + direct.refused_by_budget > 0;
         let pass_state = (changed || pass == 1, true);
@@ -184,6 +197,20 @@ pub fn solve(
         ) {
             break;
         }
+    }
+    if pass_tolerance > settings.tolerance && report.diverged_in_pass.is_none() {
+        // The last pass's radiance, to the tolerance asked for, and its estimate again.
+        let last = report.passes;
+        report.converged &= sweep_to_tolerance(
+            hierarchy,
+            solver,
+            settings,
+            settings.tolerance,
+            &mut report,
+            progress,
+            last,
+        );
+        estimate_errors(hierarchy, settings.estimate);
     }
     finish_report(hierarchy, settings, &mut report);
     report
@@ -314,6 +341,10 @@ fn refine_pass(
     (outcome, direct)
 }
 
+/// The relative change of the exitant power at which a pass without error control stops sweeping when
+/// another pass may follow ([`solve`]); the last sweeps on to `SolveSettings::tolerance`.
+const INTERMEDIATE_TOLERANCE: f64 = 1e-3;
+
 /// Sweeps in a row whose change of the total exitant power grew, after which a pass's iteration is
 /// taken to diverge: somewhere the scene sends back more light than it receives (two surfaces kept at
 /// one place, a reflectance of 1 or more), and more sweeps only make it worse. Converging solves of the
@@ -330,6 +361,7 @@ fn sweep_to_tolerance(
     hierarchy: &mut Hierarchy,
     solver: &dyn GatheringSolver,
     settings: &SolveSettings,
+    tolerance: f64,
     report: &mut SolveReport,
     progress: &Progress,
     pass: usize,
@@ -360,7 +392,7 @@ fn sweep_to_tolerance(
         growing = if step > last_step { growing + 1 } else { 0 };
         last_step = step;
         previous = total;
-        if change < settings.tolerance || total == 0.0 {
+        if change < tolerance || total == 0.0 {
             swept_to_tolerance = true;
             break;
         }

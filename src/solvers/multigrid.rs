@@ -302,7 +302,15 @@ pub fn solve_progressive(
             Some(&mut schedule),
         );
         let sweeps_before = report.iterations;
-        let swept = sweep_to_tolerance(hierarchy, solver, settings, &mut report, progress, step);
+        let swept = sweep_to_tolerance(
+            hierarchy,
+            solver,
+            settings,
+            settings.tolerance,
+            &mut report,
+            progress,
+            step,
+        );
         let changed =
             step == 1 || outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
         let refused = outcome.refused_by_budget + direct.refused_by_budget > 0;

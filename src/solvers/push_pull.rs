@@ -10,6 +10,7 @@
 //! parallelograms, where this is the plain area-weighted pull; on a trapezoid it keeps constant
 //! children constant (no false gradient) and the pulled function's power equal to the children's.
 
+use crate::bases::MAX_BASIS_SIZE;
 use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
 use std::f64::consts::PI;
@@ -54,20 +55,25 @@ pub fn push_pull(
 ) -> PatchUpdate {
     let p = &hierarchy.patches[patch as usize];
     let mut update = PatchUpdate::default();
-    let down = vec![Rgb::BLACK; hierarchy.basis_size()];
     let mut walk = Walk {
         h: hierarchy,
+        size: hierarchy.basis_size(),
         emission: p.emission,
         reflectance: p.reflectance,
         gathered,
         update: &mut update,
     };
-    walk.visit(p.root, down);
+    walk.visit(p.root, [Rgb::BLACK; MAX_BASIS_SIZE]);
     update
 }
 
+/// One element's coefficients (the first `size` of them), on the stack: push-pull visits every element
+/// of every patch in every sweep.
+type Coefficients = [Rgb; MAX_BASIS_SIZE];
+
 struct Walk<'a> {
     h: &'a Hierarchy,
+    size: usize,
     emission: Rgb,
     reflectance: Rgb,
     gathered: &'a dyn Fn(ElementId, &mut [Rgb]),
@@ -79,46 +85,60 @@ impl Walk<'_> {
     /// and, where the element's overlap matrix is not the identity, its area moments `G c`, which its
     /// parent's pull needs instead of the coefficients (the overlap is computed once per element and
     /// sweep: on a trapezoid a small Cholesky factorisation, and a cubature where it is warped).
-    fn visit(&mut self, id: ElementId, mut incident: Vec<Rgb>) -> (Vec<Rgb>, Option<Vec<Rgb>>) {
-        let h = self.h;
+    fn visit(
+        &mut self,
+        id: ElementId,
+        mut incident: Coefficients,
+    ) -> (Coefficients, Option<Coefficients>) {
+        let (h, n) = (self.h, self.size);
         let e = h.element(id);
-        (self.gathered)(id, &mut incident);
+        (self.gathered)(id, &mut incident[..n]);
         let overlap = h.basis.overlap(e.shape(), e.area);
-        let radiance = if e.is_leaf() {
+        let mut radiance = [Rgb::BLACK; MAX_BASIS_SIZE];
+        if e.is_leaf() {
             // The luminaires' first gather, a fixed part of the leaf's irradiance.
             for (h, &d) in incident.iter_mut().zip(h.direct_at(id)) {
                 *h += d;
             }
-            let mut b: Vec<Rgb> = incident.iter().map(|&x| self.reflectance * x).collect();
+            for (b, &x) in radiance[..n].iter_mut().zip(&incident[..n]) {
+                *b = self.reflectance * x;
+            }
             // Emission is constant over a patch: the constant function represents it exactly (δ_e = 0).
-            b[0] += self.emission;
+            radiance[0] += self.emission;
             // Area averages: coefficient 0, or on a trapezoid Σ_α c_α (1/A) ∫ φ_α dA.
             let (mean_incident, mean_exitant) = match &overlap {
-                Some(overlap) => (overlap.mean(&incident), overlap.mean(&b)),
-                None => (incident[0], b[0]),
+                Some(overlap) => (overlap.mean(&incident[..n]), overlap.mean(&radiance[..n])),
+                None => (incident[0], radiance[0]),
             };
             self.update.absorbed += (Rgb::WHITE - self.reflectance) * mean_incident * (PI * e.area);
             self.update.exitant += mean_exitant * (PI * e.area);
-            b
         } else {
             let domain = e.shape().domain();
-            let mut sum = vec![Rgb::BLACK; incident.len()];
             for (k, &child) in e.children.iter().enumerate() {
-                let down = h.basis.push_rgb(domain, k, &incident);
+                let mut down = [Rgb::BLACK; MAX_BASIS_SIZE];
+                h.basis.push_rgb(domain, k, &incident[..n], &mut down[..n]);
                 let (child_radiance, child_moments) = self.visit(child, down);
                 let c = h.element(child);
-                let moments = child_moments.as_deref().unwrap_or(&child_radiance);
-                h.basis
-                    .pull_add_rgb(domain, k, c.area / e.area, moments, &mut sum);
+                let moments = child_moments.as_ref().unwrap_or(&child_radiance);
+                h.basis.pull_add_rgb(
+                    domain,
+                    k,
+                    c.area / e.area,
+                    &moments[..n],
+                    &mut radiance[..n],
+                );
             }
             if let Some(overlap) = &overlap {
-                overlap.solve_rgb(&mut sum);
+                overlap.solve_rgb(&mut radiance[..n]);
             }
-            sum
-        };
+        }
         self.update.elements.push(id);
-        self.update.radiance.extend_from_slice(&radiance);
-        let moments = overlap.map(|overlap| overlap.moments_rgb(&radiance));
+        self.update.radiance.extend_from_slice(&radiance[..n]);
+        let moments = overlap.map(|overlap| {
+            let mut moments = [Rgb::BLACK; MAX_BASIS_SIZE];
+            overlap.moments_rgb(&radiance[..n], &mut moments[..n]);
+            moments
+        });
         (radiance, moments)
     }
 }

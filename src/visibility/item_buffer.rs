@@ -252,12 +252,12 @@ fn spans_inside(corners: &[DVec2], nx: usize, ny: usize, out: &mut Vec<(usize, R
     let count = corners.len();
     // Each edge as its start and direction, found once (at most 4: a triangle or a quad).
     let mut edge_array = [(DVec2::ZERO, DVec2::ZERO); 4];
-    for (i, e) in edge_array.iter_mut().enumerate().take(count) {
-        *e = (corners[i], corners[(i + 1) % count] - corners[i]);
+    for (e, (a, b)) in edge_array.iter_mut().zip(crate::geometry::edges(corners)) {
+        *e = (a, b - a);
     }
     let edges = &edge_array[..count];
-    let signed_area: f64 = (0..count)
-        .map(|i| corners[i].perp_dot(corners[(i + 1) % count]))
+    let signed_area: f64 = crate::geometry::edges(corners)
+        .map(|(a, b)| a.perp_dot(b))
         .sum();
     if signed_area == 0.0 {
         return;

@@ -151,7 +151,7 @@ fn touch_along_an_edge(scene: &Scene, faces: &[Face], i: usize, j: usize) -> boo
     let tolerance = TOUCH * faces[i].diameter.min(faces[j].diameter);
     let on_boundary = |p: DVec3, of: usize| {
         let v = scene.polygons[of].shape.vertices();
-        (0..v.len()).any(|k| segment_distance(p, v[k], v[(k + 1) % v.len()]) <= tolerance)
+        crate::geometry::edges(v).any(|(a, b)| segment_distance(p, a, b) <= tolerance)
     };
     let mut touching: Vec<DVec3> = Vec::new();
     for (a, b) in [(i, j), (j, i)] {

@@ -185,10 +185,7 @@ pub fn prism(base: &[DVec3], length: f64) -> Result<Vec<Loop>, String> {
     if length == 0.0 {
         return Err("prism length is zero".into());
     }
-    let mut newell = DVec3::ZERO;
-    for k in 0..base.len() {
-        newell += base[k].cross(base[(k + 1) % base.len()]);
-    }
+    let newell = crate::geometry::vector_area(base);
     if newell.length() == 0.0 {
         return Err("prism base has zero area".into());
     }
@@ -208,11 +205,7 @@ mod tests {
     use std::f64::consts::PI;
 
     fn area(l: &Loop) -> DVec3 {
-        let mut s = DVec3::ZERO;
-        for k in 0..l.len() {
-            s += l[k].cross(l[(k + 1) % l.len()]);
-        }
-        0.5 * s
+        crate::geometry::vector_area(l)
     }
 
     fn centroid(l: &Loop) -> DVec3 {
