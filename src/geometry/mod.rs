@@ -115,10 +115,10 @@ impl Shape {
     pub fn centroid(&self) -> DVec3 {
         match self {
             Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
-            // Area centroid of the quad as two triangles.
+            // Area centroid of the quad as two triangles (their doubled areas: the factor cancels).
             Shape::Quad(v) => {
-                let a1 = Shape::Triangle([v[0], v[1], v[2]]).area();
-                let a2 = Shape::Triangle([v[0], v[2], v[3]]).area();
+                let a1 = (v[1] - v[0]).cross(v[2] - v[0]).length();
+                let a2 = (v[2] - v[0]).cross(v[3] - v[0]).length();
                 let c1 = (v[0] + v[1] + v[2]) / 3.0;
                 let c2 = (v[0] + v[2] + v[3]) / 3.0;
                 if a1 + a2 > 0.0 {

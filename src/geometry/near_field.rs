@@ -77,10 +77,11 @@ pub const MAX_CELLS: usize = 64;
 /// end (the classroom's lamp housings over their tubes, BENCHMARKS.md).
 pub fn is_near(receiver: &Shape, source: &Shape) -> bool {
     let reach = 0.5 * receiver.diameter();
-    // Most links are far: no point of the receiver within reach of the source's bounding sphere.
-    let centre = source.centroid();
-    let radius = source
-        .vertices()
+    // Most links are far: no point of the receiver within reach of a sphere around the source's
+    // corners.
+    let corners = source.vertices();
+    let centre = corners.iter().sum::<DVec3>() / corners.len() as f64;
+    let radius = corners
         .iter()
         .map(|v| v.distance(centre))
         .fold(0.0, f64::max);

@@ -949,22 +949,24 @@ pub fn moved_by_exposure(h: &Hierarchy) -> Vec<Rgb> {
     ClusterSweep::without_table(h).push_from_clusters(h, Sharing::MovedByExposure)
 }
 
-/// Per element (by id), the irradiance over π that sending by exposure ([`Sent::through`]) moved on
-/// the element's own links with the current radiances: `Σ_l F_l |L_exposed − L_visible|` over its
-/// partly blocked links from clusters. The link's visibility says how much of its source reaches, the
+/// Per element (by id), the radiance that sending by exposure ([`Sent::through`]) moved on the
+/// element's own links with the current radiances: the largest channel of
+/// `ρ Σ_l F_l |L_exposed − L_visible|` over its partly blocked links from clusters (one number an
+/// element: this list is alive at the solve's peak of memory). The link's visibility says how much of its source reaches, the
 /// one centroid ray per patch which part; the received light is uncertain by as much as that choice
 /// moved it, which the error estimate adds to the element's level (`solvers::error_estimate`), as it
 /// adds [`moved_by_exposure`] for the receiving side. Zero without item buffers.
-pub fn moved_by_sending(h: &Hierarchy) -> Vec<Rgb> {
+pub fn moved_by_sending(h: &Hierarchy) -> Vec<f64> {
     if h.item_buffers.is_none() || h.root_cluster.is_none() {
-        return vec![Rgb::BLACK; h.elements.len()];
+        return vec![0.0; h.elements.len()];
     }
     let sweep = ClusterSweep::without_table(h);
     (0..h.elements.len() as ElementId)
         .into_par_iter()
         .map(|id| {
             let centre = h.center_of(id);
-            h.element(id)
+            let moved: Rgb = h
+                .element(id)
                 .links
                 .iter()
                 .filter(|l| carries_light(l) && l.coupling.visibility < 1.0)
@@ -972,7 +974,8 @@ pub fn moved_by_sending(h: &Hierarchy) -> Vec<Rgb> {
                     let sent = sweep.sent_toward(h, l.source, centre)?;
                     Some((sent.exposed - sent.visible).map(f64::abs) * l.coupling.form_factor())
                 })
-                .sum()
+                .sum();
+            (h.reflectance_of(id) * moved).max_channel()
         })
         .collect()
 }

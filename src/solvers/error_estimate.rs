@@ -42,6 +42,7 @@ use crate::geometry::{DVec2, Domain};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::solvers::clustering::{moved_by_exposure, moved_by_sending};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::OnceLock;
 
 /// Which estimate (`--error-estimate`).
@@ -92,7 +93,6 @@ pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
 /// inner element or cluster, the largest estimate below. `propagated` holds the sources' current
 /// conservative estimates (eq. (11)); `moved`, what exposure moved ([`Moved`]).
 fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &Moved) -> Vec<f64> {
-    let mut errors = vec![0.0; h.elements.len()];
     // What the clusters above each patch root add (their links have no surface nodes).
     let mut above = vec![Above::default(); h.patches.len()];
     if let Some(root) = h.root_cluster {
@@ -105,25 +105,25 @@ fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &Mov
             );
         }
     }
-    let trees: Vec<Vec<(ElementId, f64)>> = h
-        .patches
+    // Each element's estimate written once, by the walk of the one patch tree it is in (the bits of
+    // an `f64`: no list per tree, which made a tenth of office3's peak heap).
+    let written: Vec<AtomicU64> = (0..h.elements.len()).map(|_| AtomicU64::new(0)).collect();
+    h.patches
         .par_iter()
         .zip(&above)
-        .map(|(patch, &above)| {
-            let mut out = Vec::new();
+        .for_each(|(patch, &above)| {
             let walk = TreeWalk {
                 h,
                 propagated,
                 signed,
                 moved,
             };
-            walk.visit(patch.root, NodeSums::default(), above, &mut out);
-            out
-        })
+            walk.visit(patch.root, NodeSums::default(), above, &written);
+        });
+    let mut errors: Vec<f64> = written
+        .into_iter()
+        .map(|bits| f64::from_bits(bits.into_inner()))
         .collect();
-    for (id, error) in trees.into_iter().flatten() {
-        errors[id as usize] = error;
-    }
     if let Some(root) = h.root_cluster {
         clusters_up(h, root, &mut errors);
     }
@@ -157,15 +157,15 @@ impl Above {
 struct Moved {
     /// Per patch root, the irradiance over π that sharing by exposure moved ([`moved_by_exposure`]).
     receiving: Vec<Rgb>,
-    /// Per element, the irradiance over π that sending by exposure moved on its own links
+    /// Per element, the radiance that sending by exposure moved on its own links
     /// ([`moved_by_sending`]).
-    sending: Vec<Rgb>,
+    sending: Vec<f64>,
 }
 
 impl Moved {
     /// What sending by exposure moved on element `id`'s links, times its reflectance (largest channel).
-    fn sent_to(&self, h: &Hierarchy, id: ElementId) -> f64 {
-        (h.reflectance_of(id) * self.sending[id as usize]).max_channel()
+    fn sent_to(&self, id: ElementId) -> f64 {
+        self.sending[id as usize]
     }
 }
 
@@ -185,7 +185,7 @@ fn clusters_down(
     }
     let own = own_sums(h, id, propagated).map_or(0.0, |s| s.maximum());
     let here = above.plus(
-        own + visibility_squared(h, id).sqrt() + moved.sent_to(h, id),
+        own + visibility_squared(h, id).sqrt() + moved.sent_to(id),
         0.0,
     );
     for &child in &h.element(id).children {
@@ -317,13 +317,7 @@ struct TreeWalk<'a> {
 impl TreeWalk<'_> {
     /// Estimates the subtree of `id`, which inherits `inherited` at its nodes and `above` besides,
     /// into `out`; returns its estimate.
-    fn visit(
-        &self,
-        id: ElementId,
-        inherited: NodeSums,
-        above: Above,
-        out: &mut Vec<(ElementId, f64)>,
-    ) -> f64 {
+    fn visit(&self, id: ElementId, inherited: NodeSums, above: Above, out: &[AtomicU64]) -> f64 {
         let h = self.h;
         let e = h.element(id);
         let visibility = visibility_squared(h, id);
@@ -332,7 +326,7 @@ impl TreeWalk<'_> {
         } else {
             above.plus(visibility.sqrt(), 0.0)
         }
-        .plus(self.moved.sent_to(h, id), 0.0);
+        .plus(self.moved.sent_to(id), 0.0);
         let mut sums = inherited;
         if let Some(own) = own_sums(h, id, self.propagated) {
             let placed = sums.signed.is_empty() || sums.signed.len() == own.signed.len();
@@ -354,7 +348,7 @@ impl TreeWalk<'_> {
                 .map(|(k, &child)| self.visit(child, sums.to_child(domain, k), above, out))
                 .fold(0.0, f64::max)
         };
-        out.push((id, error));
+        out[id as usize].store(error.to_bits(), Ordering::Relaxed);
         error
     }
 }
