@@ -104,15 +104,20 @@ fn build_rule(domain: Domain, n: usize) -> Rule {
 /// [`Shape::jacobian`]. For a triangle `J` is twice the area and the master triangle has area 1/2, so the
 /// weights still sum to the shape's area.
 pub fn nodes_on(shape: &Shape, rule: &Rule) -> Vec<Node> {
+    let mut nodes = Vec::with_capacity(rule.nodes.len());
+    nodes_on_into(shape, rule, &mut nodes);
+    nodes
+}
+
+/// [`nodes_on`] into `out` (cleared first), for callers that reuse one vector.
+pub fn nodes_on_into(shape: &Shape, rule: &Rule, out: &mut Vec<Node>) {
     debug_assert_eq!(shape.domain(), rule.domain, "rule for another domain");
-    rule.nodes
-        .iter()
-        .map(|&(uv, w)| Node {
-            point: shape.point_at(uv),
-            uv,
-            weight: w * shape.jacobian(uv),
-        })
-        .collect()
+    out.clear();
+    out.extend(rule.nodes.iter().map(|&(uv, w)| Node {
+        point: shape.point_at(uv),
+        uv,
+        weight: w * shape.jacobian(uv),
+    }));
 }
 
 /// A randomly shifted copy of `nodes` (a rule mapped onto `shape` by [`nodes_on`]), the

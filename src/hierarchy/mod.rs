@@ -154,17 +154,22 @@ const STEPS: f32 = i16::MAX as f32;
 
 /// The scale of `values` in fixed point (their largest finite magnitude over [`STEPS`]), and their step
 /// counts (rounded; saturating, NaN to 0).
-fn fixed_point(values: &[f32]) -> (f32, impl Iterator<Item = i16> + '_) {
+fn fixed_point(values: impl Iterator<Item = f32> + Clone) -> (f32, impl Iterator<Item = i16>) {
     let largest = values
-        .iter()
+        .clone()
         .filter(|v| v.is_finite())
         .fold(0.0f32, |m, v| m.max(v.abs()));
     let scale = largest / STEPS;
     let inverse = if scale > 0.0 { 1.0 / scale } else { 0.0 };
-    (
-        scale,
-        values.iter().map(move |&v| (v * inverse).round() as i16),
-    )
+    (scale, values.map(move |v| round_to_i16(v * inverse)))
+}
+
+/// `x.round() as i16` (half away from zero, saturating, NaN to 0) without `roundf`, a library call on
+/// the baseline x86-64 target (1% of the default solve): in `f64` adding ½ to an `f32` is exact, and
+/// the cast truncates toward zero.
+fn round_to_i16(x: f32) -> i16 {
+    let x = f64::from(x);
+    (x + 0.5f64.copysign(x)) as i16
 }
 
 impl LinkCoupling {
@@ -184,8 +189,8 @@ impl LinkCoupling {
         );
         Self::stored(
             block.iter().map(|&k| k as f32),
-            errors,
-            node_factors,
+            errors.iter().copied(),
+            node_factors.iter().copied(),
             false,
             visibility,
             visibility_error,
@@ -211,8 +216,8 @@ impl LinkCoupling {
         );
         Self::stored(
             block.iter().map(|&k| k as f32),
-            node_errors,
-            node_factors,
+            node_errors.iter().copied(),
+            node_factors.iter().copied(),
             true,
             visibility,
             visibility_error,
@@ -242,15 +247,16 @@ impl LinkCoupling {
     /// (`errors_per_node` per node: `b`, or 1 when `reduced`) and node factors in fixed point.
     fn stored(
         block: impl ExactSizeIterator<Item = f32>,
-        errors: &[f32],
-        node_factors: &[f32],
+        errors: impl ExactSizeIterator<Item = f32> + Clone,
+        node_factors: impl ExactSizeIterator<Item = f32> + Clone,
         reduced: bool,
         visibility: f32,
         visibility_error: f32,
     ) -> Self {
         let block_len = block.len();
         let size = (block_len as f64).sqrt().round() as usize;
-        let tail_len = errors.len() + node_factors.len();
+        let nodes = node_factors.len();
+        let tail_len = errors.len() + nodes;
         // Filled in place: couplings are made by the million, one allocation each.
         let mut words = thin_words::ThinWords::zeroed(Self::word_count(block_len, tail_len));
         let (error_scale, error_steps) = fixed_point(errors);
@@ -276,7 +282,7 @@ impl LinkCoupling {
                 .expect("basis sizes are at most MAX_BASIS_SIZE")
                 | if reduced { REDUCED } else { 0 },
             shaft: None,
-            nodes: u16::try_from(node_factors.len()).expect("at most 65535 cubature nodes"),
+            nodes: u16::try_from(nodes).expect("at most 65535 cubature nodes"),
             visibility,
         }
     }
@@ -295,27 +301,30 @@ impl LinkCoupling {
             return self;
         }
         let size = self.size();
-        let grey: Vec<f64> = source.iter().map(|c| c.r + c.g + c.b).collect();
-        let ratios: Vec<f32> = (0..self.node_count())
-            .map(|k| {
-                let delta = |beta: usize| self.error(k * size + beta);
-                if grey[0] > 0.0 {
-                    let sum: f64 = grey
-                        .iter()
-                        .enumerate()
-                        .map(|(beta, &l)| l * f64::from(delta(beta)))
-                        .sum();
-                    (sum / grey[0]) as f32
-                } else {
-                    delta(0)
-                }
-            })
-            .collect();
-        let factors: Vec<f32> = self.node_factors().collect();
+        let mut grey = [0.0; MAX_BASIS_SIZE];
+        for (g, c) in grey.iter_mut().zip(source) {
+            *g = c.r + c.g + c.b;
+        }
+        let grey = &grey[..source.len()];
+        // Computed twice by `stored` (its scale, then its steps) rather than collected: couplings are
+        // made by the hundred thousand.
+        let ratios = (0..self.node_count()).map(|k| {
+            let delta = |beta: usize| self.error(k * size + beta);
+            if grey[0] > 0.0 {
+                let sum: f64 = grey
+                    .iter()
+                    .enumerate()
+                    .map(|(beta, &l)| l * f64::from(delta(beta)))
+                    .sum();
+                (sum / grey[0]) as f32
+            } else {
+                delta(0)
+            }
+        });
         Self::stored(
             self.block().iter().copied(),
-            &ratios,
-            &factors,
+            ratios,
+            self.node_factors(),
             true,
             self.visibility,
             self.visibility_error(),
@@ -390,7 +399,7 @@ impl LinkCoupling {
 
     /// `n` point-to-source factors `K_{j,1}(x_k) / ρ_i` (unoccluded ∫ K(x_k, y) dA_y with visibility),
     /// which carry propagated error in eqs. (11) and (13).
-    pub fn node_factors(&self) -> impl ExactSizeIterator<Item = f32> + '_ {
+    pub fn node_factors(&self) -> impl ExactSizeIterator<Item = f32> + Clone + '_ {
         let scale = f32::from_bits(self.word(self.block_len() + 1));
         let start = self.node_count() * self.errors_per_node();
         let steps = self.steps();
@@ -1198,6 +1207,40 @@ fn max_rgb(a: Rgb, b: Rgb) -> Rgb {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn round_to_i16_is_round_then_cast() {
+        let mut cases = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -2.5,
+            0.499_999_97,
+            -0.499_999_97,
+            32_766.5,
+            32_767.49,
+            -32_768.5,
+            1e9,
+            -1e9,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        let mut bits = 0x3f80_0001u32;
+        for _ in 0..100_000 {
+            bits = bits.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+            let x = f32::from_bits(bits);
+            if x.is_finite() && x.abs() < 70_000.0 {
+                cases.push(x);
+            }
+            cases.push((bits % 131_072) as f32 * 0.5 - 32_768.0);
+        }
+        for x in cases {
+            assert_eq!(round_to_i16(x), x.round() as i16, "{x}");
+        }
+    }
 
     /// A linear-basis coupling (b = 3) with `n` nodes and made-up coefficients.
     fn linear_coupling(n: usize) -> LinkCoupling {

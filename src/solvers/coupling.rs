@@ -37,7 +37,7 @@
 //! to the bit ([`crate::visibility::shaft`]).
 
 use super::clustering::couple_cluster;
-use crate::geometry::cubature::{nodes_on, rule, shifted_nodes, Node};
+use crate::geometry::cubature::{nodes_on, nodes_on_into, rule, shifted_nodes, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::geometry::near_field::{self, is_near, NearField};
 use crate::geometry::{DVec2, DVec3, Shape};
@@ -184,16 +184,29 @@ fn couple_in_full(
     let n_r = hierarchy.patch_of(receiver).normal;
     let n_s = hierarchy.patch_of(source).normal;
     let degree = settings.cubature_degree;
-    let x_nodes = nodes_on(r_shape, rule(r_shape.domain(), degree));
-    let y_nodes = nodes_on(
+    let mut buffers = COUPLING_BUFFERS.take();
+    let CouplingBuffers {
+        x_nodes,
+        y_nodes,
+        phi_x,
+        phi_y,
+        inner: inner_buffer,
+        block,
+        errors,
+        node_factors,
+    } = &mut buffers;
+    nodes_on_into(r_shape, rule(r_shape.domain(), degree), x_nodes);
+    nodes_on_into(
         s_shape,
         rule(
             s_shape.domain(),
             crate::bases::source_cubature_degree(degree),
         ),
+        y_nodes,
     );
-    let phi_x = basis_values(basis, r_shape, &x_nodes);
-    let phi_y = basis_values(basis, s_shape, &y_nodes);
+    basis_values_into(basis, r_shape, x_nodes, phi_x);
+    basis_values_into(basis, s_shape, y_nodes, phi_y);
+    let (x_nodes, phi_x) = (&*x_nodes, &*phi_x);
 
     let n = x_nodes.len();
     let sampler = SourceSampler {
@@ -203,15 +216,15 @@ fn couple_in_full(
         n_r,
         n_s,
         source: s_shape,
-        y_nodes: &y_nodes,
-        phi_y: &phi_y,
+        y_nodes,
+        phi_y,
         basis,
         source_rule: settings.source_rule,
         seed: settings.seed,
     };
     // Step 2: K_{j,β}(x_k), without ρ_i, at the receiver's regular nodes (the error coefficients' and
     // node factors' points).
-    let regular = sampler.rows(&x_nodes);
+    let regular = sampler.rows(x_nodes, std::mem::take(inner_buffer));
     let (mut rays, mut rays_saved) = (regular.rays, regular.rays_saved);
     // A near source whose light the regular nodes miss: the block, the unoccluded and the visible
     // transfer come from the adaptive composite rule instead (`geometry::near_field`). Where the
@@ -233,7 +246,7 @@ fn couple_in_full(
     let composite = near.map(|near| {
         let nodes = near.nodes(r_shape, degree);
         let phi = basis_values(basis, r_shape, &nodes);
-        let rows = sampler.rows(&nodes);
+        let rows = sampler.rows(&nodes, Vec::new());
         rays += rows.rays;
         rays_saved += rows.rays_saved;
         (nodes, phi, rows)
@@ -245,7 +258,8 @@ fn couple_in_full(
     let inner = &regular.inner;
     let unoccluded = block_rows.unoccluded;
     // Step 3: the block, divided by A_i (step 4a with O = A_i I).
-    let mut block = vec![0.0; size * size];
+    block.clear();
+    block.resize(size * size, 0.0);
     for (k, x) in block_nodes.iter().enumerate() {
         let w = x.weight / r.area;
         for alpha in 0..size {
@@ -257,10 +271,11 @@ fn couple_in_full(
     }
     // Step 4a on a quad whose overlap matrix is not A_i I.
     if let Some(overlap) = basis.overlap(r_shape, r.area) {
-        overlap.solve_columns(&mut block, size);
+        overlap.solve_columns(block, size);
     }
     // Step 4b: δ_{j,β}(x_k) = Σ_α R_{α,β} φ_α(x_k) − K_{j,β}(x_k).
-    let mut errors = vec![0.0f32; n * size];
+    errors.clear();
+    errors.resize(n * size, 0.0);
     for k in 0..n {
         for beta in 0..size {
             let projected: f64 = (0..size)
@@ -269,27 +284,32 @@ fn couple_in_full(
             errors[k * size + beta] = (projected - inner[k * size + beta]) as f32;
         }
     }
-    let node_factors: Vec<f32> = (0..n).map(|k| inner[k * size] as f32).collect();
+    node_factors.clear();
+    node_factors.extend((0..n).map(|k| inner[k * size] as f32));
     let visible: f64 = block_nodes
         .iter()
         .enumerate()
         .map(|(k, x)| x.weight * block_rows.inner[k * size])
         .sum();
     let visibility = visible_fraction(visible, unoccluded);
-    Coupling {
+    let source_nodes = sampler.y_nodes.len();
+    let coupled = Coupling {
         coupling: LinkCoupling::new(
-            &block,
-            &errors,
-            &node_factors,
+            block,
+            errors,
+            node_factors,
             visibility as f32,
-            visibility_error(unoccluded / r.area, visibility, y_nodes.len()),
+            visibility_error(unoccluded / r.area, visibility, source_nodes),
         ),
         unoccluded: unoccluded / r.area,
-        source_nodes: y_nodes.len(),
+        source_nodes,
         rays,
         shaft,
         rays_saved,
-    }
+    };
+    *inner_buffer = regular.inner;
+    COUPLING_BUFFERS.set(buffers);
+    coupled
 }
 
 /// A receiver node set's share of Algorithm 4.1's step 2: `K_{j,β}(x_k)` per node (row-major, node by
@@ -334,10 +354,13 @@ impl SourceSampler<'_> {
     /// Blocked shaft keep the fixed rule, whose higher-order moments are exact. The command line's
     /// default; the library's stays the published fixed rule, which is less noisy where occluders are
     /// far from the sources they hide (the Cornell box: 1.78% against 1.9% |error|/mean).
-    fn rows(&self, nodes: &[Node]) -> NodeRows {
+    /// `inner`: a vector to fill (its contents are replaced).
+    fn rows(&self, nodes: &[Node], mut inner: Vec<f64>) -> NodeRows {
         let size = self.basis.size();
+        inner.clear();
+        inner.resize(nodes.len() * size, 0.0);
         let mut out = NodeRows {
-            inner: vec![0.0; nodes.len() * size],
+            inner,
             unoccluded: 0.0,
             factor_range: (f64::INFINITY, 0.0),
             rays: 0,
@@ -525,10 +548,44 @@ pub fn basis_values(
     shape: &crate::geometry::Shape,
     nodes: &[Node],
 ) -> Vec<f64> {
-    let size = basis.size();
-    let mut out = vec![0.0; nodes.len() * size];
-    for (k, node) in nodes.iter().enumerate() {
-        basis.eval(shape.domain(), node.uv, &mut out[k * size..(k + 1) * size]);
-    }
+    let mut out = Vec::new();
+    basis_values_into(basis, shape, nodes, &mut out);
     out
+}
+
+/// [`basis_values`] into `out` (resized), for callers that reuse one vector.
+fn basis_values_into(
+    basis: &crate::bases::Basis,
+    shape: &crate::geometry::Shape,
+    nodes: &[Node],
+    out: &mut Vec<f64>,
+) {
+    let size = basis.size();
+    out.clear();
+    out.resize(nodes.len() * size, 0.0);
+    for (node, values) in nodes.iter().zip(out.chunks_exact_mut(size)) {
+        basis.eval(shape.domain(), node.uv, values);
+    }
+}
+
+/// The vectors of a surface coupling, kept per thread from one coupling to the next
+/// ([`COUPLING_BUFFERS`]).
+#[derive(Default)]
+struct CouplingBuffers {
+    x_nodes: Vec<Node>,
+    y_nodes: Vec<Node>,
+    phi_x: Vec<f64>,
+    phi_y: Vec<f64>,
+    inner: Vec<f64>,
+    block: Vec<f64>,
+    errors: Vec<f32>,
+    node_factors: Vec<f32>,
+}
+
+thread_local! {
+    /// Each thread's [`CouplingBuffers`], taken by a coupling and put back when it is done: a solve
+    /// couples hundreds of thousands of links, and eight short-lived vectors each were about a
+    /// twentieth of the default solve's time. (A coupling made while another holds them, were there
+    /// one, would find empty vectors: slower, the same result.)
+    static COUPLING_BUFFERS: std::cell::Cell<CouplingBuffers> = std::cell::Cell::default();
 }
