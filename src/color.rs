@@ -22,7 +22,7 @@ pub enum Units {
     /// Radiance in W/(m² sr), irradiance in W/m², per RGB channel.
     #[default]
     Radiometric,
-    /// Luminance in cd/m², illuminance in lux ([`WHITE_EFFICACY`] × the channels, so that the
+    /// Luminance in cd/m², illuminance in lux (`WHITE_EFFICACY`, 179 lm/W, × the channels, so that the
     /// luminance-weighted sum of an RGB value is its photometric value).
     Photometric,
 }

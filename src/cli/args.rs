@@ -172,7 +172,7 @@ pub struct SolveArgs {
     /// radiance) or reduced (one ratio per receiver node for the source's radiance when the link is
     /// made, Bekaert–Willems §4.3: less memory per link, estimates that miss later changes of shape).
     /// Default: full with --oracle error, whose refinement reads them; reduced with the other oracles,
-    /// for which they only make the a-posteriori estimate (the same solution in 6–13% less memory).
+    /// for which they only make the a-posteriori estimate (the same solution in 5–15% less memory).
     #[arg(long, value_enum)]
     pub error_storage: Option<ErrorStorage>,
     /// Error control (Bekaert–Willems algorithm 6.1) to this largest radiance error per element: an

@@ -27,8 +27,9 @@ use super::{DVec2, DVec3, Shape};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum NearField {
-    /// [`receiver_integral`] where [`is_near`], in couplings (where the regular rule misses more than
-    /// a tenth of the light) and in the power oracle's transport estimate.
+    /// The adaptive receiver integral (`receiver_integral`) where the source is near the receiver
+    /// (`is_near`), in couplings (where the regular rule misses more than a tenth of the light) and in
+    /// the power oracle's transport estimate.
     #[default]
     Adaptive,
     /// The regular rule in couplings and the centre estimate in the power oracle (Feixas et al. §4 as

@@ -35,9 +35,9 @@ pub enum Antialias {
     #[default]
     Stratified,
     /// Only in pixels whose four corners (one ray each, shared with the neighbours) differ by more than
-    /// [`ADAPTIVE_CONTRAST`]; elsewhere the corners' mean, the box filter of a smooth field to second
-    /// order in the pixel size (Mitchell 1987's adaptive supersampling with a contrast test). About a
-    /// ray and a quarter a pixel instead of `samples_per_pixel`; a feature smaller than a pixel that
+    /// 5% (`ADAPTIVE_CONTRAST`); elsewhere the corners' mean, the box filter of a smooth field to
+    /// second order in the pixel size (Mitchell 1987's adaptive supersampling with a contrast test).
+    /// A ray and a half a pixel on the Cornell box at 4 samples; a feature smaller than a pixel that
     /// no corner sees is missed. With the mesh overlay (lines a pixel wide between the corners) every
     /// pixel is sampled.
     Adaptive,

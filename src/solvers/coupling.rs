@@ -73,7 +73,7 @@ pub enum SourceRule {
     /// receiver.
     #[default]
     Fixed,
-    /// At a random shift of the source rule per receiver node ([`shifted_nodes`]; the command line's
+    /// At a random shift of the source rule per receiver node (`shifted_nodes`; the command line's
     /// default): unbiased over a shadow boundary across the source, at the price of noise
     /// (BENCHMARKS.md, "Shadow boundaries across sources").
     Shifted,
