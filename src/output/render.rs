@@ -143,41 +143,41 @@ pub fn render_with(
         }
         sum / samples as f64
     };
-    let rows = image.pixels.par_chunks_mut(width).enumerate();
-    if samples == 1 {
-        rows.for_each(|(y, row)| {
-            for (x, pixel) in row.iter_mut().enumerate() {
-                *pixel = tracer.radiance(x as f64 + 0.5, y as f64 + 0.5);
-            }
+    // Adaptive: the radiance at every pixel corner first.
+    let corners =
+        (samples > 1 && options.antialias == Antialias::Adaptive && !options.mesh).then(|| {
+            let mut corners = vec![Rgb::BLACK; (width + 1) * (camera.height + 1)];
+            corners
+                .par_chunks_mut(width + 1)
+                .enumerate()
+                .for_each(|(y, row)| {
+                    for (x, corner) in row.iter_mut().enumerate() {
+                        *corner = tracer.radiance(x as f64, y as f64);
+                    }
+                });
+            corners
         });
-    } else if options.antialias == Antialias::Adaptive && !options.mesh {
-        let mut corners = vec![Rgb::BLACK; (width + 1) * (camera.height + 1)];
-        corners
-            .par_chunks_mut(width + 1)
-            .enumerate()
-            .for_each(|(y, row)| {
-                for (x, corner) in row.iter_mut().enumerate() {
-                    *corner = tracer.radiance(x as f64, y as f64);
-                }
-            });
-        rows.for_each(|(y, row)| {
+    image
+        .pixels
+        .par_chunks_mut(width)
+        .enumerate()
+        .for_each(|(y, row)| {
             for (x, pixel) in row.iter_mut().enumerate() {
-                let at = |dx: usize, dy: usize| corners[(y + dy) * (width + 1) + x + dx];
-                let four = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
-                *pixel = if corners_agree(&four) {
-                    four.iter().fold(Rgb::BLACK, |sum, &c| sum + c) / 4.0
-                } else {
-                    stratified_pixel(x, y)
+                *pixel = match &corners {
+                    _ if samples == 1 => tracer.radiance(x as f64 + 0.5, y as f64 + 0.5),
+                    Some(corners) => {
+                        let at = |dx: usize, dy: usize| corners[(y + dy) * (width + 1) + x + dx];
+                        let four = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
+                        if corners_agree(&four) {
+                            four.iter().fold(Rgb::BLACK, |sum, &c| sum + c) / 4.0
+                        } else {
+                            stratified_pixel(x, y)
+                        }
+                    }
+                    None => stratified_pixel(x, y),
                 };
             }
         });
-    } else {
-        rows.for_each(|(y, row)| {
-            for (x, pixel) in row.iter_mut().enumerate() {
-                *pixel = stratified_pixel(x, y);
-            }
-        });
-    }
     image
 }
 

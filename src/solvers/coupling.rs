@@ -390,10 +390,7 @@ impl SourceSampler<'_> {
                     self.y_nodes,
                     self.shift_at(x.point),
                 ));
-                phi.resize(shifted.len() * size, 0.0);
-                for (node, values) in shifted.iter().zip(phi.chunks_exact_mut(size)) {
-                    self.basis.eval(self.source.domain(), node.uv, values);
-                }
+                basis_values_into(self.basis, self.source, &shifted, &mut phi);
                 self.row(x.point, exact, &shifted, &phi, row)
             };
             out.rays += rays;
