@@ -303,21 +303,20 @@ pub fn build_visibility_with(
 }
 
 /// The visibility structure `settings` names, with its cluster tree and (multires) feature size, and
-/// shaft culling over the same polygons where `--visibility-reuse shaft` applies.
+/// shaft culling over the same polygons where `--visibility-reuse shaft` applies (exact back ends and
+/// multires; extinction stays the paper's model on every segment).
 pub fn build_visibility_for(
     scene: &Scene,
     settings: &SimulationSettings,
 ) -> anyhow::Result<Box<dyn Visibility>> {
     let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
-    let rays = match settings.visibility {
-        VisibilityKind::Multires => {
-            return Ok(Box::new(Multires::new(
-                &shapes,
-                settings.cluster_tree,
-                settings.feature_size,
-                settings.multires_averaging,
-            )))
-        }
+    let rays: Box<dyn Visibility> = match settings.visibility {
+        VisibilityKind::Multires => Box::new(Multires::new(
+            &shapes,
+            settings.cluster_tree,
+            settings.feature_size,
+            settings.multires_averaging,
+        )),
         VisibilityKind::Extinction => {
             return build_visibility_with(scene, settings.visibility, settings.cluster_tree)
         }

@@ -202,7 +202,8 @@ pub struct SolveArgs {
     pub visibility: VisibilityKind,
     /// Visibility reuse in link couplings: a shaft test per link (Haines–Wallace shaft culling), whose
     /// clear or blocked verdict its sub-links inherit without rays; none casts a ray per node pair.
-    /// Exact visibility only (bvh, embree, brute-force).
+    /// Exact visibility (bvh, embree, brute-force) and multires, whose answer a clear or blocked shaft
+    /// makes exact; not extinction, the paper's model everywhere.
     #[arg(long, value_enum, default_value_t = VisibilityReuse::Shaft)]
     pub visibility_reuse: VisibilityReuse,
     /// Multires visibility: smallest shadow feature (world units on the receiver) computed exactly;

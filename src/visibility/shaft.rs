@@ -27,7 +27,7 @@ use std::ops::ControlFlow;
 #[serde(rename_all = "kebab-case")]
 pub enum VisibilityReuse {
     /// A shaft test per link whose parent's shaft was partial; Clear and Blocked verdicts are
-    /// inherited by the link's children and cost no rays (exact visibility back ends only).
+    /// inherited by the link's children and cost no rays (exact visibility back ends and multires).
     #[default]
     Shaft,
     /// A ray per pair of cubature nodes for every link.
@@ -478,8 +478,11 @@ impl ShaftTest {
     }
 }
 
-/// An exact ray-casting back end with a [`ShaftCuller`] over the same polygons: rays go to the back end
-/// unchanged, and link couplings ask [`Visibility::shafts`] for shaft tests.
+/// An exact ray-casting back end, or multi-resolution visibility, with a [`ShaftCuller`] over the same
+/// polygons: rays go to the back end unchanged, and link couplings ask [`Visibility::shafts`] for shaft
+/// tests. Under multires a shaft's verdict is the exact answer its queries approximate: transmittance 1
+/// through a clear shaft, where averaging the clusters it crosses would darken the link (Sillion–Drettakis
+/// §3.2 ask exact visibility wherever it is affordable), 0 through a blocked one.
 pub struct ShaftCulled {
     pub rays: Box<dyn Visibility>,
     pub culler: ShaftCuller,
