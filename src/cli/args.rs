@@ -229,9 +229,11 @@ pub struct SolveArgs {
     #[arg(long, value_enum, default_value_t = IntraClusterKind::ItemBuffer)]
     pub intra_cluster: IntraClusterKind,
     /// Refinement threshold ε of the power, smoothness and mi oracles, relative to the scene's total
-    /// emission (Σ A·max(E)); smaller is finer.
-    #[arg(long, default_value_t = 3e-5)]
-    pub eps: f64,
+    /// emission (Σ A·max(E)); smaller is finer. Default: 3e-5 with power and mi, 1e-2 with smoothness
+    /// (eq. (2) is scaled by the whole scene's area, not the receiver's: a thousand elements' worth
+    /// larger; at 3e-5 it refines every edge of the Cornell box to the minimum area, in gigabytes).
+    #[arg(long)]
+    pub eps: Option<f64>,
     /// Power oracle: links that a shadow boundary crosses (their sampled visibility varies over the
     /// receiver, by s in L¹; Sillion–Drettakis Appendix A) are refined until s·ρBAF is below --eps/g,
     /// g = 2·4^N: N quadtree levels deeper than eq. (1) alone where a hard boundary halves the
@@ -284,15 +286,19 @@ pub struct SolveArgs {
     pub max_steps: usize,
 }
 
+/// `--eps` of the power and MI oracles (chosen over four scenes: BENCHMARKS.md, "Which basis and ε
+/// for the default").
+const DEFAULT_EPS: f64 = 3e-5;
+
+/// `--eps` of the smoothness oracle: Cornell box 16.8k leaves, 4.6% image error in 1.8 s; office2 72k
+/// leaves, 28 s (BENCHMARKS.md, "Error against time, per basis and per oracle").
+const DEFAULT_SMOOTHNESS_EPS: f64 = 1e-2;
+
 /// Most `--shadow-levels`: each level quarters the area of the elements along shadow boundaries.
 const MAX_SHADOW_LEVELS: f64 = 8.0;
 
 impl SolveArgs {
     pub fn settings(&self, seed: u64) -> Result<SimulationSettings> {
-        anyhow::ensure!(
-            self.eps.is_finite() && self.eps >= 0.0,
-            "--eps must be a non-negative number"
-        );
         anyhow::ensure!(
             (0.0..=MAX_SHADOW_LEVELS).contains(&self.shadow_levels),
             "--shadow-levels must be between 0 and {MAX_SHADOW_LEVELS}"
@@ -328,6 +334,14 @@ impl SolveArgs {
         } else {
             OracleKind::Power
         });
+        let eps = self.eps.unwrap_or(match oracle {
+            OracleKind::Smoothness => DEFAULT_SMOOTHNESS_EPS,
+            _ => DEFAULT_EPS,
+        });
+        anyhow::ensure!(
+            eps.is_finite() && eps >= 0.0,
+            "--eps must be a non-negative number"
+        );
         Ok(SimulationSettings {
             method: self.method,
             oracle,
@@ -339,7 +353,7 @@ impl SolveArgs {
             feature_size,
             multires_averaging: self.multires_averaging.unwrap_or_default(),
             intra_cluster: self.intra_cluster,
-            eps: self.eps,
+            eps,
             shadow_levels: self.shadow_levels,
             near_field: self.near_field,
             source_rule: self.source_rule,
@@ -629,4 +643,32 @@ pub fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
         }
     }
     matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Solve {
+        #[command(flatten)]
+        solve: SolveArgs,
+    }
+
+    fn eps_of(args: &[&str]) -> f64 {
+        let parsed =
+            Solve::try_parse_from(std::iter::once("radiosity").chain(args.iter().copied()))
+                .expect("parse");
+        parsed.solve.settings(1).expect("settings").eps
+    }
+
+    #[test]
+    fn eps_defaults_per_oracle_and_an_explicit_one_wins() {
+        assert_eq!(eps_of(&[]), DEFAULT_EPS);
+        assert_eq!(eps_of(&["--oracle", "mi"]), DEFAULT_EPS);
+        assert_eq!(eps_of(&["--oracle", "smoothness"]), DEFAULT_SMOOTHNESS_EPS);
+        assert_eq!(eps_of(&["--oracle", "smoothness", "--eps", "0.2"]), 0.2);
+        assert_eq!(eps_of(&["--eps", "1e-4"]), 1e-4);
+    }
 }

@@ -171,6 +171,99 @@ fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> std::ops::Range<f
     (lo - pad)..(hi + pad)
 }
 
+/// One axis as drawn: a log axis is plotted in `log10` of its values, with labelled ticks at 1, 2 and 5
+/// times the powers of ten inside it (plotters' own log scale labels only whole powers at or above the
+/// range's first one, so a range within 0.01–0.15 got a single label).
+struct Axis {
+    log: bool,
+    /// In plotted coordinates.
+    range: std::ops::Range<f64>,
+}
+
+impl Axis {
+    fn new(values: impl Iterator<Item = f64>, log: bool) -> Self {
+        let range = axis_range(values, log);
+        let range = if log {
+            range.start.log10()..range.end.log10()
+        } else {
+            range
+        };
+        Axis { log, range }
+    }
+
+    fn plotted(&self, value: f64) -> f64 {
+        if self.log {
+            value.log10()
+        } else {
+            value
+        }
+    }
+
+    /// A log axis as a plotters coordinate with [`Axis::log_ticks`] as its key points.
+    fn log_coord(&self) -> LogTicks {
+        LogTicks {
+            range: self.range.clone(),
+            ticks: self.log_ticks(),
+        }
+    }
+
+    /// Ticks of a log axis, in plotted coordinates: 1, 2, 5 per decade (1 alone past four decades).
+    fn log_ticks(&self) -> Vec<f64> {
+        let mantissas: &[f64] = if self.range.end - self.range.start > 4.0 {
+            &[1.0]
+        } else {
+            &[1.0, 2.0, 5.0]
+        };
+        let (first, last) = (
+            self.range.start.floor() as i32,
+            self.range.end.ceil() as i32,
+        );
+        (first..=last)
+            .flat_map(|k| mantissas.iter().map(move |m| (m * 10f64.powi(k)).log10()))
+            .filter(|t| self.range.contains(t))
+            .collect()
+    }
+
+    /// The label of plotted coordinate `at`: the value itself, with as many decimals as its leading
+    /// digit needs on a log axis.
+    fn label(&self, at: f64) -> String {
+        if !self.log {
+            return format!("{at}");
+        }
+        let value = 10f64.powf(at);
+        let exponent = value.log10().floor();
+        if (-4.0..6.0).contains(&exponent) {
+            format!("{:.*}", (-exponent).max(0.0) as usize, value)
+        } else {
+            format!("{value:.0e}")
+        }
+    }
+}
+
+/// A log axis in plotted (`log10`) coordinates: linear mapping, labelled at its own ticks.
+struct LogTicks {
+    range: std::ops::Range<f64>,
+    ticks: Vec<f64>,
+}
+
+impl Ranged for LogTicks {
+    type FormatOption = plotters::coord::ranged1d::DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let fraction = (value - self.range.start) / (self.range.end - self.range.start);
+        limit.0 + (fraction * f64::from(limit.1 - limit.0)).round() as i32
+    }
+
+    fn key_points<Hint: plotters::coord::ranged1d::KeyPointHint>(&self, _hint: Hint) -> Vec<f64> {
+        self.ticks.clone()
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.range.clone()
+    }
+}
+
 /// The chart as SVG text.
 pub fn svg(series: &[Series], spec: &PlotSpec) -> Result<String> {
     ensure!(
@@ -178,27 +271,48 @@ pub fn svg(series: &[Series], spec: &PlotSpec) -> Result<String> {
         "no points to plot"
     );
     let all = || series.iter().flat_map(|s| s.points.iter().copied());
-    let xr = axis_range(all().map(|p| p.0), spec.log_x);
-    let yr = axis_range(all().map(|p| p.1), spec.log_y);
+    let x = Axis::new(all().map(|p| p.0), spec.log_x);
+    let y = Axis::new(all().map(|p| p.1), spec.log_y);
+    let plotted: Vec<Series> = series
+        .iter()
+        .map(|s| Series {
+            label: s.label.clone(),
+            points: s
+                .points
+                .iter()
+                .map(|&(px, py)| (x.plotted(px), y.plotted(py)))
+                .collect(),
+        })
+        .collect();
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, (800, 560)).into_drawing_area();
-        match (spec.log_x, spec.log_y) {
-            (false, false) => draw(&root, series, spec, xr, yr)?,
-            (true, false) => draw(&root, series, spec, xr.log_scale(), yr)?,
-            (false, true) => draw(&root, series, spec, xr, yr.log_scale())?,
-            (true, true) => draw(&root, series, spec, xr.log_scale(), yr.log_scale())?,
+        let (xr, yr) = (x.range.clone(), y.range.clone());
+        match (x.log, y.log) {
+            (false, false) => draw(&root, &plotted, spec, (&x, &y), xr, yr)?,
+            (true, false) => draw(&root, &plotted, spec, (&x, &y), x.log_coord(), yr)?,
+            (false, true) => draw(&root, &plotted, spec, (&x, &y), xr, y.log_coord())?,
+            (true, true) => draw(
+                &root,
+                &plotted,
+                spec,
+                (&x, &y),
+                x.log_coord(),
+                y.log_coord(),
+            )?,
         }
         root.present().map_err(draw_error)?;
     }
     Ok(out)
 }
 
-/// Draws axes, one line with markers per series, and the legend, on linear or log coordinates.
+/// Draws axes, one line with markers per series, and the legend; `series` are in plotted coordinates
+/// and `axes` label them.
 fn draw<X, Y>(
     root: &DrawingArea<SVGBackend, plotters::coord::Shift>,
     series: &[Series],
     spec: &PlotSpec,
+    axes: (&Axis, &Axis),
     x: X,
     y: Y,
 ) -> Result<()>
@@ -220,10 +334,13 @@ where
         .y_label_area_size(80)
         .build_cartesian_2d(x, y)
         .map_err(draw_error)?;
+    let (x_label, y_label) = (|v: &f64| axes.0.label(*v), |v: &f64| axes.1.label(*v));
     chart
         .configure_mesh()
         .x_desc(spec.x.as_str())
         .y_desc(spec.y.as_str())
+        .x_label_formatter(&x_label)
+        .y_label_formatter(&y_label)
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 15))
         .draw()
@@ -299,5 +416,26 @@ mod tests {
         assert!(json_number(&v, "b.d").unwrap_err().contains("not a number"));
         assert_eq!(json_label(&v, "b.d").as_deref(), Some("x"));
         assert_eq!(json_label(&v, "a").as_deref(), Some("1"));
+    }
+
+    #[test]
+    fn log_axes_are_labelled_at_one_two_and_five_times_powers_of_ten() {
+        let labels = |values: &[f64]| {
+            let axis = Axis::new(values.iter().copied(), true);
+            let ticks = axis.log_ticks();
+            ticks.iter().map(|&t| axis.label(t)).collect::<Vec<_>>()
+        };
+        // Within one decade below 1 (plotters' own log scale labelled only 0.1 here).
+        assert_eq!(labels(&[0.012, 0.15]), ["0.02", "0.05", "0.1"]);
+        assert_eq!(labels(&[0.17, 5.7]), ["0.2", "0.5", "1", "2", "5"]);
+        assert_eq!(
+            labels(&[30.0, 4000.0]),
+            ["50", "100", "200", "500", "1000", "2000", "5000"]
+        );
+        // Past four decades, the powers alone.
+        assert_eq!(
+            labels(&[1e-6, 1.0]),
+            ["1e-6", "1e-5", "0.0001", "0.001", "0.01", "0.1", "1"]
+        );
     }
 }
