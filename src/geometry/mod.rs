@@ -186,7 +186,9 @@ impl Shape {
                 if skew <= 1e-26 * diagonals {
                     return uv;
                 }
-                let n = self.normal();
+                // Any vector off the plane serves the projections below (its length cancels): the
+                // diagonals' cross product, twice the vector area of a planar quad, without a root.
+                let n = (v[2] - v[0]).cross(v[3] - v[1]);
                 for _ in 0..8 {
                     let (u, w) = (uv.x, uv.y);
                     let r = self.point_at(uv) - p;
