@@ -111,7 +111,8 @@ impl Extinction {
     /// visibility uses for a cluster it does not descend into.
     pub(super) fn optical_depth_below(&self, node: u32, segment: &Segment) -> f64 {
         let mut depth = 0.0;
-        let mut stack = vec![node];
+        let mut stack = WalkStack::new();
+        stack.push(node);
         while let Some(n) = stack.pop() {
             let Some((t0, t1)) = segment.clip(&self.bounds[n as usize]) else {
                 continue;
@@ -153,6 +154,11 @@ impl Extinction {
         &self.exact
     }
 }
+
+/// The clusters still to visit in a walk down the cluster tree: on the stack for any tree but a very
+/// wide one (a walk runs per ray: office3 under `--visibility extinction` 10.5 → 9.8 s without a heap
+/// allocation per walk, under multires 1%).
+pub(super) type WalkStack = smallvec::SmallVec<[u32; 64]>;
 
 /// A segment `from + t (to − from)`, `t ∈ [0, 1]`, ready for clipping against boxes.
 pub(super) struct Segment {

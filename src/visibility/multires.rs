@@ -44,7 +44,7 @@
 //! receives, so a per-surface feature size (importance, §6) is not implemented.
 
 use super::brute_force::ray_polygon;
-use super::extinction::{Extinction, Segment};
+use super::extinction::{Extinction, Segment, WalkStack};
 use super::{Hit, Visibility, SEGMENT_EPSILON};
 use crate::geometry::{Aabb, DVec3, Ray, Shape};
 use crate::hierarchy::clusters::{Child, ClusterTree, ClusterTreeKind};
@@ -176,7 +176,8 @@ impl Multires {
         };
         let ray = Ray::new(from, to - from);
         let mut depth = 0.0;
-        let mut stack = vec![root];
+        let mut stack = WalkStack::new();
+        stack.push(root);
         while let Some(n) = stack.pop() {
             let Some((t0, t1)) = segment.clip(self.extinction.padded_bounds(n)) else {
                 continue;
