@@ -207,35 +207,61 @@ impl Axis {
         }
     }
 
-    /// Ticks of a log axis, in plotted coordinates: 1, 2, 5 per decade (1 alone past four decades).
+    /// Ticks of a log axis, in plotted coordinates: 1, 2, 5 per decade (1 alone past four decades; every
+    /// digit where the range holds fewer than two of those, as 1.1 to 1.9 does).
     fn log_ticks(&self) -> Vec<f64> {
-        let mantissas: &[f64] = if self.range.end - self.range.start > 4.0 {
-            &[1.0]
-        } else {
-            &[1.0, 2.0, 5.0]
+        let ticks = |mantissas: &[f64]| -> Vec<f64> {
+            let (first, last) = (
+                self.range.start.floor() as i32,
+                self.range.end.ceil() as i32,
+            );
+            (first..=last)
+                .flat_map(|k| mantissas.iter().map(move |m| (m * 10f64.powi(k)).log10()))
+                .filter(|t| self.range.contains(t))
+                .collect()
         };
-        let (first, last) = (
-            self.range.start.floor() as i32,
-            self.range.end.ceil() as i32,
-        );
-        (first..=last)
-            .flat_map(|k| mantissas.iter().map(move |m| (m * 10f64.powi(k)).log10()))
-            .filter(|t| self.range.contains(t))
+        if self.range.end - self.range.start > 4.0 {
+            return ticks(&[1.0]);
+        }
+        for mantissas in [
+            &[1.0, 2.0, 5.0][..],
+            &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+        ] {
+            let found = ticks(mantissas);
+            if found.len() >= 2 {
+                return found;
+            }
+        }
+        // Within one digit's step: evenly spaced round values, as on a linear axis.
+        let (lo, hi) = (10f64.powf(self.range.start), 10f64.powf(self.range.end));
+        let raw = (hi - lo) / 4.0;
+        let magnitude = 10f64.powf(raw.log10().floor());
+        let step = [1.0, 2.0, 5.0, 10.0]
+            .iter()
+            .map(|m| m * magnitude)
+            .find(|&step| step >= raw)
+            .unwrap_or(10.0 * magnitude);
+        let first = (lo / step).ceil() as i64;
+        (first..)
+            .map(|k| k as f64 * step)
+            .take_while(|&v| v <= hi)
+            .map(f64::log10)
             .collect()
     }
 
-    /// The label of plotted coordinate `at`: the value itself, with as many decimals as its leading
-    /// digit needs on a log axis.
+    /// The label of plotted coordinate `at`: on a log axis the value itself, rounded to ten significant
+    /// digits (what `10^log10(v)` gives back), in exponent form outside 0.0001 to 100000.
     fn label(&self, at: f64) -> String {
         if !self.log {
             return format!("{at}");
         }
-        let value = 10f64.powf(at);
-        let exponent = value.log10().floor();
-        if (-4.0..6.0).contains(&exponent) {
-            format!("{:.*}", (-exponent).max(0.0) as usize, value)
+        let value: f64 = format!("{:.9e}", 10f64.powf(at))
+            .parse()
+            .unwrap_or(f64::NAN);
+        if (-4.0..6.0).contains(&value.log10().floor()) {
+            format!("{value}")
         } else {
-            format!("{value:.0e}")
+            format!("{value:e}")
         }
     }
 }
@@ -432,6 +458,9 @@ mod tests {
             labels(&[30.0, 4000.0]),
             ["50", "100", "200", "500", "1000", "2000", "5000"]
         );
+        assert_eq!(labels(&[1.25, 1.9]), ["1.4", "1.6", "1.8"]);
+        assert_eq!(labels(&[2.1, 3.9]), ["3", "4"]);
+        assert_eq!(labels(&[0.11, 0.45]), ["0.2", "0.3", "0.4"]);
         // Past four decades, the powers alone.
         assert_eq!(
             labels(&[1e-6, 1.0]),
