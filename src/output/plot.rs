@@ -249,19 +249,16 @@ impl Axis {
             .collect()
     }
 
-    /// The label of plotted coordinate `at`: on a log axis the value itself, rounded to ten significant
-    /// digits (what `10^log10(v)` gives back), in exponent form outside 0.0001 to 100000.
+    /// The label of plotted coordinate `at`: the value, rounded to ten significant digits (a tick's
+    /// `10^log10(v)`, or a key point's `0.1 · 3`, gives back a few ulps off), in exponent form outside
+    /// 0.0001 to 100000 on a log axis.
     fn label(&self, at: f64) -> String {
-        if !self.log {
-            return format!("{at}");
-        }
-        let value: f64 = format!("{:.9e}", 10f64.powf(at))
-            .parse()
-            .unwrap_or(f64::NAN);
-        if (-4.0..6.0).contains(&value.log10().floor()) {
-            format!("{value}")
-        } else {
+        let value = if self.log { 10f64.powf(at) } else { at };
+        let value: f64 = format!("{value:.9e}").parse().unwrap_or(value);
+        if self.log && !(-4.0..6.0).contains(&value.log10().floor()) {
             format!("{value:e}")
+        } else {
+            format!("{value}")
         }
     }
 }
@@ -461,6 +458,8 @@ mod tests {
         assert_eq!(labels(&[1.25, 1.9]), ["1.4", "1.6", "1.8"]);
         assert_eq!(labels(&[2.1, 3.9]), ["3", "4"]);
         assert_eq!(labels(&[0.11, 0.45]), ["0.2", "0.3", "0.4"]);
+        let linear = Axis::new([0.0, 1.0].into_iter(), false);
+        assert_eq!(linear.label(0.1 * 3.0), "0.3");
         // Past four decades, the powers alone.
         assert_eq!(
             labels(&[1e-6, 1.0]),
