@@ -6,6 +6,10 @@
 //! [`solvers`] → [`output`] (images, illuminated models) and [`measures`] (statistics, error metrics).
 //! See ARCHITECTURE.md.
 
+// The documentation is for the people who work on the engine: public items link to the private
+// constants and helpers that explain them (`cargo doc --document-private-items` renders those links).
+#![allow(rustdoc::private_intra_doc_links)]
+
 pub mod bases;
 pub mod cli;
 pub mod color;

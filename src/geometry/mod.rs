@@ -11,7 +11,7 @@ pub mod near_field;
 
 pub use glam::{DVec2, DVec3};
 
-/// Master parameter domain of an element (Bekaert–Willems §2): the unit square [0,1]² for quads (bilinear
+/// Master parameter domain of an element (Bekaert–Willems §2): the unit square \[0,1\]² for quads (bilinear
 /// map) and the standard triangle (0,0), (1,0), (0,1) for triangles (barycentric map). Bases and cubature
 /// rules are defined once on these and mapped onto elements by [`Shape::point_at`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

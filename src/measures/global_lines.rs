@@ -3,7 +3,7 @@
 //! the side of each polygon that faces the other point is where the line carries light between them. The
 //! lines crossing a polygon are uniform over its area and, seen from a crossing point, their directions are
 //! cosine distributed on either side — so a crossing and its neighbour sample the point-to-point form
-//! factor `F(x, y)` (Feixas et al. eq. (10), and the visibility measure of their ref. [5]).
+//! factor `F(x, y)` (Feixas et al. eq. (10), and the visibility measure of their ref. \[5\]).
 
 use crate::geometry::{DVec3, Ray};
 use crate::hierarchy::Hierarchy;

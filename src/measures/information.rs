@@ -1,5 +1,5 @@
 //! Information-theoretic scene measures (Feixas et al., "Information-theoretic oracle based on kernel
-//! smoothness", §2.2 and §3.1, and their ref. [5], "An information theory framework for the analysis of
+//! smoothness", §2.2 and §3.1, and their ref. \[5\], "An information theory framework for the analysis of
 //! scene complexity"): discrete and continuous radiosity mutual information `I_r^d` (eq. 3) and `I_r^c`
 //! (eq. 10), their visibility counterparts `I_v^d`, `I_v^c`, and the discretisation error
 //! `Δ = (I^c − I^d) / I^c`. Logarithms are base 2 (bits).
@@ -32,10 +32,10 @@
 //! **Colour.** The measures are computed on the channel average of the RGB radiosity.
 //!
 //! **Visibility measures.** `I_v^d` and `I_v^c` are the radiosity ones with `B ≡ 1`: then `B_i^in = Σ_j
-//! F_ij`, which is 1 in a closed scene, `𝒜_T = A_T` and eq. (3) becomes ref. [5]'s `I_v^d = Σ_ij (A_i/A_T)
+//! F_ij`, which is 1 in a closed scene, `𝒜_T = A_T` and eq. (3) becomes ref. \[5\]'s `I_v^d = Σ_ij (A_i/A_T)
 //! F_ij log(F_ij A_T / A_j)` and eq. (10) its `I_v^c = (1/N) Σ log(A_T cos θx cos θy / (π d²))`. In an open
 //! scene (`Σ_j F_ij < 1`) this is the mutual information of the lines that join two surfaces, which stays
-//! non-negative where ref. [5]'s closed-scene formula would not.
+//! non-negative where ref. \[5\]'s closed-scene formula would not.
 
 use super::global_lines::GlobalLines;
 use crate::geometry::form_factor::point_to_point;

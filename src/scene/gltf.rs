@@ -25,10 +25,10 @@
 //! photometric radiance: the numbers are used unconverted). Lengths are glTF metres, unscaled.
 //!
 //! Safety: the file and every external buffer or image is read with the size limit of
-//! [`read_bounded`](super::read_bounded), all loaded buffers and images together are bounded by
+//! [`read_bounded`], all loaded buffers and images together are bounded by
 //! [`MAX_LOADED_BYTES`], accessors are read with checked offsets (the crate's own readers can panic on
 //! bad strides or counts), the node graph is checked for shared children and cycles, node visits and
-//! instanced triangles are bounded (by [`MAX_NODE_VISITS`] and [`MAX_POLYGONS`](super::MAX_POLYGONS)),
+//! instanced triangles are bounded (by [`MAX_NODE_VISITS`] and [`MAX_POLYGONS`]),
 //! and images larger than [`MAX_TEXTURE_SIDE`] pixels a side are not decoded.
 
 use super::polygonize::polygonize;

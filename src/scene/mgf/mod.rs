@@ -12,7 +12,7 @@
 //!
 //! Limits (errors naming the line): files of at most [`MAX_FILE_BYTES`](super::MAX_FILE_BYTES), regular
 //! files only, include cycles (reported with the include chain), include depth, entities run and
-//! polygons made (see [`MAX_POLYGONS`](super::MAX_POLYGONS)).
+//! polygons made (see [`MAX_POLYGONS`]).
 //!
 //! Units: geometry keeps the file's units. Reflectance is `rd` times the colour normalised to luminance 1
 //! (see [`color`]). Emission: MGF's `ed` is the diffuse emittance in lumens per m² (luminous exitance).

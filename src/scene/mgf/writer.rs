@@ -2,7 +2,7 @@
 //! polygons, reflectances and emissions.
 //!
 //! Colours: the reader turns a chromaticity `cxy x y` and a luminous factor (`rd`, or `ed` / (179 π) for
-//! emission) into linear sRGB by a fixed linear map (see [`color`](super::color)). The writer inverts that
+//! emission) into linear sRGB by a fixed linear map (see [`color`]). The writer inverts that
 //! map: the XYZ of an RGB value gives the chromaticity (x, y) = (X, Y) / (X + Y + Z) and the factor Y, so
 //! every RGB inside the gamut of MGF chromaticities (X, Y, Z ≥ 0, which holds for every non-negative sRGB
 //! triple) reads back exactly up to floating-point rounding. Greys are written the same way rather than
