@@ -561,10 +561,12 @@ pub fn simulate_observed(
     if let (Some(pass), false) = (report.diverged_in_pass, progress.quiet) {
         crate::progress::stderr_line(format_args!(
             "warning: the sweeps of pass {pass} diverged (the change of the exitant power grew for {} \
-             sweeps in a row) and the solve stopped there, not converged: somewhere the scene sends \
+             sweeps in a row, or the power passed {} times what the emission and the largest \
+             reflectance allow) and the solve stopped there, not converged: somewhere the scene sends \
              back more light than it receives (surfaces at one place kept by --keep-duplicates, a \
-             reflectance of 1 or more)",
-            crate::solvers::DIVERGING_SWEEPS
+             reflectance of 1 or more, links whose couplings overestimate)",
+            crate::solvers::DIVERGING_SWEEPS,
+            crate::solvers::RUNAWAY_FACTOR
         ));
     }
     if report.refused_by_budget > 0 && !progress.quiet {

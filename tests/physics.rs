@@ -166,3 +166,30 @@ fn a_box_that_reflects_more_than_it_receives_stops_with_diverging_sweeps() {
         }
     }
 }
+
+/// The runaway bound of the divergence test is the white furnace's exitant power `E / (1 − ρ)`: a
+/// closed box refined until every link joins two leaves (the settings of the furnace test above, whose
+/// leaves are within 0.5% of `E / (1 − ρ)`) meets it to that tolerance. At practical ε the discrete row
+/// sums exceed 1 by a few percent and the same box leaves 3.7% above it (ρ 0.8, ε 1e-3): far under
+/// `RUNAWAY_FACTOR` times the bound.
+#[test]
+fn the_white_furnace_meets_the_runaway_bound_with_equality() {
+    use radiosity::solvers::runaway_power;
+    let rho = 0.8;
+    let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, 1.0);
+    let settings = SimulationSettings {
+        eps: 1e-7,
+        min_area: 1e-2,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &quiet()).expect("solve");
+    let r = &solution.report;
+    let bound = runaway_power(&solution.hierarchy, r.emitted_power);
+    let emitted = r.emitted_power.r + r.emitted_power.g + r.emitted_power.b;
+    assert!((bound - emitted / (1.0 - rho)).abs() <= 1e-9 * bound);
+    let exitant = r.exitant_power.r + r.exitant_power.g + r.exitant_power.b;
+    assert!(
+        (exitant - bound).abs() < 0.01 * bound,
+        "exitant {exitant}, bound {bound}"
+    );
+}

@@ -353,9 +353,38 @@ const INTERMEDIATE_TOLERANCE: f64 = 1e-3;
 /// grew for more than 100 (BENCHMARKS.md, "Coplanar overlaps").
 pub const DIVERGING_SWEEPS: usize = 10;
 
+/// How far past [`runaway_power`] the exitant power may go before a pass is taken to diverge: the
+/// discrete system's row sums exceed 1 by a few percent (cubature), which at the largest reflectance
+/// can double the geometric series but not multiply it by ten.
+pub const RUNAWAY_FACTOR: f64 = 10.0;
+
+/// Exitant power a converging solve of `hierarchy` cannot reach: each watt emitted comes back at most
+/// `ρ_max` times per bounce, so what leaves the surfaces sums to at most `Σ_c E_c / (1 − ρ_max,c)` per
+/// channel (the white furnace's `E / (1 − ρ)`, met with equality there). Infinite where a channel of
+/// some patch reflects everything or more. A sweep whose total passes [`RUNAWAY_FACTOR`] times this has
+/// diverged, even where its change did not grow for [`DIVERGING_SWEEPS`] sweeps in a row (the
+/// classroom's progressive step 8 at `--link-budget 20000`: 200 sweeps to 10¹⁹ W without a warning).
+pub fn runaway_power(hierarchy: &Hierarchy, emitted: Rgb) -> f64 {
+    let rho = hierarchy.patches.iter().fold(Rgb::BLACK, |m, p| {
+        Rgb::new(
+            m.r.max(p.reflectance.r),
+            m.g.max(p.reflectance.g),
+            m.b.max(p.reflectance.b),
+        )
+    });
+    [(emitted.r, rho.r), (emitted.g, rho.g), (emitted.b, rho.b)]
+        .iter()
+        .map(|&(e, r)| match e {
+            e if e <= 0.0 => 0.0,
+            e if r < 1.0 => e / (1.0 - r),
+            _ => f64::INFINITY,
+        })
+        .sum()
+}
+
 /// Sweeps with `solver` until the relative change of the total exitant power is below the tolerance
-/// (then returns true), the iteration limit, or [`DIVERGING_SWEEPS`] sweeps of growing change (then
-/// `report.diverged_in_pass` is set). The first sweep of a later pass is compared with the last of the
+/// (then returns true), the iteration limit, or [`DIVERGING_SWEEPS`] sweeps of growing change or a
+/// total past [`RUNAWAY_FACTOR`] × [`runaway_power`] (then `report.diverged_in_pass` is set). The first sweep of a later pass is compared with the last of the
 /// pass before (the same iterate, refined): a pass that changed little ends after one.
 fn sweep_to_tolerance(
     hierarchy: &mut Hierarchy,
@@ -378,6 +407,7 @@ fn sweep_to_tolerance(
     // The absolute change (not the relative: a system that diverges as a whole grows by a constant
     // ratio, its relative change tending to a constant) and how many sweeps in a row it grew.
     let (mut last_step, mut growing) = (f64::NAN, 0);
+    let runaway = RUNAWAY_FACTOR * runaway_power(hierarchy, report.emitted_power);
     for _ in 0..settings.max_iterations {
         let sweep = solver.sweep(hierarchy);
         report.iterations += 1;
@@ -396,7 +426,7 @@ fn sweep_to_tolerance(
             swept_to_tolerance = true;
             break;
         }
-        if growing >= DIVERGING_SWEEPS {
+        if growing >= DIVERGING_SWEEPS || total > runaway {
             report.diverged_in_pass = Some(pass);
             break;
         }

@@ -134,6 +134,10 @@ impl ErrorHistogram {
         self.counts
             .range(cut..)
             .map(|(&bin, &n)| {
+                // A link that must split (infinite error) has no size to fall by: its own cost.
+                if bin == i32::MAX {
+                    return n as f64;
+                }
                 let levels = (i64::from(bin) - i64::from(cut)) as f64 / BINS_PER_DECADE;
                 n as f64 * 10f64.powf(levels.min(300.0))
             })
@@ -385,5 +389,33 @@ mod tests {
         }
         assert_eq!(ErrorHistogram::bin(1.0), 0);
         assert_eq!(ErrorHistogram::bin(10.0), 16);
+    }
+
+    /// A link that must split (infinite error) predicts its own cost, not `10^300` refinements: with
+    /// one in the histogram every cut used to "fill" any budget, the cut stayed at the previous
+    /// step's, and the classroom's steps made 20k, 9.6k and 2.7k links of a 20k budget.
+    #[test]
+    fn links_that_must_split_do_not_hold_the_cut_up() {
+        let mut finite = ErrorHistogram::default();
+        for k in 0..1000 {
+            finite.add(1e-3 * (1.0 + k as f64 / 100.0), 4);
+        }
+        let mut with_split = finite.clone();
+        with_split.add(f64::INFINITY, 8);
+        for &bin in finite.counts.keys() {
+            let (a, b) = (
+                finite.predicted_refinements(bin),
+                with_split.predicted_refinements(bin),
+            );
+            assert_eq!(b, a + 8.0, "bin {bin}");
+        }
+        // So the cut is the finite links' cut for what the split link leaves of the budget.
+        for budget in [100, 1000, 4000, 100_000] {
+            assert_eq!(
+                with_split.cut(budget),
+                finite.cut(budget - 8),
+                "budget {budget}"
+            );
+        }
     }
 }
