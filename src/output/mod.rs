@@ -15,6 +15,18 @@ pub mod work_plane;
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
+/// The round step (1, 2 or 5 × 10^k) at or just above `range / count`: about `count` steps over
+/// `range` (iso-line levels of lux plots, ticks of chart axes).
+pub fn round_step(range: f64, count: f64) -> f64 {
+    let raw = range / count;
+    let decade = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * decade)
+        .find(|&s| s >= raw)
+        .unwrap_or(10.0 * decade)
+}
+
 /// Writes a file through `write` so that a failure leaves no partial file behind: into a temporary
 /// sibling renamed over `path` on success, or straight into `path` when it is a device (`/dev/null`).
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {

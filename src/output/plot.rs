@@ -234,13 +234,7 @@ impl Axis {
         }
         // Within one digit's step: evenly spaced round values, as on a linear axis.
         let (lo, hi) = (10f64.powf(self.range.start), 10f64.powf(self.range.end));
-        let raw = (hi - lo) / 4.0;
-        let magnitude = 10f64.powf(raw.log10().floor());
-        let step = [1.0, 2.0, 5.0, 10.0]
-            .iter()
-            .map(|m| m * magnitude)
-            .find(|&step| step >= raw)
-            .unwrap_or(10.0 * magnitude);
+        let step = super::round_step(hi - lo, 4.0);
         let first = (lo / step).ceil() as i64;
         (first..)
             .map(|k| k as f64 * step)

@@ -110,13 +110,7 @@ pub fn contour_levels(min: f64, max: f64) -> Vec<f64> {
     if !(range > 0.0 && range.is_finite()) {
         return Vec::new();
     }
-    let raw = range / 8.0;
-    let decade = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0]
-        .into_iter()
-        .map(|m| m * decade)
-        .find(|&s| s >= raw)
-        .unwrap_or(10.0 * decade);
+    let step = super::round_step(range, 8.0);
     let first = (min / step).floor() as i64 + 1;
     (first..)
         .map(|k| k as f64 * step)
