@@ -79,6 +79,15 @@ impl Rgb {
         self.r.max(self.g).max(self.b)
     }
 
+    /// The larger of two colours, channel by channel.
+    pub fn channel_max(self, other: Rgb) -> Rgb {
+        Rgb::new(
+            self.r.max(other.r),
+            self.g.max(other.g),
+            self.b.max(other.b),
+        )
+    }
+
     pub fn min_channel(self) -> f64 {
         self.r.min(self.g).min(self.b)
     }

@@ -769,8 +769,8 @@ impl Hierarchy {
             for &c in &children {
                 self.elements[c as usize].parent = id;
                 let (r, e) = self.optics_of(c);
-                reflectance = max_rgb(reflectance, r);
-                emission = max_rgb(emission, e);
+                reflectance = reflectance.channel_max(r);
+                emission = emission.channel_max(e);
             }
             self.elements.push(Element {
                 kind: ElementKind::Cluster(Box::new(Cluster {
@@ -1198,10 +1198,6 @@ impl Hierarchy {
     pub fn leaf_count(&self) -> usize {
         self.elements.iter().filter(|e| e.is_leaf()).count()
     }
-}
-
-fn max_rgb(a: Rgb, b: Rgb) -> Rgb {
-    Rgb::new(a.r.max(b.r), a.g.max(b.g), a.b.max(b.b))
 }
 
 #[cfg(test)]

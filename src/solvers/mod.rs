@@ -360,21 +360,14 @@ pub const RUNAWAY_FACTOR: f64 = 10.0;
 
 /// Exitant power a converging solve of `hierarchy` cannot reach: each watt emitted comes back at most
 /// `ρ_max` times per bounce, so what leaves the surfaces sums to at most `Σ_c E_c / (1 − ρ_max,c)` per
-/// channel (the white furnace's `E / (1 − ρ)`, met with equality there). Infinite where a channel of
-/// some patch reflects everything or more. A sweep whose total passes [`RUNAWAY_FACTOR`] times this has
+/// channel (the white furnace's `E / (1 − ρ)`, which a refined furnace meets). Infinite where a channel
+/// of some patch reflects everything or more. A sweep whose total passes [`RUNAWAY_FACTOR`] times this has
 /// diverged, even where its change did not grow for [`DIVERGING_SWEEPS`] sweeps in a row (the
 /// classroom's progressive step 8 at `--link-budget 20000`: 200 sweeps to 10¹⁹ W without a warning).
 pub fn runaway_power(hierarchy: &Hierarchy, emitted: Rgb) -> f64 {
-    let rho = hierarchy.patches.iter().fold(Rgb::BLACK, |m, p| {
-        Rgb::new(
-            m.r.max(p.reflectance.r),
-            m.g.max(p.reflectance.g),
-            m.b.max(p.reflectance.b),
-        )
-    });
-    [(emitted.r, rho.r), (emitted.g, rho.g), (emitted.b, rho.b)]
-        .iter()
-        .map(|&(e, r)| match e {
+    let rho = (hierarchy.patches.iter()).fold(Rgb::BLACK, |m, p| m.channel_max(p.reflectance));
+    std::iter::zip(emitted.to_array(), rho.to_array())
+        .map(|(e, r)| match e {
             e if e <= 0.0 => 0.0,
             e if r < 1.0 => e / (1.0 - r),
             _ => f64::INFINITY,
@@ -384,8 +377,9 @@ pub fn runaway_power(hierarchy: &Hierarchy, emitted: Rgb) -> f64 {
 
 /// Sweeps with `solver` until the relative change of the total exitant power is below the tolerance
 /// (then returns true), the iteration limit, or [`DIVERGING_SWEEPS`] sweeps of growing change or a
-/// total past [`RUNAWAY_FACTOR`] × [`runaway_power`] (then `report.diverged_in_pass` is set). The first sweep of a later pass is compared with the last of the
-/// pass before (the same iterate, refined): a pass that changed little ends after one.
+/// total past [`RUNAWAY_FACTOR`] × [`runaway_power`] (then `report.diverged_in_pass` is set). The
+/// first sweep of a later pass is compared with the last of the pass before (the same iterate,
+/// refined): a pass that changed little ends after one.
 fn sweep_to_tolerance(
     hierarchy: &mut Hierarchy,
     solver: &dyn GatheringSolver,
