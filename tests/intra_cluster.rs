@@ -11,9 +11,11 @@ use radiosity::hierarchy::clusters::ClusteringKind;
 use radiosity::hierarchy::{ElementId, Hierarchy};
 use radiosity::pipeline::{simulate, SimulationSettings, VisibilityKind};
 use radiosity::scene::{generators, Material, Polygon, Scene};
-use radiosity::solvers::clustering::{groups_toward, ClusterSweep};
+use radiosity::solvers::clustering::{exposure_shares, groups_toward, ClusterSweep};
 use radiosity::visibility::extinction::Extinction;
-use radiosity::visibility::item_buffer::{bucket_direction, direction_bucket, IntraClusterKind};
+use radiosity::visibility::item_buffer::{
+    bucket_direction, direction_bucket, exposed, IntraClusterKind,
+};
 use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -471,6 +473,38 @@ fn bucket_weight_change(h: &Hierarchy, id: ElementId, toward: DVec3) -> f64 {
     }
 }
 
+/// The factor by which sharing by exposure scales what a link of visibility `v` from `source`
+/// delivers to cluster `id` (`solvers::clustering::exposure_shares`): the sum of its two parts where
+/// the bucket's exposure tells some visible patches from others, else 1. The exposed share `e` is
+/// taken from the bucket's visible projected areas along its centre direction, as the sweep weighs
+/// them.
+fn exposure_scale(h: &Hierarchy, id: ElementId, source: ElementId, v: f64) -> f64 {
+    let toward = h.center_of(source);
+    let bucket = direction_bucket(toward - h.center_of(id));
+    let along = bucket_direction(bucket);
+    let Some(exposure) = h.item_buffers.as_ref().and_then(|b| b.exposure(id, bucket)) else {
+        return 1.0;
+    };
+    let contents = h.contents(h.cluster(id).expect("cluster"));
+    let (mut exposed_area, mut total) = (0.0, 0.0);
+    for (k, (&s, a)) in contents
+        .iter()
+        .zip(visible_areas(h, id, toward))
+        .enumerate()
+    {
+        let w = a * h.patch_of(s).normal.dot(along).max(0.0);
+        total += w;
+        if exposed(&exposure, k) {
+            exposed_area += w;
+        }
+    }
+    if exposed_area <= 0.0 || exposed_area >= total {
+        return 1.0;
+    }
+    let (to_exposed, to_others) = exposure_shares(exposed_area / total, v);
+    to_exposed + to_others
+}
+
 /// Largest per-channel spread `max_k L_k − min_k L_k` of the patch radiances in cluster `id`.
 fn radiance_spread(h: &Hierarchy, id: ElementId) -> f64 {
     let contents = h.contents(h.cluster(id).expect("cluster"));
@@ -487,7 +521,8 @@ fn radiance_spread(h: &Hierarchy, id: ElementId) -> f64 {
 /// [`ClusterSweep`] (one sweep's exchange by direction bucket, O(1) per cluster link) against the
 /// per-link exchange, on a closed box full of cubes whose patches carry seeded random radiances:
 /// * conservation, exact up to rounding: the power pushed into the patches, `Σ_p π A_p H_p`, is the
-///   power the clusters' links delivered, `Σ π A_c F L_sent`;
+///   power the clusters' links delivered, `Σ π A_c F L_sent`, as sharing by exposure scales it
+///   ([`exposure_scale`]: a consistency check of the sharing, not of that rule);
 /// * the radiance a cluster sends, per link: both are averages of the same patch radiances with weights
 ///   `p`, `q` that sum to one, so they differ by at most `(max L − min L) Σ|p − q| / 2`, and
 ///   `Σ|p − q| ≤ 2 Σ|w − w'| / Σ w` ([`bucket_weight_change`] bounds the last ratio);
@@ -547,7 +582,8 @@ fn per_bucket_cluster_exchange_conserves_power_and_stays_within_the_bucket_error
                 continue;
             }
             let (area, factor) = (h.element(id).area, link.form_factor());
-            delivered += carried * (factor * area);
+            let v = f64::from(link.coupling.visibility);
+            delivered += carried * (factor * area * exposure_scale(&h, id, link.source, v));
             // The per-link value moved by what exposure moved the bucket's.
             let old = old + (carried - new);
             // The per-link push: shares by the exact visible projected areas toward the source.
@@ -693,15 +729,20 @@ fn holds_both_plates(h: &Hierarchy, id: ElementId) -> bool {
 /// Two small plates side by side on the ground under a unit emitter at `HEIGHT`, the left one under a
 /// black square 2.4 m wide at 0.2 m that hides the whole emitter from it (large, so that the cluster
 /// hierarchy keeps it out of the pair's cluster), the right one in the open: the pair receives through
-/// one cluster link whose sampled visibility is about ½ (rays from either plate), and the item buffer,
-/// which sees only the pair, hides neither. Ground truth: the left plate's radiance is
-/// 0 (nothing else lights it: the plates are coplanar, the square is black), the right one's `ρ E F`
+/// one cluster link whose sampled visibility `v` is about ½ (8 rays from either plate), and the item
+/// buffer, which sees only the pair, hides neither. Ground truth: the left plate's radiance is 0
+/// (nothing else lights it: the plates are coplanar, the square is black), the right one's `ρ E F`
 /// with `F` its exact factor from the emitter (the square is outside every ray from it). Shared by
-/// visible projected area alone, both got the link's average, half of the right plate's light each;
-/// shared by exposure (a ray from each plate's centroid to the source) the right plate gets it all.
-/// Error model for the right plate: the link's visibility from 8 Bernoulli samples of p ≈ ½, standard
-/// deviation 0.18 of ½ per seed, over 16 seeds 0.044 (9%); 3 standard deviations, plus the
-/// centre-to-centre kernel's 2% (the pair's centre 0.4 m from the plate's at a height of 4 m): 29%.
+/// visible projected area alone, both got the link's average, half of the right plate's light each.
+/// Shared by exposure (a ray from each plate's centroid to the source), each plate takes the
+/// visibility its own ray found (`solvers::clustering::exposure_shares`): in every seed whose link
+/// carries light (`v` > 0; all 8 rays blocked has probability 2⁻⁸) the right plate gets what it would
+/// unoccluded, whatever `v`, with the centre-to-centre point kernel's error as its only one: the
+/// pair's centre 0.4 m from the plate's at a height of 4 m, `1 / cos⁴θ` = 1.0202, times the point
+/// kernel's excess over the unit source's exact factor, about `1 + a² / (π d²)` = 1.0199: 4.05%, and
+/// 5% with the couplings' `f32` storage and the item buffer's fractions; and the left one nothing (`v` never exceeds
+/// what `e` = ½ explains within three standard deviations of 8 samples). Until 2026-11-28 the exposed
+/// plate got all the link delivered, `2v` times the truth: 0.25 to 2 from seed to seed.
 #[test]
 fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     let scene = plates_under_a_square(
@@ -716,19 +757,29 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     // The right plate's exact mean factor from the emitter: the point factor over a 20 × 20 grid.
     let factor = mean_factor_up(&right, &emitter, 20);
     let analytic = RHO * factor;
-    let (mut open_mean, mut cluster_links) = (0.0, 0);
+    let mut lit_seeds = 0;
     for_each_seed(&scene, |seed, h| {
-        cluster_links += (0..h.elements.len() as ElementId)
-            .filter(|&id| holds_both_plates(h, id) && !h.element(id).links.is_empty())
-            .count();
+        let lit = (0..h.elements.len() as ElementId).any(|id| {
+            holds_both_plates(h, id)
+                && h.element(id)
+                    .links
+                    .iter()
+                    .any(|l| l.coupling.visibility > 0.0)
+        });
         let dark = mean_radiance_of(h, |k| k == shaded);
         assert!(dark <= 1e-12, "seed {seed}: the hidden plate got {dark}");
-        open_mean += mean_radiance_of(h, |k| k == open) / PLATE_SEEDS as f64;
+        if lit {
+            lit_seeds += 1;
+            let radiance = mean_radiance_of(h, |k| k == open);
+            assert!(
+                (radiance - analytic).abs() <= 0.05 * analytic,
+                "seed {seed}: open plate {radiance}, analytic {analytic}"
+            );
+        }
     });
-    assert!(cluster_links > 0, "no cluster holding both plates receives");
     assert!(
-        (open_mean - analytic).abs() <= 0.29 * analytic,
-        "open plate {open_mean}, analytic {analytic}"
+        lit_seeds > PLATE_SEEDS / 2,
+        "only {lit_seeds} seeds lit the pair through a cluster link"
     );
 }
 

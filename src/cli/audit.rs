@@ -1,9 +1,12 @@
 //! `radiosity audit`: solve, then audit the surface links into chosen polygons against an unbiased
 //! Monte Carlo estimate with visibility (`measures::link_audit`): which sources the couplings see too
-//! bright or too dark, by how many standard errors.
+//! bright or too dark, by how many standard errors; or the whole transport (`--transport`), or the
+//! links' closure (`--closure`).
 
 use super::args::{SceneArgs, SolveArgs};
-use crate::measures::link_audit::{audit_links, audit_transport, AuditSettings, SourceRow};
+use crate::measures::link_audit::{
+    audit_closure, audit_links, audit_transport, AuditSettings, SourceRow,
+};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use anyhow::Result;
@@ -36,6 +39,11 @@ pub struct AuditCommand {
     /// lamp the direct part's kernel is heavy-tailed and few rays understate the standard error.
     #[arg(long, default_value_t = 65_536, value_name = "N", value_parser = super::args::count(2, 100_000_000))]
     pub transport_rays: usize,
+    /// Audit the links' closure instead: the total factor each leaf gathers in a white furnace over
+    /// the solution's own links (1 at most in an open scene, 1 in a closed one, up to the couplings'
+    /// cubature error); the leaves that gather most are listed.
+    #[arg(long, conflicts_with = "transport")]
+    pub closure: bool,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -55,6 +63,9 @@ impl AuditCommand {
         let solution = simulate(&scene, &settings, progress)?;
         if self.transport {
             return self.print_transport(&name, &scene, &solution, seed);
+        }
+        if self.closure {
+            return self.print_closure(&name, &solution.hierarchy);
         }
         let audit = audit_links(
             &solution.hierarchy,
@@ -105,6 +116,45 @@ impl AuditCommand {
             )?;
         }
         line("total".to_string(), &audit.total)?;
+        Ok(())
+    }
+
+    fn print_closure(&self, name: &str, h: &crate::hierarchy::Hierarchy) -> Result<()> {
+        let audit = audit_closure(h);
+        if self.json {
+            outln!("{}", serde_json::to_string_pretty(&audit)?)?;
+            return Ok(());
+        }
+        outln!(
+            "# {name}: closure of the links, Σ F gathered per leaf in a white furnace: {} leaves, \
+             largest {:.4}, above 1.02: {}, above 1.1: {}, above 1.5: {}",
+            audit.rows.len(),
+            audit.largest(),
+            audit.above(1.02),
+            audit.above(1.1),
+            audit.above(1.5)
+        )?;
+        outln!(
+            "{:>9} {:>9} {:>30} {:>10} {:>8} {:>8}",
+            "element",
+            "side",
+            "centre",
+            "area",
+            "Σ F",
+            "pushed"
+        )?;
+        for row in audit.rows.iter().take(self.rows) {
+            let [x, y, z] = row.centre;
+            outln!(
+                "{:>9} {:>9} {:>30} {:>10.3e} {:>8.4} {:>8.4}",
+                row.element,
+                format!("{}{}", row.polygon, if row.front { "" } else { "b" }),
+                format!("{x:.4} {y:.4} {z:.4}"),
+                row.area,
+                row.factor,
+                row.pushed
+            )?;
+        }
         Ok(())
     }
 

@@ -15,6 +15,14 @@
 //! variance is unbounded (`1/r²` at the edge), so there the standard error understates the estimate's
 //! spread.
 //!
+//! [`audit_closure`] checks the links' closure: a white furnace gathered once over the solution's own
+//! links, every element at radiance 1 and reflectance 1, gives each leaf the total factor it gathers,
+//! `Σ F` over its links, its ancestors' and what the clusters above it push down. A closed scene's
+//! exact factors sum to 1 at every point and an open one's to less; a leaf above 1 gathers more light
+//! than a hemisphere of the brightest source could send it, and a loop of such leaves makes the sweeps
+//! diverge. It found the exposure rule's unbounded shares (a desk's underside at 49, a 1 cm² patch
+//! of the classroom's back wall at 223; `solvers::clustering::exposure_shares`).
+//!
 //! [`audit_transport`] checks the whole transport instead, whatever the link structure: each polygon
 //! side's reflected light as solved against one unbiased gather of the solution's own radiance field
 //! (cosine rays for the reflected part, a point on the emitters for the emitted part), cluster links,
@@ -23,8 +31,10 @@
 use crate::color::Rgb;
 use crate::geometry::form_factor::point_to_point;
 use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
-use crate::hierarchy::{ElementId, Hierarchy};
+use crate::hierarchy::{ElementId, ElementKind, Hierarchy};
 use crate::oracles::{sample_kernel, OracleContext};
+use crate::solvers::clustering::ClusterSweep;
+use crate::solvers::gathering::{GatheringSolver, Jacobi};
 use crate::solvers::link_rng;
 use crate::visibility::Visibility;
 use rand::Rng;
@@ -356,4 +366,91 @@ fn radiance_seen(
     let point = x + hit.t * direction;
     let (id, uv) = h.locate_with_parameters(patch, point);
     h.exitant_radiance_at_parameters(id, uv) - h.patches[patch as usize].emission
+}
+
+/// One leaf's closure ([`audit_closure`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ClosureRow {
+    pub element: ElementId,
+    pub polygon: usize,
+    pub front: bool,
+    pub centre: [f64; 3],
+    pub area: f64,
+    /// `Σ F` the leaf gathers: its links', its ancestors', and what clusters push to its patch.
+    pub factor: f64,
+    /// The part of `factor` that the clusters above its patch push down.
+    pub pushed: f64,
+}
+
+/// Every surface leaf's closure, largest factor first.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ClosureAudit {
+    pub rows: Vec<ClosureRow>,
+}
+
+impl ClosureAudit {
+    /// Leaves whose factor exceeds `bound`.
+    pub fn above(&self, bound: f64) -> usize {
+        self.rows.iter().filter(|r| r.factor > bound).count()
+    }
+
+    /// The largest factor (0 without leaves).
+    pub fn largest(&self) -> f64 {
+        self.rows.first().map_or(0.0, |r| r.factor)
+    }
+}
+
+/// The closure of the solution's links: one Jacobi sweep of a white furnace on a copy of the
+/// hierarchy (every element at constant radiance 1, reflectance 1, nothing emitted, no luminaire),
+/// which leaves each surface leaf at the total factor it gathers (green channel; all are equal).
+pub fn audit_closure(h: &Hierarchy) -> ClosureAudit {
+    let mut furnace = h.clone();
+    for patch in &mut furnace.patches {
+        patch.reflectance = Rgb::WHITE;
+        patch.emission = Rgb::BLACK;
+    }
+    for element in &mut furnace.elements {
+        if let ElementKind::Cluster(c) = &mut element.kind {
+            c.reflectance = Rgb::WHITE;
+            c.emission = Rgb::BLACK;
+        }
+    }
+    furnace.direct.iter_mut().for_each(|d| *d = Rgb::BLACK);
+    for id in 0..furnace.elements.len() as ElementId {
+        let radiance = furnace.radiance_mut(id);
+        radiance.iter_mut().for_each(|l| *l = Rgb::BLACK);
+        radiance[0] = Rgb::WHITE;
+    }
+    furnace.pull_clusters();
+    let pushed = ClusterSweep::new(&furnace);
+    let pushed: Vec<f64> = furnace
+        .patches
+        .iter()
+        .map(|p| pushed.pushed(p.root).g)
+        .collect();
+    Jacobi.sweep(&mut furnace);
+    let mut rows: Vec<ClosureRow> = furnace
+        .leaves()
+        .into_iter()
+        .filter(|&id| !furnace.is_cluster(id))
+        .map(|id| {
+            let e = furnace.element(id);
+            let patch = &furnace.patches[e.patch() as usize];
+            ClosureRow {
+                element: id,
+                polygon: patch.polygon,
+                front: patch.front,
+                centre: furnace.center_of(id).to_array(),
+                area: e.area,
+                factor: furnace.average_radiance(id).g,
+                pushed: pushed[e.patch() as usize],
+            }
+        })
+        .collect();
+    rows.sort_by(|a, b| {
+        b.factor
+            .total_cmp(&a.factor)
+            .then(a.element.cmp(&b.element))
+    });
+    ClosureAudit { rows }
 }

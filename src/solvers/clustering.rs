@@ -53,8 +53,9 @@
 //! weights of the radiance it sends (hidden patches send none). The item buffer sees only the
 //! cluster's contents; what stands outside it between a patch and the source only the link's one
 //! average visibility knew, so the shares of received irradiance go to the patches *exposed* toward
-//! the source (a ray from each patch's centroid, [`expose`]), which keeps every link's power and
-//! moves it to where it arrives.
+//! the source (a ray from each patch's centroid, [`expose`]), each taking the visibility its own ray
+//! found rather than the link's average: what it would receive unoccluded, or nothing
+//! ([`exposure_shares`]), so that no patch receives more from a link than it would unoccluded.
 //!
 //! Cost: a coupling reads its cluster ends by normal group ([`groups_toward`]: each group's visible
 //! area, cached per (cluster, bucket) with the fractions, [`VisibleAreas`]), so a cluster link costs
@@ -451,7 +452,7 @@ pub fn couple_cluster(
             // more than they receive (with item buffers the shares concentrate on few patches).
             let open = c_receiver * (s.area * c_source / (PI * r2)).min(1.0);
             let v = if open > 0.0 {
-                sample_visibility(None, 2 * CLUSTER_VISIBILITY_SAMPLES, &mut rng)
+                sample_visibility(None, CLUSTER_RECEIVER_SAMPLES, &mut rng)
             } else {
                 1.0
             };
@@ -815,47 +816,52 @@ impl ClusterSweep {
             match (&h.item_buffers, kind) {
                 (Some(buffers), _) => {
                     let contents = h.contents(cluster);
-                    let mut by_bucket: Vec<(u16, ElementId, Rgb)> = e
+                    let mut by_bucket: Vec<(u16, ElementId, Rgb, f64)> = e
                         .links
                         .iter()
                         .filter(|l| carries_light(l))
                         .map(|l| {
                             let target = h.center_of(l.source);
-                            (bucket_toward(h, id, target), l.source, gathered(l))
+                            let v = f64::from(l.coupling.visibility);
+                            (bucket_toward(h, id, target), l.source, gathered(l), v)
                         })
                         .collect();
                     // Stable: equal buckets keep link order, so the sums below do too.
-                    by_bucket.sort_by_key(|&(bucket, _, _)| bucket);
+                    by_bucket.sort_by_key(|&(bucket, ..)| bucket);
                     for run in by_bucket.chunk_by(|a, b| a.0 == b.0) {
                         let areas = visible_areas_along(h, &self.contents, buffers, id, run[0].0);
-                        let exposed_areas = buffers
-                            .exposure(id, run[0].0)
-                            .and_then(|exposure| exposed_only(&areas, &exposure))
-                            .map(|(areas, _)| areas);
                         if areas.iter().sum::<f64>() > 0.0 {
-                            let total: Rgb = run.iter().map(|&(_, _, g)| g).sum();
+                            let total: Rgb = run.iter().map(|&(_, _, g, _)| g).sum();
                             let geometry = self.contents.of(h, id);
-                            match (sharing, exposed_areas) {
-                                (Sharing::Pushed, exposed_areas) => {
-                                    let weights = exposed_areas.as_deref().unwrap_or(&areas);
-                                    share_by_areas(geometry, e.area, total, weights, &mut share)
+                            let split = buffers
+                                .exposure(id, run[0].0)
+                                .and_then(|exposure| ExposureSplit::new(&areas, &exposure));
+                            let Some(split) = split else {
+                                if sharing == Sharing::Pushed {
+                                    share_by_areas(geometry, e.area, total, &areas, &mut share);
                                 }
-                                (Sharing::MovedByExposure, Some(exposed_areas)) => {
-                                    let mut plain = vec![Rgb::BLACK; share.len()];
-                                    share_by_areas(geometry, e.area, total, &areas, &mut plain);
-                                    let mut moved = vec![Rgb::BLACK; share.len()];
-                                    share_by_areas(
-                                        geometry,
-                                        e.area,
-                                        total,
-                                        &exposed_areas,
-                                        &mut moved,
-                                    );
-                                    for ((s, p), m) in share.iter_mut().zip(plain).zip(moved) {
-                                        *s += (m - p).map(f64::abs);
-                                    }
+                                continue;
+                            };
+                            // What each link gathered, to the exposed patches and to the others.
+                            let (mut to_exposed, mut to_others) = (Rgb::BLACK, Rgb::BLACK);
+                            for &(_, _, g, v) in run {
+                                let (exposed, others) = exposure_shares(split.exposed_share(), v);
+                                to_exposed += g * exposed;
+                                to_others += g * others;
+                            }
+                            let mut shared = vec![Rgb::BLACK; share.len()];
+                            let into = match sharing {
+                                Sharing::Pushed => &mut share,
+                                Sharing::MovedByExposure => &mut shared,
+                            };
+                            share_by_areas(geometry, e.area, to_exposed, &split.exposed, into);
+                            share_by_areas(geometry, e.area, to_others, &split.others, into);
+                            if sharing == Sharing::MovedByExposure {
+                                let mut plain = vec![Rgb::BLACK; share.len()];
+                                share_by_areas(geometry, e.area, total, &areas, &mut plain);
+                                for ((s, p), m) in share.iter_mut().zip(plain).zip(shared) {
+                                    *s += (m - p).map(f64::abs);
                                 }
-                                (Sharing::MovedByExposure, None) => {}
                             }
                             continue;
                         }
@@ -871,7 +877,7 @@ impl ClusterSweep {
                             visible: Some(visible_areas(h, buffers, id, run[0].0)),
                         };
                         let mut group_share = vec![Rgb::BLACK; cluster.orientation.groups.len()];
-                        for &(_, source, g) in run {
+                        for &(_, source, g, _) in run {
                             let target = h.center_of(source);
                             share_by_groups(&groups, e.area, g, target, &mut group_share);
                         }
@@ -992,8 +998,9 @@ pub fn moved_by_sending(h: &Hierarchy) -> Vec<f64> {
 /// cluster stands between it and the source. Where the visibility is partial the exposed patches got
 /// too little and the sheltered ones too much: the classroom's chair backs, at the height of the desks
 /// in front of them, read 60–68% too dark, while a final gather of the same solution at those points
-/// agrees with the reference (BENCHMARKS.md, "Exposure"). Sharing by exposure keeps each link's power
-/// and moves it to where it arrives.
+/// agrees with the reference (BENCHMARKS.md, "Exposure"). Sharing by exposure gives each exposed
+/// patch what it would receive unoccluded, and the others only what the link's rays saw beyond what
+/// the exposed ones explain ([`exposure_shares`]).
 ///
 /// The same for sending, keyed apart ([`sending_key`]): per (cluster, bucket) that links from the
 /// cluster use, which visible patches a ray from their centroid reaches the bucket's nearest
@@ -1161,30 +1168,88 @@ fn sent_along(
             .sum()
     };
     let visible = average(&areas, total);
-    // Where every visible patch is exposed, or none, both averages are the visible one.
-    let Some((exposed_areas, exposed_total)) = buffers
+    let Some(split) = buffers
         .exposure(id, sending_key(bucket))
-        .and_then(|exposure| exposed_only(&areas, &exposure))
-        .filter(|&(_, exposed_total)| exposed_total < total)
+        .and_then(|exposure| ExposureSplit::new(&areas, &exposure))
     else {
         return Sent::even(visible);
     };
     Sent {
         visible,
-        exposed: average(&exposed_areas, exposed_total),
+        exposed: average(&split.exposed, split.exposed_total),
     }
 }
 
-/// `areas` with the patches `exposure` leaves unexposed set to 0, and their sum; `None` when no patch
-/// with an area is exposed (sharing and sending then fall back on all visible patches).
-fn exposed_only(areas: &[f64], exposure: &[u64]) -> Option<(Vec<f64>, f64)> {
-    let only: Vec<f64> = areas
-        .iter()
-        .enumerate()
-        .map(|(k, &w)| if exposed(exposure, k) { w } else { 0.0 })
-        .collect();
-    let total: f64 = only.iter().sum();
-    (total > 0.0).then_some((only, total))
+/// A cluster's visible projected areas along a bucket split by exposure ([`expose`]): the exposed
+/// patches' and the others'.
+struct ExposureSplit {
+    /// The areas with every unexposed patch's set to 0.
+    exposed: Vec<f64>,
+    /// The areas with every exposed patch's set to 0.
+    others: Vec<f64>,
+    exposed_total: f64,
+    total: f64,
+}
+
+impl ExposureSplit {
+    /// `None` where no patch with an area is exposed, or every one is: exposure then tells no patch
+    /// from another, and sharing and sending take all visible patches alike.
+    fn new(areas: &[f64], exposure: &[u64]) -> Option<Self> {
+        let (exposed, others): (Vec<f64>, Vec<f64>) = areas
+            .iter()
+            .enumerate()
+            .map(|(k, &w)| {
+                if exposed(exposure, k) {
+                    (w, 0.0)
+                } else {
+                    (0.0, w)
+                }
+            })
+            .unzip();
+        let exposed_total: f64 = exposed.iter().sum();
+        let total: f64 = areas.iter().sum();
+        (exposed_total > 0.0 && exposed_total < total).then_some(ExposureSplit {
+            exposed,
+            others,
+            exposed_total,
+            total,
+        })
+    }
+
+    /// `e`, the exposed patches' share of the visible projected area.
+    fn exposed_share(&self) -> f64 {
+        self.exposed_total / self.total
+    }
+}
+
+/// Visibility samples of a link whose receiver is a cluster ([`couple_cluster`]).
+pub const CLUSTER_RECEIVER_SAMPLES: usize = 2 * CLUSTER_VISIBILITY_SAMPLES;
+
+/// What a cluster link gathered, `g` (its sampled visibility `v` included), goes to the exposed
+/// patches, `g e / v`, and to the other visible ones, `g max(0, v − v_e) / v` with
+/// `v_e = e + 3 √(e (1 − e) / N)`, where `e` is the exposed patches' share of the visible projected
+/// area along the link's bucket and `N` = [`CLUSTER_RECEIVER_SAMPLES`]; shared within each part by
+/// visible projected area. Returns the two factors of `g`.
+///
+/// Why: each patch takes the visibility its own centroid ray found ([`expose`]), 1 where it reached
+/// the source, rather than the cluster's average `v`: an exposed patch gets what it would unoccluded,
+/// a hidden one nothing, whatever the few rays of `v` found (exact where the occlusion is all or
+/// nothing per patch: a chair back behind a desk, the ceiling over a corridor lamp lit by the lamp's
+/// back). `v` only adds what the centroid rays cannot explain: its excess over `e` beyond three
+/// standard deviations of `N` Bernoulli samples at `e`, spread over the unexposed patches (a source
+/// whose centre is hidden from most patches while most of it is not). Until 2026-11-28 the exposed
+/// patches got all of `g`, `v / e` times what they would unoccluded: a patch holding 0.45% of a
+/// desk's visible area took the floor's light for the whole desk, one patch of the classroom
+/// gathered 223 times what a white furnace allows, and the sweeps of its progressive
+/// multi-gridding diverged (BENCHMARKS.md, "Exposure: each patch its own visibility"). Now no patch
+/// receives more from a link than it would unoccluded; the power delivered is the patches', not
+/// exactly the link's `g`.
+pub fn exposure_shares(e: f64, v: f64) -> (f64, f64) {
+    if v <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let explained = e + 3.0 * (e * (1.0 - e) / CLUSTER_RECEIVER_SAMPLES as f64).sqrt();
+    (e / v, (v - explained).max(0.0) / v)
 }
 
 /// What a cluster sends along a direction bucket ([`sent_along`]), before a link's visibility picks
