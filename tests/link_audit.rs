@@ -11,7 +11,7 @@ use radiosity::bases::BasisKind;
 use radiosity::geometry::form_factor::parallel_rectangles;
 use radiosity::hierarchy::{Hierarchy, Link, OracleFactor};
 use radiosity::measures::link_audit::{audit_closure, audit_links, audit_transport, AuditSettings};
-use radiosity::pipeline::{simulate, SimulationSettings};
+use radiosity::pipeline::{simulate, SimulationSettings, Solution};
 use radiosity::progress::Progress;
 use radiosity::scene::generators;
 use radiosity::solvers::coupling::{couple, CouplingSettings, SourceRule};
@@ -114,14 +114,9 @@ fn the_audit_finds_the_bias_of_fixed_source_nodes_behind_a_near_occluder() {
     );
 }
 
-/// The transport audit of a closed white furnace: every ray of the gather meets a surface of radiance
-/// `E / (1 − ρ)`, so both the gathered and the solved light are `ρ E / (1 − ρ) A`, each within the
-/// solution's own uniformity (every leaf within 10⁻³ of `E / (1 − ρ)` at these settings:
-/// `scene_generators.rs::furnace_mgf_solves_to_e_over_one_minus_rho`): 2·10⁻³ allowed, besides four
-/// standard errors of the gather's direct part (a point on the emitting walls per ray).
-#[test]
-fn the_transport_audit_of_a_furnace_is_exact() {
-    let (rho, emission) = (0.6, 2.0);
+/// A closed unit cube of reflectance `rho` whose walls emit `emission`, solved finely (every leaf within
+/// 10⁻³ of `E / (1 − ρ)`).
+fn solved_furnace(rho: f64, emission: f64) -> (radiosity::scene::Scene, Solution) {
     let scene = generators::furnace(radiosity::geometry::DVec3::ONE, rho, emission);
     let solution = simulate(
         &scene,
@@ -133,6 +128,18 @@ fn the_transport_audit_of_a_furnace_is_exact() {
         &Progress::new(true),
     )
     .expect("solve");
+    (scene, solution)
+}
+
+/// The transport audit of a closed white furnace: every ray of the gather meets a surface of radiance
+/// `E / (1 − ρ)`, so both the gathered and the solved light are `ρ E / (1 − ρ) A`, each within the
+/// solution's own uniformity (every leaf within 10⁻³ of `E / (1 − ρ)` at these settings:
+/// `scene_generators.rs::furnace_mgf_solves_to_e_over_one_minus_rho`): 2·10⁻³ allowed, besides four
+/// standard errors of the gather's direct part (a point on the emitting walls per ray).
+#[test]
+fn the_transport_audit_of_a_furnace_is_exact() {
+    let (rho, emission) = (0.6, 2.0);
+    let (scene, solution) = solved_furnace(rho, emission);
     let polygons: Vec<usize> = (0..scene.polygons.len()).collect();
     let rows = audit_transport(
         &solution.hierarchy,
@@ -160,17 +167,7 @@ fn the_transport_audit_of_a_furnace_is_exact() {
 /// where the kernel is singular, so this also checks that near-field couplings keep the closure.
 #[test]
 fn the_closure_audit_of_a_closed_box_is_one_everywhere() {
-    let scene = generators::furnace(radiosity::geometry::DVec3::ONE, 0.6, 2.0);
-    let solution = simulate(
-        &scene,
-        &SimulationSettings {
-            eps: 1e-7,
-            min_area: 1e-2,
-            ..SimulationSettings::default()
-        },
-        &Progress::new(true),
-    )
-    .expect("solve");
+    let (_, solution) = solved_furnace(0.6, 2.0);
     let audit = audit_closure(&solution.hierarchy);
     assert!(audit.rows.len() > 6, "{} leaves", audit.rows.len());
     for row in &audit.rows {
