@@ -41,7 +41,7 @@ pub struct AuditCommand {
     pub transport_rays: usize,
     /// Audit the links' closure instead: the total factor each leaf gathers in a white furnace over
     /// the solution's own links (1 at most in an open scene, 1 in a closed one, up to the couplings'
-    /// cubature error); the leaves that gather most are listed.
+    /// cubature error); the leaves that gather most are listed (of the --polygon ones, if given).
     #[arg(long, conflicts_with = "transport")]
     pub closure: bool,
     /// Print JSON instead of a table.
@@ -120,7 +120,10 @@ impl AuditCommand {
     }
 
     fn print_closure(&self, name: &str, h: &crate::hierarchy::Hierarchy) -> Result<()> {
-        let audit = audit_closure(h);
+        let mut audit = audit_closure(h);
+        if !self.polygons.is_empty() {
+            audit.rows.retain(|r| self.polygons.contains(&r.polygon));
+        }
         if self.json {
             outln!("{}", serde_json::to_string_pretty(&audit)?)?;
             return Ok(());
