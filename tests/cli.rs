@@ -567,7 +567,7 @@ fn probe_at_points_the_camera_sees() {
 }
 
 #[test]
-fn audit_lists_the_sources_of_a_polygon_and_rejects_an_unknown_one() {
+fn audit_lists_the_sources_of_a_polygon_its_closure_and_rejects_an_unknown_one() {
     let out = radiosity(&["audit", "--polygon", "0", "--samples", "16", "--rows", "3"]);
     assert!(
         out.status.success(),
@@ -596,6 +596,28 @@ fn audit_lists_the_sources_of_a_polygon_and_rejects_an_unknown_one() {
         text.contains("gathered") && text.contains("total"),
         "{text}"
     );
+    let out = radiosity(&["audit", "--closure", "--polygon", "0", "--rows", "2"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    // Header, column names and the two floor leaves that gather most.
+    assert!(text.contains("closure of the links"), "{text}");
+    assert_eq!(text.lines().count(), 4, "{text}");
+    let stochastic = [
+        "audit",
+        "--closure",
+        "--method",
+        "stochastic-jacobi",
+        "--basis",
+        "constant",
+    ];
+    let out = radiosity(&stochastic);
+    assert!(!out.status.success());
+    let error = String::from_utf8_lossy(&out.stderr);
+    assert!(error.contains("no links to audit"), "{error}");
     let out = radiosity(&["audit", "--polygon", "9999"]);
     assert!(!out.status.success());
     let error = String::from_utf8_lossy(&out.stderr);

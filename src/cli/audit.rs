@@ -120,6 +120,11 @@ impl AuditCommand {
     }
 
     fn print_closure(&self, name: &str, h: &crate::hierarchy::Hierarchy) -> Result<()> {
+        anyhow::ensure!(
+            h.elements.iter().any(|e| !e.links.is_empty()),
+            "{name}: the solution has no links to audit (the closure audit needs the deterministic \
+             method's link hierarchy)"
+        );
         let mut audit = audit_closure(h);
         if !self.polygons.is_empty() {
             audit.rows.retain(|r| self.polygons.contains(&r.polygon));
