@@ -170,6 +170,11 @@ fn the_closure_audit_of_a_closed_box_is_one_everywhere() {
     let (_, solution) = solved_furnace(0.6, 2.0);
     let audit = audit_closure(&solution.hierarchy);
     assert!(audit.rows.len() > 6, "{} leaves", audit.rows.len());
+    assert!(
+        (audit.area_mean() - 1.0).abs() < 1e-4,
+        "{}",
+        audit.area_mean()
+    );
     for row in &audit.rows {
         assert!((row.factor - 1.0).abs() < 1e-4, "{row:?}");
         assert_eq!(row.pushed, 0.0, "{row:?}");

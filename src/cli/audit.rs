@@ -135,8 +135,9 @@ impl AuditCommand {
         }
         outln!(
             "# {name}: closure of the links, Σ F gathered per leaf in a white furnace: {} leaves, \
-             largest {:.4}, above 1.02: {}, above 1.1: {}, above 1.5: {}",
+             mean by area {:.4}, largest {:.4}, above 1.02: {}, above 1.1: {}, above 1.5: {}",
             audit.rows.len(),
+            audit.area_mean(),
             audit.largest(),
             audit.above(1.02),
             audit.above(1.1),

@@ -398,6 +398,21 @@ impl ClosureAudit {
     pub fn largest(&self) -> f64 {
         self.rows.first().map_or(0.0, |r| r.factor)
     }
+
+    /// The factor averaged over the leaves by area: in a closed scene 1 up to the couplings' cubature
+    /// over their receivers, whatever the link structure (pushes keep what each link delivers over its
+    /// receiver, and the sources along any point's ancestors cover the scene once); less in an open
+    /// one by the share of its light that escapes (and the outer sides of a room's two-sided walls
+    /// see nothing: the classroom and office3 read 0.52). Where it is 1 and leaves are not, the
+    /// hierarchy misplaces light without losing or making it.
+    pub fn area_mean(&self) -> f64 {
+        let area: f64 = self.rows.iter().map(|r| r.area).sum();
+        if area > 0.0 {
+            self.rows.iter().map(|r| r.area * r.factor).sum::<f64>() / area
+        } else {
+            0.0
+        }
+    }
 }
 
 /// The closure of the solution's links: one Jacobi sweep of a white furnace on a copy of the
