@@ -11,6 +11,18 @@ fn radiosity(args: &[&str]) -> std::process::Output {
         .expect("run radiosity")
 }
 
+/// Runs the binary with `args`, asserts that it succeeded (showing its standard error if not) and
+/// returns its standard output.
+fn succeeds(args: &[&str]) -> String {
+    let out = radiosity(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("radiosity-cli-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -113,13 +125,7 @@ fn render_writes_png_exr_models_and_stats() {
 fn info_prints_counts_of_a_renderpark_scene() {
     let scene =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark/cube.mgf");
-    let out = radiosity(&["info", scene.to_str().unwrap(), "--split-contacts", "off"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = succeeds(&["info", scene.to_str().unwrap(), "--split-contacts", "off"]);
     assert!(stdout.contains("polygons:      66 "), "{stdout}");
     assert!(stdout.contains("not split"), "{stdout}");
     // By default (auto) only the ceiling is cut, along the outline of the two-sided lamp under it.
@@ -568,17 +574,11 @@ fn probe_at_points_the_camera_sees() {
 
 #[test]
 fn audit_lists_the_sources_of_a_polygon_its_closure_and_rejects_an_unknown_one() {
-    let out = radiosity(&["audit", "--polygon", "0", "--samples", "16", "--rows", "3"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = succeeds(&["audit", "--polygon", "0", "--samples", "16", "--rows", "3"]);
     assert!(text.contains("coupled") && text.contains("total"), "{text}");
     // Header, column names, three sources and the total.
     assert_eq!(text.lines().count(), 6, "{text}");
-    let out = radiosity(&[
+    let text = succeeds(&[
         "audit",
         "--transport",
         "--polygon",
@@ -587,22 +587,10 @@ fn audit_lists_the_sources_of_a_polygon_its_closure_and_rejects_an_unknown_one()
         "64",
     ]);
     assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
         text.contains("gathered") && text.contains("total"),
         "{text}"
     );
-    let out = radiosity(&["audit", "--closure", "--polygon", "0", "--rows", "2"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = succeeds(&["audit", "--closure", "--polygon", "0", "--rows", "2"]);
     // Header, column names and the two floor leaves that gather most.
     assert!(text.contains("closure of the links"), "{text}");
     assert_eq!(text.lines().count(), 4, "{text}");
