@@ -18,7 +18,7 @@ use crate::solvers::coupling::{CouplingSettings, SourceRule};
 use crate::solvers::error_estimate::EstimateKind;
 use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};
 use crate::solvers::multigrid::{solve_progressive, MultigridSettings, StepReport};
-use crate::solvers::refine::RefineSettings;
+use crate::solvers::refine::{OutlineRule, RefineSettings};
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
@@ -157,6 +157,8 @@ pub struct SimulationSettings {
     pub near_field: NearField,
     /// Where partly visible sources are sampled ([`SourceRule`]).
     pub source_rule: SourceRule,
+    /// Whether links are split where something lies over part of an end ([`OutlineRule`]).
+    pub outlines: OutlineRule,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
     /// Radiance basis on every element (Bekaert–Willems §2).
@@ -243,6 +245,7 @@ impl Default for SimulationSettings {
             shadow_levels: 0.0,
             near_field: NearField::Adaptive,
             source_rule: SourceRule::Fixed,
+            outlines: OutlineRule::Ignore,
             min_area: 1e-5,
             basis: BasisKind::Constant,
             cubature_degree: None,
@@ -392,6 +395,7 @@ pub fn deterministic_settings(
                 near_field: settings.near_field,
                 source_rule: settings.source_rule,
             },
+            outlines: settings.outlines,
             seed: settings.seed,
         },
         tolerance: settings.tolerance,

@@ -20,6 +20,7 @@ use crate::scene::luminaire::Luminaire;
 use crate::scene::Scene;
 use crate::visibility::item_buffer::ItemBuffers;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::Arc;
 
 /// Index of an element in [`Hierarchy::elements`].
@@ -544,6 +545,40 @@ pub struct Element {
     pub error: f64,
     /// Link error threshold `Δ_l` of algorithm 6.1 (radiance); infinite when error control is off.
     pub threshold: f64,
+    /// Whether something lies over part of the element, found by rays on first need
+    /// (`solvers::refine::straddles_outline`).
+    pub straddles_outline: LazyVerdict,
+}
+
+/// A yes/no fact about an element that costs rays to establish: found on first need by whichever
+/// thread asks, and kept. It depends on the element alone, so which thread finds it (or whether two
+/// race to) changes nothing.
+#[derive(Debug, Default)]
+pub struct LazyVerdict(AtomicU8);
+
+impl LazyVerdict {
+    const NO: u8 = 1;
+    const YES: u8 = 2;
+
+    /// The verdict, established with `find` if it was not yet.
+    pub fn get_or(&self, find: impl FnOnce() -> bool) -> bool {
+        match self.0.load(Ordering::Relaxed) {
+            Self::NO => false,
+            Self::YES => true,
+            _ => {
+                let verdict = find();
+                let code = if verdict { Self::YES } else { Self::NO };
+                self.0.store(code, Ordering::Relaxed);
+                verdict
+            }
+        }
+    }
+}
+
+impl Clone for LazyVerdict {
+    fn clone(&self) -> Self {
+        LazyVerdict(AtomicU8::new(self.0.load(Ordering::Relaxed)))
+    }
 }
 
 /// [`Element::parent`] of an element without one: a patch root outside clusters, the root cluster.
@@ -683,6 +718,7 @@ impl Hierarchy {
                     links: Vec::new(),
                     error: 0.0,
                     threshold: f64::INFINITY,
+                    straddles_outline: LazyVerdict::default(),
                 });
                 h.patches.push(Patch {
                     polygon: index,
@@ -787,6 +823,7 @@ impl Hierarchy {
                 links: Vec::new(),
                 error: 0.0,
                 threshold: f64::INFINITY,
+                straddles_outline: LazyVerdict::default(),
             });
             self.radiance.extend(std::iter::repeat_n(Rgb::BLACK, size));
         }
@@ -1007,6 +1044,7 @@ impl Hierarchy {
                 links: Vec::new(),
                 error,
                 threshold,
+                straddles_outline: LazyVerdict::default(),
             });
         }
         let children = [first, first + 1, first + 2, first + 3];

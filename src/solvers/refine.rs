@@ -11,7 +11,7 @@ use super::coupling::{
     couple_with_prior, shaft_test, visibility_error, visibility_spread, CouplingSettings,
 };
 use super::link_rng;
-use crate::geometry::{DVec3, Shape};
+use crate::geometry::{DVec3, Ray, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling, OracleFactor};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
@@ -157,7 +157,64 @@ pub struct RefineSettings {
     /// Links are not refined beyond this count (the link budget, from `--max-memory`).
     pub max_links: usize,
     pub coupling: CouplingSettings,
+    /// Whether receivers that straddle the outline of something lying over them count as crossed by
+    /// a shadow boundary.
+    pub outlines: OutlineRule,
     pub seed: u64,
+}
+
+/// Whether a receiver that something lies over in part counts as crossed by a shadow boundary
+/// (`--outlines`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OutlineRule {
+    /// The oracle alone decides (the papers' refinement).
+    #[default]
+    Ignore,
+    /// A receiver that straddles the outline of something lying over it ([`straddles_outline`])
+    /// counts in the power oracle's visibility term (`--shadow-levels`) as a link that a hard shadow
+    /// boundary crosses, spread ½: it is refined as deep as one.
+    Split,
+}
+
+/// What the outline probe of [`straddles_outline`] reaches, relative to the element's diameter.
+const OUTLINE_REACH: f64 = 0.5;
+
+/// How far the probe's corner points are moved toward the centroid, relative to the way there: off
+/// the edges an element shares with its neighbours (and with walls meeting it).
+const PROBE_INSET: f64 = 0.02;
+
+/// Whether something lies over part of element `id` but not over all of it, nearer than half its
+/// diameter ([`OUTLINE_REACH`]): rays along its normal from its centroid and from its corners (moved
+/// [`PROBE_INSET`] toward the centroid) meet a surface within that reach from some of these points and
+/// not from the others.
+///
+/// Why: across the outline of a lid at height `d` over a surface (a lamp housing 2 cm under a ceiling,
+/// a shelf, a picture off a wall) the light changes within about `d`, the width of the edge's
+/// penumbra, while the oracles judge a link by what it carries, and eq. (1) lets dim ones stay coarse.
+/// An element wider than about `2d` across the outline then spreads the light of the open side into
+/// the gap (where the lid's underside and the surface reflect it back and forth) and the gap's
+/// darkness over the open side. Such a receiver is one that a shadow boundary crosses, whatever its
+/// link's rays saw (the lid need not lie between it and the source: it holds the light that enters
+/// the gap to a band along the outline): [`OutlineRule::Split`] refines it as the visibility term of
+/// Sillion–Drettakis Appendix A eq. (5) refines those, which resolves the outline as
+/// `--split-contacts` cutting would, without new polygons, as deep as `--shadow-levels` takes those
+/// (and no finer than about twice the gap, where the probe stops straddling). The
+/// classroom's ceiling over its housings read up to +93% against the path tracer without it
+/// (BENCHMARKS.md, "Outlines"). A surface lying at a distance of more than half the element is left to
+/// the oracle: its shadow edge is wider than half the element, which the basis follows.
+pub fn straddles_outline(h: &Hierarchy, visibility: &dyn Visibility, id: ElementId) -> bool {
+    let shape = h.element(id).shape();
+    let normal = h.patch_of(id).normal;
+    let size = shape.diameter();
+    let centre = shape.centroid();
+    let (near, far) = (1e-9 * size, OUTLINE_REACH * size);
+    let covered = |p: DVec3| visibility.occluded(&Ray::new(p, normal), near, far);
+    let first = covered(centre);
+    shape
+        .vertices()
+        .iter()
+        .any(|&v| covered(v + (centre - v) * PROBE_INSET) != first)
 }
 
 /// What one refinement pass did.
@@ -1243,7 +1300,9 @@ fn couple_for_verdict(
 /// over the receiver is weighed ([`RefinementOracle::with_partial_visibility`],
 /// [`visibility_spread`]). The visibility is the one its coupling sampled: the cached coupling, or one
 /// computed here and kept on `verdict` (the link's own if it stays); a Clear or Blocked shaft verdict
-/// says it is whole without rays. Links that no spread could refine are not looked at.
+/// says it is whole without rays. Links that no spread could refine are not looked at. With
+/// [`OutlineRule::Split`] a receiver that something lies over in part ([`straddles_outline`]) counts
+/// as crossed by a hard boundary, spread ½, whatever the link's rays saw.
 fn with_visibility(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
@@ -1256,6 +1315,18 @@ fn with_visibility(
     match oracle.with_partial_visibility(error, 0.5) {
         Some(largest) if largest > settings.threshold => {}
         _ => return error,
+    }
+    let h = context.hierarchy;
+    let receiver = h.element(c.receiver);
+    if settings.outlines == OutlineRule::Split
+        && receiver.area > settings.min_area
+        && receiver
+            .straddles_outline
+            .get_or(|| straddles_outline(h, context.visibility, c.receiver))
+    {
+        // Something lies over part of the receiver: a hard boundary through it (eq. (5) at v = ½),
+        // whatever the link's rays saw.
+        return oracle.with_partial_visibility(error, 0.5).unwrap_or(error);
     }
     if c.coupling.is_none() {
         if let Some(ShaftVerdict::Clear | ShaftVerdict::Blocked) = c.shaft {
