@@ -1045,6 +1045,13 @@ macro_rules! avx_kernels {
                     gt(t_lo, mul(splat1(ray.reject_hi), far)),
                 ),
             );
+            // Kept: not degenerate, and the sign uncertain or nothing rejects. Most blocks a ray visits
+            // keep no lane: they skip the sure-hit tests.
+            let dropped = or(degenerate, and(signed, reject));
+            let maybe = !(_mm256_movemask_pd(dropped) as u32) & ((1 << LANES) - 1);
+            if maybe == 0 {
+                return Lanes { maybe, sure: 0 };
+            }
             let scale = max(splat1(ray.origin_max), m_s);
             let off_plane = mul(
                 mul(splat1(2.0 * IN_PLANE), scale),
@@ -1066,9 +1073,7 @@ macro_rules! avx_kernels {
                     gt(sub(abs(t), err_t), off_plane),
                 ),
             );
-            // Kept: not degenerate, and the sign uncertain or nothing rejects; sure: signed, kept and sure.
-            let dropped = or(degenerate, and(signed, reject));
-            let maybe = !(_mm256_movemask_pd(dropped) as u32) & ((1 << LANES) - 1);
+            // Sure: signed, kept and sure.
             let sure = _mm256_movemask_pd(_mm256_andnot_pd(reject, and(signed, sure))) as u32;
             Lanes {
                 maybe,
