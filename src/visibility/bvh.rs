@@ -614,7 +614,7 @@ impl Bvh {
         let mut current = 0u32;
         loop {
             let node = &self.nodes[current as usize];
-            let (mask, enter) = K::slab(&trav, node);
+            let (mask, _) = K::slab(&trav, node);
             // The leaves' blocks and the interior children are fetched first, so that the fetches
             // overlap each other and the leaf tests.
             let leaves = mask & node.leaves as u32;
@@ -624,28 +624,24 @@ impl Bvh {
                 bits &= bits - 1;
                 prefetch(self.blocks.as_ptr().wrapping_add(node.child[k] as usize));
             }
-            // The next node is the nearest interior child, the others pushed: rays from a surface find
-            // nearby blockers soonest.
+            // The next node is the first interior child, the others pushed (their entry parameters are
+            // not needed: any blocker ends the ray). Visiting the nearest first instead measured slower
+            // on office3 and on a 2.7M-triangle room: its comparisons cost more than its order saves.
             let mut inner = mask & !leaves;
             let mut next = None;
             if inner != 0 {
                 let k = inner.trailing_zeros() as usize;
                 inner &= inner - 1;
-                let (mut best, mut best_t) = (node.child[k], enter[k]);
-                prefetch(self.nodes.as_ptr().wrapping_add(best as usize));
+                let first = node.child[k];
+                prefetch(self.nodes.as_ptr().wrapping_add(first as usize));
                 while inner != 0 {
                     let k = inner.trailing_zeros() as usize;
                     inner &= inner - 1;
-                    let (c, t) = (node.child[k], enter[k]);
+                    let c = node.child[k];
                     prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
-                    if t < best_t {
-                        stack.push(best, best_t);
-                        (best, best_t) = (c, t);
-                    } else {
-                        stack.push(c, t);
-                    }
+                    stack.push(c, 0.0);
                 }
-                next = Some(best);
+                next = Some(first);
             }
             // Leaves before descending: a blocker ends the ray.
             let mut bits = leaves;
