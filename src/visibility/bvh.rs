@@ -8,7 +8,8 @@
 //! (`origin + q * scale`, `scale` a power of two, rounded outward), half the bytes per child of `f32`
 //! boxes: on large scenes traversal waits on node fetches from memory, so bytes per child and levels per
 //! ray are what count. One visit tests the eight boxes in one SIMD pass: AVX2 + FMA where the CPU has them
-//! (detected at run time), a portable lane loop elsewhere; both give the same answers. A leaf is one block
+//! (detected at run time; the same kernels compiled with AVX-512 enabled where it has that too, see
+//! `avx_kernels!`), a portable lane loop elsewhere; all give the same answers. A leaf is one block
 //! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with the first
 //! vertex in `f64` and the edge vectors in `f32` (three cache lines), so that one AVX2 pass of `f64`
 //! lanes filters all four (see [`Block`], [`classify`]).
@@ -257,16 +258,17 @@ fn largest(v: DVec3) -> f64 {
 /// and both `f64` evaluations add a few `2^-53`, so each computed value is within about `2^-23` of
 /// the products' absolute sum of the reference's value. `det` and `T` are triple products of `e1`,
 /// `e2` and `d` or `s`, so their sums are `|d| . n` and `|s| . n` with one `n = |e1| x+ |e2|`
-/// ([`abs_cross`]). For `U` and `W` a cheaper bound serves: each product is at most the product of its
-/// factors' largest components (`m_d`, `m_s`, `m_1`, `m_2` for `d`, `s`, `e1`, `e2`), so their sums
-/// are at most `6 m_s m_d m_2` and `6 m_d m_s m_1` (looser, by a factor that only matters within
+/// ([`abs_cross`]). For `U` and `W` a cheaper bound serves: each product is at most the product of
+/// its factors' largest components (`m_d`, `m_s`, `m_1`, `m_2` for `d`, `s`, `e1`, `e2`), so their
+/// sums are at most `6 m_s m_d m_2` and `6 m_d m_s m_1` (looser, by a factor that only matters within
 /// about `1e-6` of a barycentric edge; the exact sums would cost two more cross products and dot
-/// products; `det` and `T` keep the exact sums, which decide the `t` range tightly on the
-/// axis-aligned polygons of buildings, where the rays' own and end polygons sit within `1e-5` of it).
+/// products). `det` and `T` keep the exact sums: they decide the `t` range, tightly needed on the
+/// axis-aligned polygons of buildings, where the rays' own and end polygons sit within `1e-5` of it
+/// (the largest-component bound there kept more lanes and measured slower).
 /// The bounds `err = FILTER_ERROR * sum + FILTER_FLOOR` are twice the error, which also covers the
 /// roundings of the bounds themselves and of the comparisons below (each `2^-53` of terms no larger
-/// than the sum) and of the reference's divisions (`2^-52`). Given `|det| > err_det`, the determinant's sign is the
-/// reference's, and (sign-normalised, `a = |det|`):
+/// than the sum) and of the reference's divisions (`2^-52`). Given `|det| > err_det`, the
+/// determinant's sign is the reference's, and (sign-normalised, `a = |det|`):
 /// - `U + err_U < 0` means `u < 0` (the `2^900` test keeps `U / det` from underflowing to `-0`),
 ///   `U - err_U > a + err_det` means `u > 1`; likewise `w < 0` and `u + w > 1`;
 /// - `T + err_T < t_min (a - err_det)` means `t < t_min` (for `t_min >= 0`), `T - err_T > t_max (a +
