@@ -8,7 +8,8 @@
 //! (`origin + q * scale`, `scale` a power of two, rounded outward), half the bytes per child of `f32`
 //! boxes: on large scenes traversal waits on node fetches from memory, so bytes per child and levels per
 //! ray are what count. One visit tests the eight boxes in one SIMD pass: AVX2 + FMA where the CPU has them
-//! (detected at run time), a portable lane loop elsewhere; both give the same answers. A leaf is one block
+//! (detected at run time; the same kernels compiled with AVX-512 enabled where it has that too, see
+//! `avx_kernels!`), a portable lane loop elsewhere; all give the same answers. A leaf is one block
 //! of up to four triangles (a quad fills two lanes), stored coordinate by coordinate with the first
 //! vertex in `f64` and the edge vectors in `f32` (three cache lines), so that one AVX2 pass of `f64`
 //! lanes filters all four (see [`Block`], [`classify`]).
@@ -161,6 +162,8 @@ const TWO_POW_900: f64 = f64::from_bits((1023 + 900) << 52);
 /// Bound on the filter's error relative to the absolute sum of the products it adds up (see
 /// [`classify`]): `2^-22`, twice the `2^-23` that the `f32` edges and the `f64` roundings can cause.
 const FILTER_ERROR: f64 = 1.0 / 4_194_304.0;
+/// [`FILTER_ERROR`] of six products, each bounded by the product of its factors' largest components.
+const FILTER_ERROR_6: f64 = 6.0 * FILTER_ERROR;
 /// Absolute term of the filter's error bounds: far above the underflow of a few `f64` products
 /// (`2^-1074` each) and far below the reference's `1e-300` determinant cutoff.
 const FILTER_FLOOR: f64 = 1e-305;
@@ -172,6 +175,9 @@ struct FilterRay {
     origin: DVec3,
     direction: DVec3,
     direction_abs: DVec3,
+    /// [`FILTER_ERROR_6`] times the direction's largest component: the part of the error bounds of
+    /// `U` and `W` that the ray gives.
+    error_d: f64,
     /// The origin's largest component: with the lane's `|s|`, the reference's in-plane `scale`.
     origin_max: f64,
     /// Rejection below `t_min`: `t_min`, or `-inf` when negative (the test assumes `t_min >= 0`).
@@ -190,6 +196,7 @@ impl FilterRay {
             origin: ray.origin,
             direction: ray.direction,
             direction_abs: ray.direction.abs(),
+            error_d: FILTER_ERROR_6 * largest(ray.direction.abs()),
             origin_max: ray.origin.abs().max_element(),
             reject_lo: if t_min >= 0.0 {
                 t_min
@@ -229,6 +236,14 @@ fn abs_cross(x: DVec3, y: DVec3) -> DVec3 {
     )
 }
 
+/// The largest component of `v` as `_mm256_max_pd(x, _mm256_max_pd(y, z))` computes it (`max(a, b)`
+/// is `if a > b { a } else { b }`), so that the scalar and SIMD filters agree bit for bit.
+#[inline(always)]
+fn largest(v: DVec3) -> f64 {
+    let max = |a: f64, b: f64| if a > b { a } else { b };
+    max(v.x, max(v.y, v.z))
+}
+
 /// Whether [`triangle`] (`ray_triangle(ray, s, e1, e2, t_min, t_max)`, with the `f64` edges) can
 /// return a hit, and whether it surely does, computed from the `f32` edges `e1`, `e2` (widened; `s =
 /// origin - a` and the ray are the reference's own), as `(maybe, sure)`: it answers `maybe = false`
@@ -241,11 +256,19 @@ fn abs_cross(x: DVec3, y: DVec3) -> DVec3 {
 /// `W = d . (s x e1)`, `T = e2 . (s x e1)` are sums of six products of three inputs. The `f32` edges
 /// change each product by at most `2 * 2^-24` of itself (one rounding per edge, relative `2^-24`),
 /// and both `f64` evaluations add a few `2^-53`, so each computed value is within about `2^-23` of
-/// the products' absolute sum (`|e1| . (|d| x+ |e2|)` etc., [`abs_cross`]) of the reference's value.
-/// The bounds `err = FILTER_ERROR * sum + FILTER_FLOOR` are twice that, which also covers the
-/// roundings of the comparisons below (each `2^-53` of terms no larger than the sum) and of the
-/// reference's divisions (`2^-52`). Given `|det| > err_det`, the determinant's sign is the
-/// reference's, and (sign-normalised, `a = |det|`):
+/// the products' absolute sum of the reference's value. `det` and `T` are triple products of `e1`,
+/// `e2` and `d` or `s`, so their sums are `|d| . n` and `|s| . n` with one `n = |e1| x+ |e2|`
+/// ([`abs_cross`]). For `U` and `W` a cheaper bound serves: each product is at most the product of
+/// its factors' largest components (`m_d`, `m_s`, `m_1`, `m_2` for `d`, `s`, `e1`, `e2`), so their
+/// sums are at most `6 m_s m_d m_2` and `6 m_d m_s m_1` (looser, by a factor that only matters within
+/// about `1e-6` of a barycentric edge; the exact sums would cost two more cross products and dot
+/// products). `det` and `T` keep the exact sums: they decide the `t` range, tightly needed on the
+/// axis-aligned polygons of buildings, where the rays' own and end polygons sit within `1e-5` of it
+/// (the largest-component bound there kept more lanes and measured slower).
+/// The bounds `err = FILTER_ERROR * sum + FILTER_FLOOR` are twice the error, which also covers the
+/// roundings of the bounds themselves and of the comparisons below (each `2^-53` of terms no larger
+/// than the sum) and of the reference's divisions (`2^-52`). Given `|det| > err_det`, the
+/// determinant's sign is the reference's, and (sign-normalised, `a = |det|`):
 /// - `U + err_U < 0` means `u < 0` (the `2^900` test keeps `U / det` from underflowing to `-0`),
 ///   `U - err_U > a + err_det` means `u > 1`; likewise `w < 0` and `u + w > 1`;
 /// - `T + err_T < t_min (a - err_det)` means `t < t_min` (for `t_min >= 0`), `T - err_T > t_max (a +
@@ -256,7 +279,7 @@ fn abs_cross(x: DVec3, y: DVec3) -> DVec3 {
 /// It is a sure hit when the opposite bounds hold: `a - err_det >= 1e-300`, `U - err_U > 0`,
 /// `W - err_W > 0`, `(U + err_U) + (W + err_W) < a - err_det`, `t` within `(max(t_min, 0), t_max)`
 /// by the same margins, and the origin surely off the plane: `|T| - err_T > 2 IN_PLANE scale L`,
-/// with `L`, the sum of `|e1| x+ |e2|`, at least `|e1 x e2|`.
+/// with `L`, the sum of `n`'s components, at least `|e1 x e2|`.
 ///
 /// NaN anywhere (a lane whose edges do not fit `f32`) keeps the lane, never surely.
 #[inline(always)]
@@ -266,8 +289,8 @@ fn classify(ray: &FilterRay, a: DVec3, e1: DVec3, e2: DVec3) -> (bool, bool) {
     let det = e1.dot(p);
     let abs = det.abs();
     let (s_abs, e1_abs, e2_abs) = (s.abs(), e1.abs(), e2.abs());
-    let p_abs = abs_cross(ray.direction_abs, e2_abs);
-    let err_det = FILTER_ERROR * e1_abs.dot(p_abs) + FILTER_FLOOR;
+    let n = abs_cross(e1_abs, e2_abs);
+    let err_det = FILTER_ERROR * ray.direction_abs.dot(n) + FILTER_FLOOR;
     if abs + err_det < 1e-300 {
         return (false, false);
     }
@@ -279,35 +302,33 @@ fn classify(ray: &FilterRay, a: DVec3, e1: DVec3, e2: DVec3) -> (bool, bool) {
     let sign = if det < 0.0 { -1.0 } else { 1.0 };
     let far = abs + err_det;
     let negative = |x: f64| x < 0.0 && x.abs() * TWO_POW_900 > abs;
+    let (m_s, m_1, m_2) = (largest(s_abs), largest(e1_abs), largest(e2_abs));
     let u = sign * s.dot(p);
-    let err_u = FILTER_ERROR * s_abs.dot(p_abs) + FILTER_FLOOR;
+    let err_u = ray.error_d * (m_s * m_2) + FILTER_FLOOR;
     let (u_lo, u_hi) = (u - err_u, u + err_u);
     if negative(u_hi) || u_lo > far {
         return (false, false);
     }
     let q = s.cross(e1);
-    let q_abs = abs_cross(s_abs, e1_abs);
     let w = sign * d.dot(q);
-    let err_w = FILTER_ERROR * ray.direction_abs.dot(q_abs) + FILTER_FLOOR;
+    let err_w = ray.error_d * (m_s * m_1) + FILTER_FLOOR;
     let (w_lo, w_hi) = (w - err_w, w + err_w);
     if negative(w_hi) || u_lo + w_lo > far {
         return (false, false);
     }
     let t = sign * e2.dot(q);
-    let err_t = FILTER_ERROR * e2_abs.dot(q_abs) + FILTER_FLOOR;
+    let err_t = FILTER_ERROR * s_abs.dot(n) + FILTER_FLOOR;
     let (t_lo, t_hi) = (t - err_t, t + err_t);
     let near = abs - err_det;
     if t_hi < ray.reject_lo * near || t_lo > ray.reject_hi * far {
         return (false, false);
     }
-    // `max` as `max_element` (and `_mm256_max_pd`) computes it.
-    let s_max = s_abs.max_element();
-    let scale = if ray.origin_max > s_max {
+    // `max` as `_mm256_max_pd` computes it.
+    let scale = if ray.origin_max > m_s {
         ray.origin_max
     } else {
-        s_max
+        m_s
     };
-    let n = abs_cross(e1_abs, e2_abs);
     let off_plane = (2.0 * IN_PLANE) * scale * ((n.x + n.y) + n.z);
     let sure = near >= 1e-300
         && u_lo > 0.0
@@ -561,13 +582,11 @@ impl Bvh {
         let tiny = 1.0 / 4_294_967_296.0;
         let inv = dir.map(|d| 1.0 / if d.abs() < tiny { tiny.copysign(d) } else { d });
         let inv = inv.as_vec3a();
-        // A negative direction enters a slab at its maximum.
-        let near = [0, 1, 2].map(|a| 2 * a + usize::from(inv[a] < 0.0));
         let mut trav = TravRay {
             origin: origin.to_array(),
             inv: inv.to_array(),
-            near,
-            far: near.map(|p| p ^ 1),
+            // A negative direction enters a slab at its maximum.
+            negative: [0, 1, 2].map(|a| usize::from(inv[a] < 0.0)),
             t_far: 0.0,
             t0: lo,
             scale,
@@ -597,7 +616,7 @@ impl Bvh {
         let mut current = 0u32;
         loop {
             let node = &self.nodes[current as usize];
-            let (mask, enter) = K::slab(&trav, node);
+            let (mask, _) = K::slab(&trav, node);
             // The leaves' blocks and the interior children are fetched first, so that the fetches
             // overlap each other and the leaf tests.
             let leaves = mask & node.leaves as u32;
@@ -605,30 +624,26 @@ impl Bvh {
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                prefetch(std::slice::from_ref(&self.blocks[node.child[k] as usize]));
+                prefetch(self.blocks.as_ptr().wrapping_add(node.child[k] as usize));
             }
-            // The next node is the nearest interior child, the others pushed: rays from a surface find
-            // nearby blockers soonest.
+            // The next node is the first interior child, the others pushed (their entry parameters are
+            // not needed: any blocker ends the ray). Visiting the nearest first instead measured slower
+            // on office3 and on a 2.7M-triangle room: its comparisons cost more than its order saves.
             let mut inner = mask & !leaves;
             let mut next = None;
             if inner != 0 {
                 let k = inner.trailing_zeros() as usize;
                 inner &= inner - 1;
-                let (mut best, mut best_t) = (node.child[k], enter[k]);
-                prefetch(std::slice::from_ref(&self.nodes[best as usize]));
+                let first = node.child[k];
+                prefetch(self.nodes.as_ptr().wrapping_add(first as usize));
                 while inner != 0 {
                     let k = inner.trailing_zeros() as usize;
                     inner &= inner - 1;
-                    let (c, t) = (node.child[k], enter[k]);
-                    prefetch(std::slice::from_ref(&self.nodes[c as usize]));
-                    if t < best_t {
-                        stack.push(best, best_t);
-                        (best, best_t) = (c, t);
-                    } else {
-                        stack.push(c, t);
-                    }
+                    let c = node.child[k];
+                    prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
+                    stack.push(c, 0.0);
                 }
-                next = Some(best);
+                next = Some(first);
             }
             // Leaves before descending: a blocker ends the ray.
             let mut bits = leaves;
@@ -700,10 +715,10 @@ impl Bvh {
                 for &(_, k) in &order[..n] {
                     let c = node.child[k] as usize;
                     if node.leaves & (1 << k) == 0 {
-                        prefetch(std::slice::from_ref(&self.nodes[c]));
+                        prefetch(self.nodes.as_ptr().wrapping_add(c));
                     } else {
-                        prefetch(std::slice::from_ref(&self.blocks[c]));
-                        prefetch(std::slice::from_ref(&self.lanes[c]));
+                        prefetch(self.blocks.as_ptr().wrapping_add(c));
+                        prefetch(self.lanes.as_ptr().wrapping_add(c));
                     }
                 }
                 // Leaves first, nearer first, so that their hits cull the interior children.
@@ -753,24 +768,34 @@ impl Bvh {
     }
 }
 
-/// Asks the CPU to start loading `items` into cache (a hint: no effect on results; nothing where the
-/// target has no prefetch instruction). Traversal waits on memory on large scenes, and this lets the
-/// fetches of nodes and leaves that will be visited overlap.
+/// Asks the CPU to start loading the item at `item` into cache (a hint: no effect on results; nothing
+/// where the target has no prefetch instruction). Traversal waits on memory on large scenes, and this
+/// lets the fetches of nodes and leaves that will be visited overlap. The pointer is never read, so
+/// callers form it with `wrapping_add` instead of a bounds-checked index.
 #[inline(always)]
-fn prefetch<T>(items: &[T]) {
+fn prefetch<T>(item: *const T) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let start = items.as_ptr() as usize;
-        let end = start + std::mem::size_of_val(items);
-        // Every cache line the items touch.
-        for line in (start & !63..end).step_by(64) {
+        let size = std::mem::size_of::<T>();
+        // Every cache line the item touches: a fixed count of whole lines for the 64-byte aligned nodes
+        // and blocks (the loop unrolls), else from the line of its start to the line of its end.
+        let (start, lines) = if std::mem::align_of::<T>() >= 64 {
+            (item.cast::<i8>(), size.div_ceil(64))
+        } else {
+            let offset = item as usize & 63;
+            (
+                item.cast::<i8>().wrapping_sub(offset),
+                (offset + size).div_ceil(64),
+            )
+        };
+        for line in 0..lines {
             // SAFETY: prefetching is only a hint, which never faults, and SSE is part of x86_64.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(line as *const i8) };
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(start.wrapping_add(64 * line)) };
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = items;
+    let _ = item;
 }
 
 /// Traversal stack of (node, entry parameter): a fixed array, left uninitialised so that each ray does
@@ -813,9 +838,8 @@ impl Stack {
 struct TravRay {
     origin: [f32; 3],
     inv: [f32; 3],
-    /// Per axis the plane (index into [`Node::planes`]) where the ray enters a slab, and where it leaves.
-    near: [usize; 3],
-    far: [usize; 3],
+    /// Per axis 1 where the direction is negative (the ray enters the slab at its maximum), else 0.
+    negative: [usize; 3],
     /// Conservative far end of the interval, in traversal parameters.
     t_far: f32,
     t0: f64,
@@ -828,6 +852,17 @@ impl TravRay {
     fn set_far(&mut self, t: f64) {
         let t = ((t - self.t0) * self.scale) as f32;
         self.t_far = t * (1.0 + 1e-5) + 1e-30;
+    }
+
+    /// The grid coordinates of `node`'s children where the ray enters the slabs of `axis`, and where it
+    /// leaves them (the index, masked, is provably in range: no bounds check).
+    #[inline(always)]
+    fn planes<'a>(&self, node: &'a Node, axis: usize) -> (&'a [u8; WIDTH], &'a [u8; WIDTH]) {
+        let near = self.negative[axis] & 1;
+        (
+            &node.planes[2 * axis + near],
+            &node.planes[2 * axis + (near ^ 1)],
+        )
     }
 
     /// Per axis the slab parameter of grid coordinate `q` of `node` is `q * a + b`: `(a, b)`.
@@ -868,7 +903,7 @@ impl Simd for Portable {
         let mut exit = [ray.t_far; WIDTH];
         for axis in 0..3 {
             let (a, b) = ray.grid(node, axis);
-            let (near, far) = (&node.planes[ray.near[axis]], &node.planes[ray.far[axis]]);
+            let (near, far) = ray.planes(node, axis);
             for k in 0..WIDTH {
                 enter[k] = enter[k].max(f32::from(near[k]) * a + b);
                 exit[k] = exit[k].min(f32::from(far[k]) * a + b);
@@ -894,209 +929,255 @@ impl Simd for Portable {
     }
 }
 
-/// AVX2 + FMA: the eight lanes in one 256-bit register.
-#[cfg(target_arch = "x86_64")]
-struct Avx2;
+/// Defines an AVX2 kernel type `$kernel` ([`Simd`] on the eight slab lanes in one 256-bit register and
+/// four `f64` filter lanes in another) and its traversals `$occluded` and `$intersect`, all compiled with
+/// the target features `$features` (which include AVX2 and FMA): one source, compiled once for AVX2 and
+/// once more with AVX-512 enabled, where the same code has 32 vector registers instead of 16 (the leaf
+/// filter no longer spills) and compares into mask registers.
+macro_rules! avx_kernels {
+    ($features:literal, $kernel:ident, $filter:ident, $slab:ident, $occluded:ident, $intersect:ident) => {
+        #[cfg(target_arch = "x86_64")]
+        struct $kernel;
 
-#[cfg(target_arch = "x86_64")]
-impl Simd for Avx2 {
-    #[inline(always)]
-    fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
-        // SAFETY: this kernel only runs inside `occluded_avx2` / `intersect_avx2`, which are only called
-        // when the CPU has AVX2 and FMA (`Kernel::detect`).
-        unsafe { slab_avx2(ray, node) }
-    }
+        #[cfg(target_arch = "x86_64")]
+        impl Simd for $kernel {
+            #[inline(always)]
+            fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
+                // SAFETY: this kernel only runs on CPUs with `$features`: inside the traversals
+                // `Kernel::detect` chooses for them, and in tests that check the CPU first.
+                unsafe { $slab(ray, node) }
+            }
 
-    #[inline(always)]
-    fn filter(ray: &FilterRay, block: &Block) -> Lanes {
-        // SAFETY: as above.
-        unsafe { filter_avx2(ray, block) }
-    }
+            #[inline(always)]
+            fn filter(ray: &FilterRay, block: &Block) -> Lanes {
+                // SAFETY: as above.
+                unsafe { $filter(ray, block) }
+            }
+        }
+
+        /// [`classify`] on four lanes of `f64` (the `f32` edges widened on load): the same products,
+        /// sums and comparisons in the same order (no fused multiply-add), so every lane's answer is
+        /// bit for bit the scalar one.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        #[inline]
+        fn $filter(ray: &FilterRay, block: &Block) -> Lanes {
+            use std::arch::x86_64::*;
+            type V = [__m256d; 3];
+            // SAFETY: each row is four `f64` (32-byte aligned) or four `f32` (16-byte aligned) at an aligned
+            // offset of the 64-byte aligned block.
+            let load =
+                |rows: &[[f64; LANES]; 3]| rows.map(|r| unsafe { _mm256_load_pd(r.as_ptr()) });
+            let widen = |rows: &[[f32; LANES]; 3]| {
+                rows.map(|r| _mm256_cvtps_pd(unsafe { _mm_load_ps(r.as_ptr()) }))
+            };
+            let splat = |v: DVec3| v.to_array().map(|x| _mm256_set1_pd(x));
+            let (mul, add, sub, max) = (_mm256_mul_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_max_pd);
+            let (and, or) = (_mm256_and_pd, _mm256_or_pd);
+            let (gt, lt) = (_mm256_cmp_pd::<_CMP_GT_OQ>, _mm256_cmp_pd::<_CMP_LT_OQ>);
+            // `glam`'s `DVec3::cross` and `dot`, and `abs_cross`, term for term.
+            let cross = |x: V, y: V| {
+                [
+                    sub(mul(x[1], y[2]), mul(y[1], x[2])),
+                    sub(mul(x[2], y[0]), mul(y[2], x[0])),
+                    sub(mul(x[0], y[1]), mul(y[0], x[1])),
+                ]
+            };
+            let abs_cross = |x: V, y: V| {
+                [
+                    add(mul(x[1], y[2]), mul(y[1], x[2])),
+                    add(mul(x[2], y[0]), mul(y[2], x[0])),
+                    add(mul(x[0], y[1]), mul(y[0], x[1])),
+                ]
+            };
+            let dot = |x: V, y: V| add(add(mul(x[0], y[0]), mul(x[1], y[1])), mul(x[2], y[2]));
+            let sign_bit = _mm256_set1_pd(-0.0);
+            let abs = |x: __m256d| _mm256_andnot_pd(sign_bit, x);
+            // `max_pd(x, y)` is `if x > y { x } else { y }`, as in `largest`, NaN included.
+            let largest = |x: V| max(x[0], max(x[1], x[2]));
+            let (d, o, d_abs) = (
+                splat(ray.direction),
+                splat(ray.origin),
+                splat(ray.direction_abs),
+            );
+            let a = load(&block.a);
+            let s = [0, 1, 2].map(|i| sub(o[i], a[i]));
+            let (e1, e2) = (widen(&block.e1), widen(&block.e2));
+            let p = cross(d, e2);
+            let det = dot(e1, p);
+            let det_abs = abs(det);
+            let (s_abs, e1_abs, e2_abs) = (s.map(abs), e1.map(abs), e2.map(abs));
+            let n = abs_cross(e1_abs, e2_abs);
+            let (error, floor) = (_mm256_set1_pd(FILTER_ERROR), _mm256_set1_pd(FILTER_FLOOR));
+            let err_det = add(mul(error, dot(d_abs, n)), floor);
+            let degenerate = lt(add(det_abs, err_det), _mm256_set1_pd(1e-300));
+            let signed = gt(det_abs, err_det);
+            // `sign * x` with `sign = ±1` is `x` with the determinant's sign bit flipped in.
+            let sign = and(det, sign_bit);
+            let (far, near) = (add(det_abs, err_det), sub(det_abs, err_det));
+            let zero = _mm256_setzero_pd();
+            let negative = |x: __m256d| {
+                let huge = mul(abs(x), _mm256_set1_pd(TWO_POW_900));
+                and(lt(x, zero), gt(huge, det_abs))
+            };
+            let u = _mm256_xor_pd(dot(s, p), sign);
+            let (m_s, m_1, m_2) = (largest(s_abs), largest(e1_abs), largest(e2_abs));
+            let error_d = _mm256_set1_pd(ray.error_d);
+            let err_u = add(mul(error_d, mul(m_s, m_2)), floor);
+            let (u_lo, u_hi) = (sub(u, err_u), add(u, err_u));
+            let q = cross(s, e1);
+            let w = _mm256_xor_pd(dot(d, q), sign);
+            let err_w = add(mul(error_d, mul(m_s, m_1)), floor);
+            let (w_lo, w_hi) = (sub(w, err_w), add(w, err_w));
+            let t = _mm256_xor_pd(dot(e2, q), sign);
+            let err_t = add(mul(error, dot(s_abs, n)), floor);
+            let (t_lo, t_hi) = (sub(t, err_t), add(t, err_t));
+            let splat1 = _mm256_set1_pd;
+            let reject = or(
+                or(
+                    or(negative(u_hi), gt(u_lo, far)),
+                    or(negative(w_hi), gt(add(u_lo, w_lo), far)),
+                ),
+                or(
+                    lt(t_hi, mul(splat1(ray.reject_lo), near)),
+                    gt(t_lo, mul(splat1(ray.reject_hi), far)),
+                ),
+            );
+            // Kept: not degenerate, and the sign uncertain or nothing rejects. Most blocks a ray visits
+            // keep no lane: they skip the sure-hit tests.
+            let dropped = or(degenerate, and(signed, reject));
+            let maybe = !(_mm256_movemask_pd(dropped) as u32) & ((1 << LANES) - 1);
+            if maybe == 0 {
+                return Lanes { maybe, sure: 0 };
+            }
+            let scale = max(splat1(ray.origin_max), m_s);
+            let off_plane = mul(
+                mul(splat1(2.0 * IN_PLANE), scale),
+                add(add(n[0], n[1]), n[2]),
+            );
+            let sure = and(
+                and(
+                    and(
+                        _mm256_cmp_pd::<_CMP_GE_OQ>(near, splat1(1e-300)),
+                        gt(u_lo, zero),
+                    ),
+                    and(gt(w_lo, zero), lt(add(u_hi, w_hi), near)),
+                ),
+                and(
+                    and(
+                        gt(t_lo, mul(splat1(ray.sure_lo), far)),
+                        lt(t_hi, mul(splat1(ray.sure_hi), near)),
+                    ),
+                    gt(sub(abs(t), err_t), off_plane),
+                ),
+            );
+            // Sure: signed, kept and sure.
+            let sure = _mm256_movemask_pd(_mm256_andnot_pd(reject, and(signed, sure))) as u32;
+            Lanes {
+                maybe,
+                sure: sure & maybe,
+            }
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        #[inline]
+        fn $slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
+            use std::arch::x86_64::*;
+            // Eight grid coordinates as `f32` lanes.
+            let lanes = |plane: &[u8; WIDTH]| {
+                // SAFETY: `plane` is eight readable bytes; the load has no alignment requirement.
+                let bytes = unsafe { _mm_loadl_epi64(plane.as_ptr().cast()) };
+                _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bytes))
+            };
+            let mut enter = _mm256_setzero_ps();
+            let mut exit = _mm256_set1_ps(ray.t_far);
+            for axis in 0..3 {
+                let (a, b) = ray.grid(node, axis);
+                let (a, b) = (_mm256_set1_ps(a), _mm256_set1_ps(b));
+                let (near, far) = ray.planes(node, axis);
+                let near = _mm256_fmadd_ps(lanes(near), a, b);
+                let far = _mm256_fmadd_ps(lanes(far), a, b);
+                enter = _mm256_max_ps(enter, near);
+                exit = _mm256_min_ps(exit, far);
+            }
+            let hit = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
+            let mut lanes_out = [0f32; WIDTH];
+            // SAFETY: `lanes_out` holds eight `f32`; the store has no alignment requirement.
+            unsafe { _mm256_storeu_ps(lanes_out.as_mut_ptr(), enter) };
+            (hit & u32::from(node.valid), lanes_out)
+        }
+
+        /// The traversals compiled with the kernel's features (the leaf tests too: they stay
+        /// bit-identical, as Rust never fuses a multiply and an add on its own).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        fn $occluded(
+            bvh: &Bvh,
+            ray: &Ray,
+            t_min: f64,
+            t_max: f64,
+            transparent: &impl Fn(usize) -> bool,
+        ) -> bool {
+            bvh.occluded_with::<$kernel>(ray, t_min, t_max, transparent)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        fn $intersect(bvh: &Bvh, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
+            bvh.intersect_with::<$kernel>(ray, t_min, t_max)
+        }
+    };
 }
 
-/// [`classify`] on four lanes of `f64` (the `f32` edges widened on load): the same products, sums and
-/// comparisons in the same order (no fused multiply-add), so every lane's answer is bit for
-/// bit the scalar one.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn filter_avx2(ray: &FilterRay, block: &Block) -> Lanes {
-    use std::arch::x86_64::*;
-    type V = [__m256d; 3];
-    // SAFETY: each row is four `f64` (32-byte aligned) or four `f32` (16-byte aligned) at an aligned
-    // offset of the 64-byte aligned block.
-    let load = |rows: &[[f64; LANES]; 3]| rows.map(|r| unsafe { _mm256_load_pd(r.as_ptr()) });
-    let widen = |rows: &[[f32; LANES]; 3]| {
-        rows.map(|r| _mm256_cvtps_pd(unsafe { _mm_load_ps(r.as_ptr()) }))
-    };
-    let splat = |v: DVec3| v.to_array().map(|x| _mm256_set1_pd(x));
-    let (mul, add, sub, max) = (_mm256_mul_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_max_pd);
-    let (and, or) = (_mm256_and_pd, _mm256_or_pd);
-    let (gt, lt) = (_mm256_cmp_pd::<_CMP_GT_OQ>, _mm256_cmp_pd::<_CMP_LT_OQ>);
-    // `glam`'s `DVec3::cross` and `dot`, and `abs_cross`, term for term.
-    let cross = |x: V, y: V| {
-        [
-            sub(mul(x[1], y[2]), mul(y[1], x[2])),
-            sub(mul(x[2], y[0]), mul(y[2], x[0])),
-            sub(mul(x[0], y[1]), mul(y[0], x[1])),
-        ]
-    };
-    let abs_cross = |x: V, y: V| {
-        [
-            add(mul(x[1], y[2]), mul(y[1], x[2])),
-            add(mul(x[2], y[0]), mul(y[2], x[0])),
-            add(mul(x[0], y[1]), mul(y[0], x[1])),
-        ]
-    };
-    let dot = |x: V, y: V| add(add(mul(x[0], y[0]), mul(x[1], y[1])), mul(x[2], y[2]));
-    let sign_bit = _mm256_set1_pd(-0.0);
-    let abs = |x: __m256d| _mm256_andnot_pd(sign_bit, x);
-    // `max_pd(x, y)` is `if x > y { x } else { y }`, as in `max_element`, NaN included.
-    let max_element = |x: V| max(x[0], max(x[1], x[2]));
-    let (d, o, d_abs) = (
-        splat(ray.direction),
-        splat(ray.origin),
-        splat(ray.direction_abs),
-    );
-    let a = load(&block.a);
-    let s = [0, 1, 2].map(|i| sub(o[i], a[i]));
-    let (e1, e2) = (widen(&block.e1), widen(&block.e2));
-    let p = cross(d, e2);
-    let det = dot(e1, p);
-    let det_abs = abs(det);
-    let (s_abs, e1_abs, e2_abs) = (s.map(abs), e1.map(abs), e2.map(abs));
-    let p_abs = abs_cross(d_abs, e2_abs);
-    let (error, floor) = (_mm256_set1_pd(FILTER_ERROR), _mm256_set1_pd(FILTER_FLOOR));
-    let bound = |x: V, y: V| add(mul(error, dot(x, y)), floor);
-    let err_det = bound(e1_abs, p_abs);
-    let degenerate = lt(add(det_abs, err_det), _mm256_set1_pd(1e-300));
-    let signed = gt(det_abs, err_det);
-    // `sign * x` with `sign = ±1` is `x` with the determinant's sign bit flipped in.
-    let sign = and(det, sign_bit);
-    let (far, near) = (add(det_abs, err_det), sub(det_abs, err_det));
-    let zero = _mm256_setzero_pd();
-    let negative = |x: __m256d| {
-        let huge = mul(abs(x), _mm256_set1_pd(TWO_POW_900));
-        and(lt(x, zero), gt(huge, det_abs))
-    };
-    let u = _mm256_xor_pd(dot(s, p), sign);
-    let err_u = bound(s_abs, p_abs);
-    let (u_lo, u_hi) = (sub(u, err_u), add(u, err_u));
-    let q = cross(s, e1);
-    let q_abs = abs_cross(s_abs, e1_abs);
-    let w = _mm256_xor_pd(dot(d, q), sign);
-    let err_w = bound(d_abs, q_abs);
-    let (w_lo, w_hi) = (sub(w, err_w), add(w, err_w));
-    let t = _mm256_xor_pd(dot(e2, q), sign);
-    let err_t = bound(e2_abs, q_abs);
-    let (t_lo, t_hi) = (sub(t, err_t), add(t, err_t));
-    let splat1 = _mm256_set1_pd;
-    let reject = or(
-        or(
-            or(negative(u_hi), gt(u_lo, far)),
-            or(negative(w_hi), gt(add(u_lo, w_lo), far)),
-        ),
-        or(
-            lt(t_hi, mul(splat1(ray.reject_lo), near)),
-            gt(t_lo, mul(splat1(ray.reject_hi), far)),
-        ),
-    );
-    let scale = max(splat1(ray.origin_max), max_element(s_abs));
-    let n = abs_cross(e1_abs, e2_abs);
-    let off_plane = mul(
-        mul(splat1(2.0 * IN_PLANE), scale),
-        add(add(n[0], n[1]), n[2]),
-    );
-    let sure = and(
-        and(
-            and(
-                _mm256_cmp_pd::<_CMP_GE_OQ>(near, splat1(1e-300)),
-                gt(u_lo, zero),
-            ),
-            and(gt(w_lo, zero), lt(add(u_hi, w_hi), near)),
-        ),
-        and(
-            and(
-                gt(t_lo, mul(splat1(ray.sure_lo), far)),
-                lt(t_hi, mul(splat1(ray.sure_hi), near)),
-            ),
-            gt(sub(abs(t), err_t), off_plane),
-        ),
-    );
-    // Kept: not degenerate, and the sign uncertain or nothing rejects; sure: signed, kept and sure.
-    let dropped = or(degenerate, and(signed, reject));
-    let maybe = !(_mm256_movemask_pd(dropped) as u32) & ((1 << LANES) - 1);
-    let sure = _mm256_movemask_pd(_mm256_andnot_pd(reject, and(signed, sure))) as u32;
-    Lanes {
-        maybe,
-        sure: sure & maybe,
-    }
-}
+avx_kernels!(
+    "avx2,fma",
+    Avx2,
+    filter_avx2,
+    slab_avx2,
+    occluded_avx2,
+    intersect_avx2
+);
+avx_kernels!(
+    "avx2,fma,avx512f,avx512vl",
+    Avx512,
+    filter_avx512,
+    slab_avx512,
+    occluded_avx512,
+    intersect_avx512
+);
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-fn slab_avx2(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
-    use std::arch::x86_64::*;
-    // Eight grid coordinates as `f32` lanes.
-    let lanes = |plane: &[u8; WIDTH]| {
-        // SAFETY: `plane` is eight readable bytes; the load has no alignment requirement.
-        let bytes = unsafe { _mm_loadl_epi64(plane.as_ptr().cast()) };
-        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bytes))
-    };
-    let mut enter = _mm256_setzero_ps();
-    let mut exit = _mm256_set1_ps(ray.t_far);
-    for axis in 0..3 {
-        let (a, b) = ray.grid(node, axis);
-        let (a, b) = (_mm256_set1_ps(a), _mm256_set1_ps(b));
-        let near = _mm256_fmadd_ps(lanes(&node.planes[ray.near[axis]]), a, b);
-        let far = _mm256_fmadd_ps(lanes(&node.planes[ray.far[axis]]), a, b);
-        enter = _mm256_max_ps(enter, near);
-        exit = _mm256_min_ps(exit, far);
-    }
-    let hit = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
-    let mut lanes_out = [0f32; WIDTH];
-    // SAFETY: `lanes_out` holds eight `f32`; the store has no alignment requirement.
-    unsafe { _mm256_storeu_ps(lanes_out.as_mut_ptr(), enter) };
-    (hit & u32::from(node.valid), lanes_out)
-}
-
-/// Which [`Simd`] kernels traversal runs, chosen once per tree from the CPU's features.
+/// Which traversals run, chosen once per tree from the CPU's features.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kernel {
     Portable,
+    /// The [`Avx2`] kernels.
     #[cfg(target_arch = "x86_64")]
     Avx2,
+    /// The same kernels compiled with AVX-512 F and VL enabled too (see [`avx_kernels`]).
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
 }
 
 impl Kernel {
+    /// The fastest kernel this CPU runs.
     fn detect() -> Kernel {
+        *Kernel::available().last().unwrap_or(&Kernel::Portable)
+    }
+
+    /// The kernels this CPU runs, slowest first.
+    fn available() -> Vec<Kernel> {
+        #[allow(unused_mut)]
+        let mut kernels = vec![Kernel::Portable];
         #[cfg(target_arch = "x86_64")]
         if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-            return Kernel::Avx2;
+            kernels.push(Kernel::Avx2);
+            if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl") {
+                kernels.push(Kernel::Avx512);
+            }
         }
-        Kernel::Portable
+        kernels
     }
-}
-
-/// The traversals compiled for AVX2 + FMA (the leaf tests too: they stay bit-identical, as Rust never
-/// fuses a multiply and an add on its own).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn occluded_avx2(
-    bvh: &Bvh,
-    ray: &Ray,
-    t_min: f64,
-    t_max: f64,
-    transparent: &impl Fn(usize) -> bool,
-) -> bool {
-    bvh.occluded_with::<Avx2>(ray, t_min, t_max, transparent)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn intersect_avx2(bvh: &Bvh, ray: &Ray, t_min: f64, t_max: f64) -> Option<Hit> {
-    bvh.intersect_with::<Avx2>(ray, t_min, t_max)
 }
 
 /// A child of a binary node: interior node index (count 0) or leaf (`LEAF_FLAG | first`, count), with
@@ -1521,6 +1602,9 @@ impl Visibility for Bvh {
             // SAFETY: `Kernel::Avx2` is only chosen on CPUs with AVX2 and FMA.
             #[cfg(target_arch = "x86_64")]
             Kernel::Avx2 => unsafe { intersect_avx2(self, ray, t_min, t_max) },
+            // SAFETY: `Kernel::Avx512` is only chosen on CPUs that also have AVX-512 F and VL.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512 => unsafe { intersect_avx512(self, ray, t_min, t_max) },
             Kernel::Portable => self.intersect_with::<Portable>(ray, t_min, t_max),
         }
     }
@@ -1530,6 +1614,9 @@ impl Visibility for Bvh {
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
             Kernel::Avx2 => unsafe { occluded_avx2(self, ray, t_min, t_max, &|_| false) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512 => unsafe { occluded_avx512(self, ray, t_min, t_max, &|_| false) },
             Kernel::Portable => self.occluded_with::<Portable>(ray, t_min, t_max, &|_| false),
         }
     }
@@ -1547,6 +1634,9 @@ impl Visibility for Bvh {
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
             Kernel::Avx2 => unsafe { occluded_avx2(self, ray, t_min, t_max, transparent) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512 => unsafe { occluded_avx512(self, ray, t_min, t_max, transparent) },
             Kernel::Portable => self.occluded_with::<Portable>(ray, t_min, t_max, transparent),
         }
     }
@@ -1785,8 +1875,12 @@ mod tests {
         type SlabFn = fn(&TravRay, &Node) -> (u32, [f32; WIDTH]);
         let mut kernels: Vec<SlabFn> = vec![Portable::slab];
         #[cfg(target_arch = "x86_64")]
-        if Kernel::detect() == Kernel::Avx2 {
-            kernels.push(Avx2::slab);
+        for kernel in Kernel::available() {
+            match kernel {
+                Kernel::Portable => {}
+                Kernel::Avx2 => kernels.push(Avx2::slab),
+                Kernel::Avx512 => kernels.push(Avx512::slab),
+            }
         }
         let mut met = 0;
         for i in 0..3000 {
@@ -1840,12 +1934,7 @@ mod tests {
         let mut bvh = Bvh::new(&shapes);
         let reference = BruteForce::new(shapes.clone());
         let segments = random_segments(&shapes, 3000, 22);
-        let mut kernels = vec![Kernel::Portable];
-        #[cfg(target_arch = "x86_64")]
-        if Kernel::detect() == Kernel::Avx2 {
-            kernels.push(Kernel::Avx2);
-        }
-        for kernel in kernels {
+        for kernel in Kernel::available() {
             bvh.kernel = kernel;
             let mut blocked = 0;
             for (i, &(a, b)) in segments.iter().enumerate() {
@@ -1988,13 +2077,20 @@ mod tests {
         );
     }
 
-    /// The AVX2 filter gives, lane for lane, the scalar filter's answer, on the adversarial cases of
-    /// [`filter_case`] (each lane's triangle moved so that the ray passes its target) and empty lanes.
+    /// The AVX2 filters (as compiled for AVX2 and for AVX-512) give, lane for lane, the scalar
+    /// filter's answer, on the adversarial cases of [`filter_case`] (each lane's triangle moved so
+    /// that the ray passes its target) and empty lanes.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn filter_kernels_agree() {
-        if Kernel::detect() != Kernel::Avx2 {
-            return;
+        type FilterFn = fn(&FilterRay, &Block) -> Lanes;
+        let mut kernels: Vec<FilterFn> = Vec::new();
+        for kernel in Kernel::available() {
+            match kernel {
+                Kernel::Portable => {}
+                Kernel::Avx2 => kernels.push(Avx2::filter),
+                Kernel::Avx512 => kernels.push(Avx512::filter),
+            }
         }
         let mut rng = Pcg64Mcg::seed_from_u64(6);
         let (mut kept, mut dropped, mut sure) = (0, 0, 0);
@@ -2009,7 +2105,9 @@ mod tests {
             }
             let ray = FilterRay::new(&ray, t_min, t_max);
             let want = Portable::filter(&ray, &block);
-            assert_eq!(Avx2::filter(&ray, &block), want, "case {i}");
+            for kernel in &kernels {
+                assert_eq!(kernel(&ray, &block), want, "case {i}");
+            }
             kept += want.maybe.count_ones();
             dropped += LANES as u32 - want.maybe.count_ones();
             sure += want.sure.count_ones();
