@@ -9,14 +9,12 @@ use radiosity::bases::BasisKind;
 use radiosity::color::Rgb;
 use radiosity::geometry::{DVec3, Shape};
 use radiosity::pipeline::{simulate, SimulationSettings};
-use radiosity::reference::probe::{parse_points, probe_points, ProbeReference};
 use radiosity::scene::{Material, Object, Polygon, Scene};
 use radiosity::solvers::refine::OutlineRule;
-use std::path::Path;
 
 #[allow(dead_code)] // each test file uses part of the shared module
 mod common;
-use common::{quiet, rectangle};
+use common::{probe_with_reference, quiet, rectangle};
 
 /// The room's side, the lid's extent (off the quadtree's edges) and its gap under the ceiling.
 const SIDE: f64 = 2.0;
@@ -99,21 +97,7 @@ fn error_across_the_outline(outlines: OutlineRule) -> (f64, f64) {
             format!("{x} 0.97 {SIDE} 0 0 -1\n")
         })
         .collect();
-    let file = Path::new("outline.txt");
-    let points = parse_points(&text, file).expect("valid points");
-    let reference = Some(ProbeReference {
-        spp: 16_384,
-        seed: 5,
-    });
-    let results = probe_points(
-        &scene,
-        solution.visibility.as_ref(),
-        &solution.hierarchy,
-        &points,
-        reference,
-        file,
-    )
-    .expect("points on the ceiling");
+    let results = probe_with_reference(&scene, &solution, &text, 16_384, 5);
     let (mut squared, mut noise) = (0.0, 0.0f64);
     for r in &results {
         let estimate = r.reference.expect("reference asked for");

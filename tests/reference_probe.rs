@@ -7,7 +7,7 @@ use radiosity::geometry::form_factor::point_to_polygon;
 use radiosity::geometry::DVec3;
 use radiosity::pipeline::{simulate, SimulationSettings};
 use radiosity::progress::Progress;
-use radiosity::reference::probe::{parse_points, probe_points, ProbeReference};
+use radiosity::reference::probe::{parse_points, probe_points};
 use radiosity::scene::generators;
 use std::path::Path;
 
@@ -59,23 +59,9 @@ fn probes_compare_the_solution_with_the_reference_on_parallel_plates() {
         ..Default::default()
     };
     let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
-    let file = Path::new("pts.csv");
     // The receiver's centre slightly above the surface, and the emitter's centre seen from below.
     let text = "0.5 0.5 0.0001 0 0 1\n0.5 0.5 1 0 0 -1\n";
-    let points = parse_points(text, file).expect("valid");
-    let reference = Some(ProbeReference {
-        spp: 20_000,
-        seed: 2,
-    });
-    let results = probe_points(
-        &scene,
-        solution.visibility.as_ref(),
-        &solution.hierarchy,
-        &points,
-        reference,
-        file,
-    )
-    .expect("points on surfaces");
+    let results = common::probe_with_reference(&scene, &solution, text, 20_000, 2);
     let centre = DVec3::new(0.5, 0.5, 0.0);
     let exact = rho * e * point_to_polygon(centre, DVec3::Z, &scene.polygons[1].shape);
     let receiver = &results[0];
@@ -97,6 +83,7 @@ fn probes_compare_the_solution_with_the_reference_on_parallel_plates() {
     assert!((emitter.radiosity.g - e).abs() < 1e-12);
 
     // A point in mid-air, and the black back of the receiver, are errors naming the line.
+    let file = Path::new("pts.csv");
     let bad = parse_points("0.5 0.5 0 0 0 1\n0.5 0.5 0.5 0 0 1\n", file).expect("valid");
     let error = probe_points(
         &scene,

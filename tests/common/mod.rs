@@ -139,3 +139,26 @@ pub fn emitter_hidden_by_a_near_strip(reflectance: f64, emission: f64) -> Scene 
     });
     scene
 }
+
+/// The probes of `text` (one `x y z nx ny nz` a line) on `solution` of `scene`, each with a
+/// path-traced reference of `spp` paths from `seed`.
+pub fn probe_with_reference(
+    scene: &Scene,
+    solution: &radiosity::pipeline::Solution,
+    text: &str,
+    spp: usize,
+    seed: u64,
+) -> Vec<radiosity::reference::probe::ProbeResult> {
+    use radiosity::reference::probe::{parse_points, probe_points, ProbeReference};
+    let file = std::path::Path::new("points.txt");
+    let points = parse_points(text, file).expect("valid points");
+    probe_points(
+        scene,
+        solution.visibility.as_ref(),
+        &solution.hierarchy,
+        &points,
+        Some(ProbeReference { spp, seed }),
+        file,
+    )
+    .expect("points on surfaces")
+}
