@@ -168,12 +168,12 @@ pub struct RefineSettings {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum OutlineRule {
-    /// The oracle alone decides (the papers' refinement).
+    /// The oracle and its links' rays alone decide (the papers' refinement).
     #[default]
     Ignore,
-    /// A receiver that straddles the outline of something lying over it ([`straddles_outline`])
-    /// counts in the power oracle's visibility term (`--shadow-levels`) as a link that a hard shadow
-    /// boundary crosses, spread ½: it is refined as deep as one.
+    /// A receiver that straddles the outline of something lying over it (`straddles_outline`) counts
+    /// in the power oracle's visibility term (`--shadow-levels`) as crossed by a hard shadow
+    /// boundary, spread ½, and is refined as deep as such a link.
     Split,
 }
 
