@@ -110,8 +110,9 @@ pub struct SolveReport {
     pub exitant_power: Rgb,
     pub refine_seconds: f64,
     pub solve_seconds: f64,
-    /// Whether the last pass refined nothing and the sweeps met the tolerance (under error control:
-    /// whether every leaf's estimate is within the accuracy).
+    /// Whether the last pass refined (almost) nothing, fewer than [`SETTLED_FRACTION`] of the links,
+    /// and the sweeps met the tolerance (under error control: whether every leaf's estimate is within
+    /// the accuracy).
     pub converged: bool,
     /// Relative change of the total exitant power after each sweep (the residual of the iteration).
     pub residuals: Vec<f64>,
@@ -136,7 +137,7 @@ pub fn emitted_power(hierarchy: &Hierarchy) -> Rgb {
 }
 
 /// Hierarchical radiosity: refine with `oracle`, sweep with `solver` to convergence, re-refine with the
-/// new radiance, until refinement stops changing the hierarchy.
+/// new radiance, until refinement (almost: [`SETTLED_FRACTION`]) stops changing the hierarchy.
 pub fn solve(
     hierarchy: &mut Hierarchy,
     visibility: &dyn Visibility,
@@ -184,7 +185,8 @@ pub fn solve(
             progress,
             pass,
         );
-        let changed = outcome.subdivisions + direct.subdivisions + outcome.refined_links > 0;
+        let refined = outcome.subdivisions + direct.subdivisions + outcome.refined_links;
+        let changed = refined as f64 > SETTLED_FRACTION * hierarchy.link_count() as f64;
         let refused = outcome.refused_by_budget + direct.refused_by_budget > 0;
         let pass_state = (changed || pass == 1, true);
         if end_pass(
@@ -340,6 +342,13 @@ fn refine_pass(
     report.refused_by_budget += outcome.refused_by_budget + direct.refused_by_budget;
     (outcome, direct)
 }
+
+/// A pass without error control that refines fewer than this fraction of the links ends the passes
+/// ([`solve`]): the links it still refined crossed their threshold by a small margin as the radiance
+/// moved, and the solution's error bound, the sum of its links' (each below ε), changes by about that
+/// fraction if the ones the next pass would refine are left (office3: passes 6 to 12 refined 265,
+/// 131, 28, 37, 113, 5 and 0 of 526k links; the built-in Cornell box 3, 3 and 0 of 118k).
+const SETTLED_FRACTION: f64 = 1e-3;
 
 /// The relative change of the exitant power at which a pass without error control stops sweeping when
 /// another pass may follow ([`solve`]); the last sweeps on to `SolveSettings::tolerance`.
