@@ -346,8 +346,9 @@ fn refine_pass(
 /// A pass without error control that refines fewer than this fraction of the links ends the passes
 /// ([`solve`]): the links it still refined crossed their threshold by a small margin as the radiance
 /// moved, and the solution's error bound, the sum of its links' (each below ε), changes by about that
-/// fraction if the ones the next pass would refine are left (office3: passes 6 to 12 refined 265,
-/// 131, 28, 37, 113, 5 and 0 of 526k links; the built-in Cornell box 3, 3 and 0 of 118k).
+/// fraction if the ones the next pass would refine are left (office3 once ran passes 6 to 12 that
+/// refined 265, 131, 28, 37, 113, 5 and 0 of 526k links; the built-in Cornell box 3, 3 and 0 of 118k
+/// in its last three; BENCHMARKS.md, "Passes that refine under 0.1%").
 const SETTLED_FRACTION: f64 = 1e-3;
 
 /// The relative change of the exitant power at which a pass without error control stops sweeping when
