@@ -157,7 +157,8 @@ pub struct SimulationSettings {
     pub near_field: NearField,
     /// Where partly visible sources are sampled ([`SourceRule`]).
     pub source_rule: SourceRule,
-    /// Whether links are split where something lies over part of an end ([`OutlineRule`]).
+    /// Whether a receiver that something lies over in part counts as crossed by a shadow boundary
+    /// ([`OutlineRule`]).
     pub outlines: OutlineRule,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
