@@ -8,13 +8,14 @@
 use radiosity::bases::BasisKind;
 use radiosity::color::Rgb;
 use radiosity::geometry::{DVec3, Shape};
-use radiosity::pipeline::{simulate, SimulationSettings};
+use radiosity::hierarchy::Hierarchy;
+use radiosity::pipeline::{build_visibility, simulate, SimulationSettings, VisibilityKind};
 use radiosity::scene::{Material, Object, Polygon, Scene};
-use radiosity::solvers::refine::OutlineRule;
+use radiosity::solvers::refine::{straddles_outline, OutlineRule};
 
 #[allow(dead_code)] // each test file uses part of the shared module
 mod common;
-use common::{probe_with_reference, quiet, rectangle};
+use common::{one_polygon_per_material, probe_with_reference, quiet, rectangle};
 
 /// The room's side, the lid's extent (off the quadtree's edges) and its gap under the ceiling.
 const SIDE: f64 = 2.0;
@@ -138,5 +139,55 @@ fn receivers_under_an_outline_are_resolved() {
         split <= ignored * 2.0 / 3.0,
         "outline splitting did not bring the ceiling across the lid's edge nearer the path tracer: \
          RMS {split} against {ignored} without it"
+    );
+}
+
+/// Whether a unit receiver [0, 1]² (facing +z, the root of its patch) straddles an outline when a
+/// black plate `[x0, x1] × [y0, y1]` lies at height `height` over it, probed with exact rays.
+fn straddles(plate: [f64; 4], height: f64) -> bool {
+    let scene = one_polygon_per_material(
+        vec![
+            Material::diffuse("receiver", Rgb::splat(0.5)),
+            Material::diffuse("plate", Rgb::BLACK),
+        ],
+        [
+            rectangle([0.0, 1.0, 0.0, 1.0], 0.0, true),
+            rectangle(plate, height, false),
+        ],
+        |_| false,
+    );
+    let hierarchy = Hierarchy::new(&scene, BasisKind::Constant);
+    let visibility = build_visibility(&scene, VisibilityKind::Bvh).expect("bvh");
+    let root = hierarchy.patches[0].root;
+    straddles_outline(&hierarchy, visibility.as_ref(), root)
+}
+
+/// The probe's geometry: rays along the normal from the centroid and the corners (2% inset), up to
+/// half the diameter (√2 / 2 here). A plate over part of the receiver within that reach straddles
+/// it; one over all of it, one beside it, one beyond the reach, and one over a part that no probe
+/// point lies under do not (the last is the probe's known blind spot: a lid narrower than the
+/// spacing of five points is found only on smaller elements, where it spans a corner or the centre).
+#[test]
+fn the_outline_probe_finds_what_lies_over_part_of_an_element() {
+    assert!(
+        straddles([-0.5, 0.4, -0.5, 0.4], 0.02),
+        "a lid over one corner"
+    );
+    assert!(
+        straddles([0.3, 0.7, 0.3, 0.7], 0.5),
+        "a plate over the centre, 0.5 up"
+    );
+    assert!(
+        !straddles([-0.5, 1.5, -0.5, 1.5], 0.02),
+        "a lid over all of it"
+    );
+    assert!(!straddles([1.2, 2.0, 0.0, 1.0], 0.02), "a plate beside it");
+    assert!(
+        !straddles([0.3, 0.7, 0.3, 0.7], 0.8),
+        "a plate beyond half the diameter"
+    );
+    assert!(
+        !straddles([0.1, 0.2, 0.4, 0.6], 0.02),
+        "a lid between the probe points"
     );
 }
