@@ -168,8 +168,10 @@ pub struct SimulationSettings {
     pub cubature_degree: Option<usize>,
     /// How links store their error coefficients (Bekaert–Willems §4.3).
     pub error_storage: ErrorStorage,
-    /// Error control's target (with the link error oracle).
-    pub accuracy: Accuracy,
+    /// Error control's target (Bekaert–Willems algorithm 6.1), with any oracle; `None`: no error
+    /// control, except with the link error oracle, which always controls
+    /// ([`SimulationSettings::controlled_accuracy`]).
+    pub accuracy: Option<Accuracy>,
     /// Algorithm 6.1's threshold factor.
     pub threshold_factor: f64,
     /// Which a-posteriori estimate to compute (and control).
@@ -218,10 +220,23 @@ impl SimulationSettings {
     /// [`BasisKind::default_cubature_degree`]); one point per direction fewer for the other oracles,
     /// which only need the coupling itself (a 2×2 receiver rule for the constant basis).
     pub fn cubature_degree(&self) -> usize {
-        self.cubature_degree.unwrap_or_else(|| match self.oracle {
-            OracleKind::Error => self.basis.default_cubature_degree(),
-            _ => self.basis.default_cubature_degree() - 2,
+        self.cubature_degree.unwrap_or_else(|| {
+            if self.controlled_accuracy().is_some() {
+                self.basis.default_cubature_degree()
+            } else {
+                self.basis.default_cubature_degree() - 2
+            }
         })
+    }
+
+    /// The accuracy error control aims at, if it runs: the one asked for, or
+    /// [`DEFAULT_RELATIVE_ACCURACY`] with the link error oracle, whose thresholds only error control
+    /// sets.
+    pub fn controlled_accuracy(&self) -> Option<Accuracy> {
+        match (self.accuracy, self.oracle) {
+            (None, OracleKind::Error) => Some(Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY)),
+            (accuracy, _) => accuracy,
+        }
     }
 }
 
@@ -251,7 +266,7 @@ impl Default for SimulationSettings {
             basis: BasisKind::Constant,
             cubature_degree: None,
             error_storage: ErrorStorage::Full,
-            accuracy: Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY),
+            accuracy: None,
             threshold_factor: 1.4,
             estimate: EstimateKind::Realistic,
             max_elements: 2_000_000,
@@ -397,16 +412,20 @@ pub fn deterministic_settings(
                 source_rule: settings.source_rule,
             },
             outlines: settings.outlines,
+            receiver_thresholds: settings.oracle != OracleKind::Error
+                && settings.controlled_accuracy().is_some(),
             seed: settings.seed,
         },
         tolerance: settings.tolerance,
         max_iterations: settings.max_iterations,
         max_passes: settings.max_passes,
         estimate: settings.estimate,
-        error_control: (settings.oracle == OracleKind::Error).then(|| ErrorControl {
-            accuracy: settings.accuracy.absolute(hierarchy),
-            threshold_factor: settings.threshold_factor,
-        }),
+        error_control: settings
+            .controlled_accuracy()
+            .map(|accuracy| ErrorControl {
+                accuracy: accuracy.absolute(hierarchy),
+                threshold_factor: settings.threshold_factor,
+            }),
     }
 }
 
@@ -503,6 +522,10 @@ pub fn simulate_observed(
         anyhow::ensure!(
             settings.multigrid.is_none(),
             "progressive multi-gridding (--link-budget) works with the deterministic method"
+        );
+        anyhow::ensure!(
+            settings.accuracy.is_none(),
+            "error control (--accuracy) works with the deterministic method"
         );
         anyhow::ensure!(
             settings.basis == BasisKind::Constant && settings.oracle != OracleKind::Error,

@@ -608,7 +608,7 @@ fn cube_mgf_with_its_two_sided_lamp_agrees_with_the_reference() {
     // radiance is its emission, constant, at every level of its tree (pulled up from constant leaves).
     let controlled = SimulationSettings {
         oracle: OracleKind::Error,
-        accuracy: Accuracy::Relative(0.1),
+        accuracy: Some(Accuracy::Relative(0.1)),
         ..settings
     };
     let (solution, controlled_image, _) = solve_and_render(&scene, &controlled, &camera);

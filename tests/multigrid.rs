@@ -151,7 +151,7 @@ fn every_oracle_steps_within_the_budget() {
         let settings = SimulationSettings {
             oracle,
             eps: 1e-3,
-            accuracy: Accuracy::Relative(0.5),
+            accuracy: Some(Accuracy::Relative(0.5)),
             clustering: ClusteringKind::Isotropic,
             multigrid: Some(MultigridSettings {
                 link_budget: 100,

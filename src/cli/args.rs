@@ -7,7 +7,7 @@ use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
 use crate::hierarchy::ErrorStorage;
 use crate::pipeline::{
     default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
-    VisibilityKind, DEFAULT_RELATIVE_ACCURACY,
+    VisibilityKind,
 };
 use crate::scene::{self, LoadOptions, Scene};
 use crate::solvers::coupling::SourceRule;
@@ -178,7 +178,10 @@ pub struct SolveArgs {
     pub error_storage: Option<ErrorStorage>,
     /// Error control (Bekaert–Willems algorithm 6.1) to this largest radiance error per element: an
     /// absolute radiance in W/(m² sr) (e.g. 0.05), or a percentage of the scene's mean radiance (e.g.
-    /// 10%). Implies --oracle error; with --oracle error alone it is 10%.
+    /// 10%). Alone it implies --oracle error (the paper's); with --oracle power, mi or smoothness
+    /// algorithm 6.1 lowers that oracle's threshold (from --eps) at the receivers whose estimate fails
+    /// (the same promise at lower RMS error and in less memory on the Cornell box, cube.mgf and
+    /// office2: BENCHMARKS.md). With --oracle error alone it is 10%.
     #[arg(long, value_parser = parse_accuracy, value_name = "EPS|P%")]
     pub accuracy: Option<Accuracy>,
     /// Factor by which error control lowers a failing element's link error threshold per pass.
@@ -372,9 +375,7 @@ impl SolveArgs {
                 OracleKind::Error => ErrorStorage::Full,
                 _ => ErrorStorage::Reduced,
             }),
-            accuracy: self
-                .accuracy
-                .unwrap_or(Accuracy::Relative(DEFAULT_RELATIVE_ACCURACY)),
+            accuracy: self.accuracy,
             threshold_factor: self.threshold_factor,
             estimate: self.error_estimate,
             max_elements: self.max_elements,

@@ -543,7 +543,9 @@ pub struct Element {
     /// A-posteriori error estimate of the radiance (Bekaert–Willems §4, W/(m² sr)): after the extended
     /// push-pull of algorithm 6.1, on a leaf the estimate there, on an inner element the largest below.
     pub error: f64,
-    /// Link error threshold `Δ_l` of algorithm 6.1 (radiance); infinite when error control is off.
+    /// Link error threshold `Δ_l` of algorithm 6.1 for links into this element, in the oracle's units
+    /// (radiance for the link error oracle, radiance × area for the others:
+    /// `solvers::refine::RefineSettings::threshold_into`); infinite when error control is off.
     pub threshold: f64,
     /// Whether something lies over part of the element, found by rays on first need
     /// (`solvers::refine::straddles_outline`).

@@ -38,14 +38,15 @@ pub struct DirectOutcome {
 
 impl FirstGather {
     /// Computes the direct coefficients of every leaf not yet computed and splits leaves whose direct
-    /// term the basis misses (see the module comment), repeating on the new leaves. With error control
-    /// (`error_control`) the leaf's own threshold is used, else `settings.threshold`.
+    /// term the basis misses (see the module comment), repeating on the new leaves, against the leaf's
+    /// threshold ([`RefineSettings::threshold_into`]): a radiance when `radiance_thresholds` (the
+    /// link error oracle's, Bekaert–Willems algorithm 6.1), else radiance × area like eq. (1)'s.
     pub fn refine_and_gather(
         &mut self,
         hierarchy: &mut Hierarchy,
         visibility: &dyn Visibility,
         settings: &RefineSettings,
-        error_control: bool,
+        radiance_thresholds: bool,
     ) -> DirectOutcome {
         let mut outcome = DirectOutcome::default();
         if hierarchy.luminaires.is_empty() {
@@ -80,10 +81,10 @@ impl FirstGather {
             for id in hierarchy.leaves() {
                 let e = hierarchy.element(id);
                 let error = self.residuals[id as usize];
-                let too_coarse = if error_control {
+                let too_coarse = if radiance_thresholds {
                     error > e.threshold
                 } else {
-                    error * e.area > settings.threshold
+                    error * e.area > settings.threshold_into(hierarchy, id)
                 };
                 if too_coarse && e.area > settings.min_area {
                     split.push(id);

@@ -49,7 +49,9 @@ pub struct SolveSettings {
     pub max_passes: usize,
     /// The a-posteriori estimate computed after each pass (and used by error control).
     pub estimate: EstimateKind,
-    /// Error control (Bekaert–Willems algorithm 6.1); needs the link error oracle.
+    /// Error control (Bekaert–Willems algorithm 6.1), with any oracle: the link error oracle compares
+    /// its links' error with their receivers' thresholds (radiance), the others their estimates with
+    /// them when `refine.receiver_thresholds` is set (radiance × area, starting at `refine.threshold`).
     pub error_control: Option<ErrorControl>,
 }
 
@@ -227,7 +229,15 @@ fn start_report(hierarchy: &mut Hierarchy, settings: &SolveSettings) -> SolveRep
     report.error.estimate = Some(settings.estimate);
     if let Some(control) = &settings.error_control {
         report.error.accuracy = Some(control.accuracy);
-        initialise_thresholds(hierarchy, control.accuracy);
+        if settings.refine.receiver_thresholds {
+            // The other oracles' thresholds are in their own units: eq. (1)'s ε, which algorithm
+            // 6.1 then lowers where the estimate fails.
+            for e in &mut hierarchy.elements {
+                e.threshold = settings.refine.threshold;
+            }
+        } else {
+            initialise_thresholds(hierarchy, control.accuracy);
+        }
     }
     report
 }
@@ -331,7 +341,7 @@ fn refine_pass(
         hierarchy,
         visibility,
         &settings.refine,
-        settings.error_control.is_some(),
+        oracle.judges_couplings(),
     );
     spinner.finish_and_clear();
     report.refine_seconds += start.elapsed().as_secs_f64();

@@ -150,6 +150,11 @@ pub struct RefineSettings {
     /// Oracle threshold ε, in the oracle's units (radiance × area). The link error oracle uses each
     /// receiver's own threshold `Element::threshold` instead (Bekaert–Willems algorithm 6.1).
     pub threshold: f64,
+    /// Error control with an oracle that does not judge couplings: each link is compared with its
+    /// receiver's own threshold (`Element::threshold`, in the oracle's units: it starts at
+    /// `threshold` and algorithm 6.1 lowers it where the a-posteriori estimate fails) instead of
+    /// `threshold` ([`RefineSettings::threshold_into`]).
+    pub receiver_thresholds: bool,
     /// Elements of at most this area are never split.
     pub min_area: f64,
     /// Elements are not split beyond this count (the element budget); links stay where they are.
@@ -161,6 +166,19 @@ pub struct RefineSettings {
     /// a shadow boundary.
     pub outlines: OutlineRule,
     pub seed: u64,
+}
+
+impl RefineSettings {
+    /// The threshold a link into `receiver` is compared with when its oracle does not judge
+    /// couplings: the receiver's own under error control ([`RefineSettings::receiver_thresholds`]),
+    /// else the uniform ε of eq. (1).
+    pub fn threshold_into(&self, h: &Hierarchy, receiver: ElementId) -> f64 {
+        if self.receiver_thresholds {
+            h.element(receiver).threshold
+        } else {
+            self.threshold
+        }
+    }
 }
 
 /// Whether a receiver that something lies over in part counts as crossed by a shadow boundary
@@ -1167,7 +1185,7 @@ fn decide(
         if oracle.judges_couplings() {
             carried / h.element(c.receiver).area.max(1e-300) > h.element(c.receiver).threshold
         } else {
-            carried > settings.threshold
+            carried > settings.threshold_into(h, c.receiver)
         }
     };
     let horizon = horizon_split(h, c.receiver, c.source, settings.coupling.cubature_degree)
@@ -1223,8 +1241,9 @@ fn decide(
                 estimate.error
             }
         };
-        if error > settings.threshold {
-            (error, settings.threshold, None)
+        let threshold = settings.threshold_into(h, c.receiver);
+        if error > threshold {
+            (error, threshold, None)
         } else {
             // What the visibility term refines is the receiver's average of the visibility
             // (Sillion–Drettakis Appendix A): splitting the source would not reduce it.
@@ -1237,7 +1256,7 @@ fn decide(
                 error,
                 &mut verdict,
             );
-            (seen, settings.threshold, Some(Decision::SubdivideReceiver))
+            (seen, threshold, Some(Decision::SubdivideReceiver))
         }
     };
     verdict.error = error as f32;
@@ -1313,7 +1332,7 @@ fn with_visibility(
     verdict: &mut Verdict,
 ) -> f64 {
     match oracle.with_partial_visibility(error, 0.5) {
-        Some(largest) if largest > settings.threshold => {}
+        Some(largest) if largest > settings.threshold_into(context.hierarchy, c.receiver) => {}
         _ => return error,
     }
     let h = context.hierarchy;
@@ -1380,7 +1399,7 @@ fn decide_cluster_link(
             h.element(c.receiver).threshold,
         )
     } else {
-        (weight * bound, settings.threshold)
+        (weight * bound, settings.threshold_into(h, c.receiver))
     };
     let mut verdict = Verdict {
         error: error as f32,
