@@ -420,12 +420,10 @@ pub fn deterministic_settings(
         max_iterations: settings.max_iterations,
         max_passes: settings.max_passes,
         estimate: settings.estimate,
-        error_control: settings
-            .controlled_accuracy()
-            .map(|accuracy| ErrorControl {
-                accuracy: accuracy.absolute(hierarchy),
-                threshold_factor: settings.threshold_factor,
-            }),
+        error_control: settings.controlled_accuracy().map(|accuracy| ErrorControl {
+            accuracy: accuracy.absolute(hierarchy),
+            threshold_factor: settings.threshold_factor,
+        }),
     }
 }
 

@@ -389,6 +389,47 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     assert_eq!(json["settings"]["oracle"], "error");
     assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
     assert!(json["residuals"].as_array().is_some_and(|r| !r.is_empty()));
+    // With another oracle the accuracy is not ignored: the same control runs on that oracle.
+    let out = radiosity(&[
+        "render",
+        "--oracle",
+        "power",
+        "--accuracy",
+        "40%",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "-o",
+        png.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["settings"]["oracle"], "power");
+    assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("accuracy"));
+    // Monte Carlo radiosity has no error control: refused, not ignored.
+    let out = radiosity(&[
+        "render",
+        "-q",
+        "--method",
+        "stochastic-jacobi",
+        "--basis",
+        "constant",
+        "--accuracy",
+        "10%",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("deterministic"));
     let out = radiosity(&[
         "render",
         "-q",

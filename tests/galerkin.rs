@@ -338,14 +338,48 @@ fn error_control_meets_the_accuracy_at_95_percent_of_points() {
     // A coarse ε for the power oracle, so that error control has to do the work.
     let coarse = 1e-2;
     for (oracle, basis, accuracy, error_storage) in [
-        (OracleKind::Error, BasisKind::Constant, 0.008, ErrorStorage::Full),
-        (OracleKind::Error, BasisKind::Linear, 0.008, ErrorStorage::Full),
-        (OracleKind::Error, BasisKind::Linear, 0.008, ErrorStorage::Reduced),
-        (OracleKind::Error, BasisKind::Linear, 0.002, ErrorStorage::Full),
-        
-        (OracleKind::Power, BasisKind::Linear, 0.008, ErrorStorage::Full),
-        (OracleKind::Power, BasisKind::Linear, 0.008, ErrorStorage::Reduced),
-        (OracleKind::Power, BasisKind::Linear, 0.002, ErrorStorage::Reduced),
+        (
+            OracleKind::Error,
+            BasisKind::Constant,
+            0.008,
+            ErrorStorage::Full,
+        ),
+        (
+            OracleKind::Error,
+            BasisKind::Linear,
+            0.008,
+            ErrorStorage::Full,
+        ),
+        (
+            OracleKind::Error,
+            BasisKind::Linear,
+            0.008,
+            ErrorStorage::Reduced,
+        ),
+        (
+            OracleKind::Error,
+            BasisKind::Linear,
+            0.002,
+            ErrorStorage::Full,
+        ),
+        (
+            OracleKind::Power,
+            BasisKind::Linear,
+            0.008,
+            ErrorStorage::Full,
+        ),
+        (
+            OracleKind::Power,
+            BasisKind::Linear,
+            0.008,
+            ErrorStorage::Reduced,
+        ),
+        (
+            OracleKind::Power,
+            BasisKind::Linear,
+            0.002,
+            ErrorStorage::Reduced,
+        ),
     ] {
         let settings = SimulationSettings {
             oracle,
