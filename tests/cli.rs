@@ -364,57 +364,39 @@ fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
 fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     let dir = temp_dir("accuracy");
     let (png, stats, errors) = (dir.join("c.png"), dir.join("c.json"), dir.join("e.png"));
-    let out = radiosity(&[
-        "render",
-        "--accuracy",
-        "40%",
-        "--width",
-        "32",
-        "--height",
-        "32",
-        "-o",
-        png.to_str().unwrap(),
-        "--stats",
-        stats.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary = String::from_utf8_lossy(&out.stderr);
-    assert!(summary.contains("accuracy"), "{summary}");
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    // The summary line and the stats of a controlled render with `oracle` options.
+    let controlled = |oracle: &[&str]| {
+        let mut args = vec![
+            "render",
+            "--accuracy",
+            "40%",
+            "--width",
+            "32",
+            "--height",
+            "32",
+        ];
+        args.extend_from_slice(oracle);
+        args.extend([
+            "-o",
+            png.to_str().unwrap(),
+            "--stats",
+            stats.to_str().unwrap(),
+        ]);
+        let out = radiosity(&args);
+        let summary = String::from_utf8_lossy(&out.stderr).to_string();
+        assert!(out.status.success(), "{summary}");
+        assert!(summary.contains("accuracy"), "{summary}");
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
+        json
+    };
+    let json = controlled(&[]);
     assert_eq!(json["settings"]["oracle"], "error");
-    assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
     assert!(json["residuals"].as_array().is_some_and(|r| !r.is_empty()));
     // With another oracle the accuracy is not ignored: the same control runs on that oracle.
-    let out = radiosity(&[
-        "render",
-        "--oracle",
-        "power",
-        "--accuracy",
-        "40%",
-        "--width",
-        "32",
-        "--height",
-        "32",
-        "-o",
-        png.to_str().unwrap(),
-        "--stats",
-        stats.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let json = controlled(&["--oracle", "power"]);
     assert_eq!(json["settings"]["oracle"], "power");
-    assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("accuracy"));
     // Monte Carlo radiosity has no error control: refused, not ignored.
     let out = radiosity(&[
         "render",
