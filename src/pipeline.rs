@@ -215,10 +215,10 @@ pub fn default_max_memory() -> usize {
 }
 
 impl SimulationSettings {
-    /// The cubature degree couplings use: the basis's default when the link error oracle reads the error
-    /// coefficients (it needs `d + 3` receiver nodes per direction, see
-    /// [`BasisKind::default_cubature_degree`]); one point per direction fewer for the other oracles,
-    /// which only need the coupling itself (a 2×2 receiver rule for the constant basis).
+    /// The cubature degree couplings use: the basis's default under error control, whose estimate reads
+    /// the error coefficients at the nodes (it needs `d + 3` receiver nodes per direction, see
+    /// [`BasisKind::default_cubature_degree`]), whatever the oracle; one point per direction fewer
+    /// otherwise, where only the coupling itself counts (a 2×2 receiver rule for the constant basis).
     pub fn cubature_degree(&self) -> usize {
         self.cubature_degree.unwrap_or_else(|| {
             if self.controlled_accuracy().is_some() {
