@@ -618,45 +618,42 @@ impl Bvh {
             let node = &self.nodes[current as usize];
             let slabs = K::slab(&trav, node);
             let mask = slabs.hit;
-            // The leaves' blocks and the interior children are fetched first, so that the fetches
-            // overlap each other and the leaf tests.
             let leaves = mask & node.leaves as u32;
-            let mut bits = leaves;
-            while bits != 0 {
-                let k = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                prefetch(self.blocks.as_ptr().wrapping_add(node.child[k] as usize));
-            }
             // The next node is the interior child whose box holds the longest stretch of the ray, the
-            // others pushed (their entry parameters are not needed: any blocker ends the ray).
+            // others pushed (their entry parameters are not needed: any blocker ends the ray). All are
+            // fetched now, so that the fetches overlap each other and the leaf tests. One child, the
+            // common case on small scenes, takes no loop (their branches mispredict).
             let inner = mask & !leaves;
             let mut next = None;
             if inner != 0 {
-                let mut bits = inner;
-                while bits != 0 {
-                    let k = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    prefetch(self.nodes.as_ptr().wrapping_add(node.child[k] as usize));
-                }
-                // One child (the common case on small scenes) needs no comparison.
                 let k = if inner & (inner - 1) == 0 {
                     inner.trailing_zeros() as usize
                 } else {
-                    K::longest(inner, &slabs)
+                    let k = K::longest(inner, &slabs);
+                    let mut others = inner & !(1 << k);
+                    while others != 0 {
+                        let c = node.child[others.trailing_zeros() as usize];
+                        others &= others - 1;
+                        prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
+                        stack.push(c, 0.0);
+                    }
+                    k
                 };
-                let mut others = inner & !(1 << k);
-                while others != 0 {
-                    let j = others.trailing_zeros() as usize;
-                    others &= others - 1;
-                    stack.push(node.child[j], 0.0);
-                }
-                next = Some(node.child[k]);
+                let c = node.child[k];
+                prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
+                next = Some(c);
             }
-            // Leaves before descending: a blocker ends the ray.
+            // Leaves before descending: a blocker ends the ray. Each test starts the fetch of the next
+            // leaf's block, so that on large scenes the fetches overlap the tests (a separate loop that
+            // fetched every block first cost 2-3% of the time on office3, which sits in cache).
             let mut bits = leaves;
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
+                if bits != 0 {
+                    let next = node.child[bits.trailing_zeros() as usize] as usize;
+                    prefetch(self.blocks.as_ptr().wrapping_add(next));
+                }
                 let block = node.child[k] as usize;
                 if self.block_occludes::<K>(block, ray, &filter, (t_min, t_max), transparent) {
                     return true;
