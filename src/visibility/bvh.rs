@@ -616,40 +616,44 @@ impl Bvh {
         let mut current = 0u32;
         loop {
             let node = &self.nodes[current as usize];
-            let (mask, _) = K::slab(&trav, node);
-            // The leaves' blocks and the interior children are fetched first, so that the fetches
-            // overlap each other and the leaf tests.
+            let slabs = K::slab(&trav, node);
+            let mask = slabs.hit;
             let leaves = mask & node.leaves as u32;
-            let mut bits = leaves;
-            while bits != 0 {
-                let k = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                prefetch(self.blocks.as_ptr().wrapping_add(node.child[k] as usize));
-            }
-            // The next node is the first interior child, the others pushed (their entry parameters are
-            // not needed: any blocker ends the ray). Visiting the nearest first instead measured slower
-            // on office3 and on a 2.7M-triangle room: its comparisons cost more than its order saves.
-            let mut inner = mask & !leaves;
+            // The next node is the interior child whose box holds the longest stretch of the ray, the
+            // others pushed (their entry parameters are not needed: any blocker ends the ray). All are
+            // fetched now, so that the fetches overlap each other and the leaf tests. One child, the
+            // common case on small scenes, takes no loop (their branches mispredict).
+            let inner = mask & !leaves;
             let mut next = None;
             if inner != 0 {
-                let k = inner.trailing_zeros() as usize;
-                inner &= inner - 1;
-                let first = node.child[k];
-                prefetch(self.nodes.as_ptr().wrapping_add(first as usize));
-                while inner != 0 {
-                    let k = inner.trailing_zeros() as usize;
-                    inner &= inner - 1;
-                    let c = node.child[k];
-                    prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
-                    stack.push(c, 0.0);
-                }
-                next = Some(first);
+                let k = if inner & (inner - 1) == 0 {
+                    inner.trailing_zeros() as usize
+                } else {
+                    let k = K::longest(inner, &slabs);
+                    let mut others = inner & !(1 << k);
+                    while others != 0 {
+                        let c = node.child[others.trailing_zeros() as usize];
+                        others &= others - 1;
+                        prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
+                        stack.push(c, 0.0);
+                    }
+                    k
+                };
+                let c = node.child[k];
+                prefetch(self.nodes.as_ptr().wrapping_add(c as usize));
+                next = Some(c);
             }
-            // Leaves before descending: a blocker ends the ray.
+            // Leaves before descending: a blocker ends the ray. Each test starts the fetch of the next
+            // leaf's block, so that on large scenes the fetches overlap the tests (a separate loop that
+            // fetched every block first cost 2-3% of the time on office3, which sits in cache).
             let mut bits = leaves;
             while bits != 0 {
                 let k = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
+                if bits != 0 {
+                    let next = node.child[bits.trailing_zeros() as usize] as usize;
+                    prefetch(self.blocks.as_ptr().wrapping_add(next));
+                }
                 let block = node.child[k] as usize;
                 if self.block_occludes::<K>(block, ray, &filter, (t_min, t_max), transparent) {
                     return true;
@@ -693,7 +697,9 @@ impl Bvh {
             let mut current = 0u32;
             loop {
                 let node = &self.nodes[current as usize];
-                let (mask, enter) = K::slab(&trav, node);
+                let Slabs {
+                    hit: mask, enter, ..
+                } = K::slab(&trav, node);
                 // Hit children sorted by entry distance (insertion sort of at most eight).
                 let mut order = [(0f32, 0usize); WIDTH];
                 let mut n = 0;
@@ -879,18 +885,35 @@ impl TravRay {
 /// The SIMD kernels of a traversal: the slab tests of a node's children and the hit filter of a leaf's
 /// lanes.
 trait Simd {
-    /// Slab tests of a node's eight children against `[0, t_far]`: bit `k` of the mask is set when child
-    /// `k` exists and is hit; lane `k` of the array is its entry parameter.
+    /// Slab tests of a node's eight children against `[0, t_far]`.
     ///
     /// Error bound: a slab parameter is `(origin + q scale - o) inv`, computed as `q (scale inv) +
     /// (origin - o) inv` with at most four roundings of terms below `4 M |inv|` (`M` the scene's largest
     /// coordinate), so it is off by under `2^-20 M |inv|`, while the box padding ([`RELATIVE_PAD`]) moves
     /// every slab by `2^-18 M |inv|`: a box the exact ray meets is never culled.
-    fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]);
+    fn slab(ray: &TravRay, node: &Node) -> Slabs;
+
+    /// Of the children in `mask` (hit ones, at least one), the one whose box holds the longest stretch
+    /// of the ray, `exit - enter` (the first of equals): the occlusion traversal visits it next. Any
+    /// blocker ends an occlusion ray, and a box that holds more of the ray is likelier to hold one: on
+    /// a 2.7M-triangle room of boxes, where nearly every ray is blocked, this cut the nodes visited per
+    /// ray from 9.9 to 7.5 and the leaf blocks from 1.8 to 1.2 against the first child in slot order
+    /// (on office3 from 3.2 to 3.1 nodes). Visiting the nearest first had measured slower on both.
+    fn longest(mask: u32, slabs: &Slabs) -> usize;
 
     /// [`classify`] of each lane of `block`, computed with exactly its operations, so bit-identical and
     /// conservative in every kernel.
     fn filter(ray: &FilterRay, block: &Block) -> Lanes;
+}
+
+/// What the slab tests of a node's children give.
+struct Slabs {
+    /// Bit `k` set when child `k` exists and the ray meets its box within `[0, t_far]`.
+    hit: u32,
+    /// Lane `k`: the traversal parameter where the ray enters child `k`'s box (or 0)...
+    enter: [f32; WIDTH],
+    /// ... and where it leaves it (or `t_far`).
+    exit: [f32; WIDTH],
 }
 
 /// Lane loops in plain Rust (any CPU).
@@ -898,7 +921,7 @@ struct Portable;
 
 impl Simd for Portable {
     #[inline(always)]
-    fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
+    fn slab(ray: &TravRay, node: &Node) -> Slabs {
         let mut enter = [0f32; WIDTH];
         let mut exit = [ray.t_far; WIDTH];
         for axis in 0..3 {
@@ -913,7 +936,26 @@ impl Simd for Portable {
         for k in 0..WIDTH {
             mask |= u32::from(enter[k] <= exit[k]) << k;
         }
-        (mask & u32::from(node.valid), enter)
+        Slabs {
+            hit: mask & u32::from(node.valid),
+            enter,
+            exit,
+        }
+    }
+
+    #[inline(always)]
+    fn longest(mask: u32, slabs: &Slabs) -> usize {
+        let mut bits = mask;
+        let (mut best, mut length) = (mask.trailing_zeros() as usize, f32::NEG_INFINITY);
+        while bits != 0 {
+            let k = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let l = slabs.exit[k] - slabs.enter[k];
+            if l > length {
+                (best, length) = (k, l);
+            }
+        }
+        best
     }
 
     #[inline(always)]
@@ -935,17 +977,31 @@ impl Simd for Portable {
 /// once more with AVX-512 enabled, where the same code has 32 vector registers instead of 16 (the leaf
 /// filter no longer spills) and compares into mask registers.
 macro_rules! avx_kernels {
-    ($features:literal, $kernel:ident, $filter:ident, $slab:ident, $occluded:ident, $intersect:ident) => {
+    (
+        $features:literal,
+        $kernel:ident,
+        $filter:ident,
+        $slab:ident,
+        $longest:ident,
+        $occluded:ident,
+        $intersect:ident
+    ) => {
         #[cfg(target_arch = "x86_64")]
         struct $kernel;
 
         #[cfg(target_arch = "x86_64")]
         impl Simd for $kernel {
             #[inline(always)]
-            fn slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
+            fn slab(ray: &TravRay, node: &Node) -> Slabs {
                 // SAFETY: this kernel only runs on CPUs with `$features`: inside the traversals
                 // `Kernel::detect` chooses for them, and in tests that check the CPU first.
                 unsafe { $slab(ray, node) }
+            }
+
+            #[inline(always)]
+            fn longest(mask: u32, slabs: &Slabs) -> usize {
+                // SAFETY: as above.
+                unsafe { $longest(mask, slabs) }
             }
 
             #[inline(always)]
@@ -1082,7 +1138,7 @@ macro_rules! avx_kernels {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $features)]
         #[inline]
-        fn $slab(ray: &TravRay, node: &Node) -> (u32, [f32; WIDTH]) {
+        fn $slab(ray: &TravRay, node: &Node) -> Slabs {
             use std::arch::x86_64::*;
             // Eight grid coordinates as `f32` lanes.
             let lanes = |plane: &[u8; WIDTH]| {
@@ -1102,10 +1158,44 @@ macro_rules! avx_kernels {
                 exit = _mm256_min_ps(exit, far);
             }
             let hit = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(enter, exit)) as u32;
-            let mut lanes_out = [0f32; WIDTH];
-            // SAFETY: `lanes_out` holds eight `f32`; the store has no alignment requirement.
-            unsafe { _mm256_storeu_ps(lanes_out.as_mut_ptr(), enter) };
-            (hit & u32::from(node.valid), lanes_out)
+            let store = |v: __m256| {
+                let mut lanes = [0f32; WIDTH];
+                // SAFETY: `lanes` holds eight `f32`; the store has no alignment requirement.
+                unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), v) };
+                lanes
+            };
+            Slabs {
+                hit: hit & u32::from(node.valid),
+                enter: store(enter),
+                exit: store(exit),
+            }
+        }
+
+        /// The lengths `exit - enter` on eight lanes, those outside `mask` at -inf, their maximum
+        /// spread to every lane by three swaps and maxima, and the first lane equal to it (without the
+        /// scalar loop's branches, which mispredict).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        #[inline]
+        fn $longest(mask: u32, slabs: &Slabs) -> usize {
+            use std::arch::x86_64::*;
+            // SAFETY: each array is eight readable `f32`; the load has no alignment requirement.
+            let load = |v: &[f32; WIDTH]| unsafe { _mm256_loadu_ps(v.as_ptr()) };
+            let length = _mm256_sub_ps(load(&slabs.exit), load(&slabs.enter));
+            let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+            let bits = _mm256_and_si256(_mm256_set1_epi32(mask as i32), lane_bits);
+            let outside = _mm256_cmpeq_epi32(bits, _mm256_setzero_si256());
+            let length = _mm256_blendv_ps(
+                length,
+                _mm256_set1_ps(f32::NEG_INFINITY),
+                _mm256_castsi256_ps(outside),
+            );
+            let max = _mm256_max_ps(length, _mm256_permute2f128_ps::<1>(length, length));
+            let max = _mm256_max_ps(max, _mm256_permute_ps::<0b01_00_11_10>(max));
+            let max = _mm256_max_ps(max, _mm256_permute_ps::<0b10_11_00_01>(max));
+            let equal = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(length, max)) as u32 & mask;
+            // No lane equals the maximum only where a length is NaN: then any child will do.
+            (if equal != 0 { equal } else { mask }).trailing_zeros() as usize
         }
 
         /// The traversals compiled with the kernel's features (the leaf tests too: they stay
@@ -1135,6 +1225,7 @@ avx_kernels!(
     Avx2,
     filter_avx2,
     slab_avx2,
+    longest_avx2,
     occluded_avx2,
     intersect_avx2
 );
@@ -1143,6 +1234,7 @@ avx_kernels!(
     Avx512,
     filter_avx512,
     slab_avx512,
+    longest_avx512,
     occluded_avx512,
     intersect_avx512
 );
@@ -1864,7 +1956,8 @@ mod tests {
     /// The slab kernels never cull a child box that the exact ray meets: every point of a primitive lies
     /// at least the padding inside its leaf's box and its ancestors' boxes, so a box shrunk by the
     /// padding that the exact (`f64`) ray crosses must be reported hit by every kernel, at an entry
-    /// parameter no later than the exact one.
+    /// parameter no later than the exact one (and an exit no earlier). Each kernel's choice of the
+    /// longest stretch is one of the children it is given, none longer.
     #[test]
     fn slab_kernels_are_conservative() {
         let shapes = random_mixed(3000, 11);
@@ -1872,14 +1965,15 @@ mod tests {
         // The scene's largest coordinate is at least 1, so its boxes are padded by at least this.
         let pad = RELATIVE_PAD;
         let mut rng = Pcg64Mcg::seed_from_u64(12);
-        type SlabFn = fn(&TravRay, &Node) -> (u32, [f32; WIDTH]);
-        let mut kernels: Vec<SlabFn> = vec![Portable::slab];
+        type SlabFn = fn(&TravRay, &Node) -> Slabs;
+        type LongestFn = fn(u32, &Slabs) -> usize;
+        let mut kernels: Vec<(SlabFn, LongestFn)> = vec![(Portable::slab, Portable::longest)];
         #[cfg(target_arch = "x86_64")]
         for kernel in Kernel::available() {
             match kernel {
                 Kernel::Portable => {}
-                Kernel::Avx2 => kernels.push(Avx2::slab),
-                Kernel::Avx512 => kernels.push(Avx512::slab),
+                Kernel::Avx2 => kernels.push((Avx2::slab, Avx2::longest)),
+                Kernel::Avx512 => kernels.push((Avx512::slab, Avx512::longest)),
             }
         }
         let mut met = 0;
@@ -1896,8 +1990,25 @@ mod tests {
                 continue;
             };
             for node in bvh.nodes.iter().step_by(7) {
-                for kernel in &kernels {
-                    let (mask, enter) = kernel(&trav, node);
+                for (slab, longest) in &kernels {
+                    let slabs = slab(&trav, node);
+                    // Every subset of two or more hit children: the longest is one of them, and
+                    // no other is longer.
+                    let length = |k: usize| slabs.exit[k] - slabs.enter[k];
+                    let mut subset = slabs.hit;
+                    while subset.count_ones() >= 2 {
+                        let k = longest(subset, &slabs);
+                        assert!(subset & (1 << k) != 0);
+                        assert!(
+                            (0..WIDTH).all(|j| subset & (1 << j) == 0 || length(j) <= length(k))
+                        );
+                        subset &= subset - 1;
+                    }
+                    let Slabs {
+                        hit: mask,
+                        enter,
+                        exit,
+                    } = slabs;
                     for (k, &entry) in enter.iter().enumerate() {
                         if node.valid & (1 << k) == 0 {
                             continue;
@@ -1914,8 +2025,9 @@ mod tests {
                         if lo <= hi {
                             met += 1;
                             assert!(mask & (1 << k) != 0, "ray {i} culls a box it meets");
-                            let exact = ((lo - trav.t0) * trav.scale) as f32;
-                            assert!(entry <= exact.max(0.0) * (1.0 + 1e-6) + 1e-6);
+                            let exact = |t: f64| ((t - trav.t0) * trav.scale) as f32;
+                            assert!(entry <= exact(lo).max(0.0) * (1.0 + 1e-6) + 1e-6);
+                            assert!(exit[k] >= exact(hi) * (1.0 - 1e-6) - 1e-6);
                         }
                     }
                 }
