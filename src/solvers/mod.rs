@@ -229,15 +229,7 @@ fn start_report(hierarchy: &mut Hierarchy, settings: &SolveSettings) -> SolveRep
     report.error.estimate = Some(settings.estimate);
     if let Some(control) = &settings.error_control {
         report.error.accuracy = Some(control.accuracy);
-        if settings.refine.receiver_thresholds {
-            // The other oracles' thresholds are in their own units: eq. (1)'s ε, which algorithm
-            // 6.1 then lowers where the estimate fails.
-            for e in &mut hierarchy.elements {
-                e.threshold = settings.refine.threshold;
-            }
-        } else {
-            initialise_thresholds(hierarchy, control.accuracy);
-        }
+        initialise_thresholds(hierarchy, &settings.refine, control.accuracy);
     }
     report
 }
@@ -451,11 +443,17 @@ fn sweep_to_tolerance(
 }
 
 /// Algorithm 6.1 step 1b: `Δ_p = (1 − ρ_p) ε − max |δ_e|` on every element, with `δ_e = 0` (emission is
-/// constant per patch) and ρ_p the patch's largest channel.
-fn initialise_thresholds(hierarchy: &mut Hierarchy, accuracy: f64) {
+/// constant per patch) and ρ_p the patch's largest channel. With the other oracles
+/// (`refine.receiver_thresholds`) the thresholds are in their own units and start at their uniform
+/// `refine.threshold` (eq. (1)'s ε), which the later steps lower where the estimate fails.
+fn initialise_thresholds(hierarchy: &mut Hierarchy, refine: &RefineSettings, accuracy: f64) {
     for id in 0..hierarchy.elements.len() {
-        let rho = hierarchy.reflectance_of(id as ElementId).max_channel();
-        hierarchy.elements[id].threshold = (1.0 - rho).max(0.0) * accuracy;
+        hierarchy.elements[id].threshold = if refine.receiver_thresholds {
+            refine.threshold
+        } else {
+            let rho = hierarchy.reflectance_of(id as ElementId).max_channel();
+            (1.0 - rho).max(0.0) * accuracy
+        };
     }
 }
 

@@ -1331,10 +1331,12 @@ fn with_visibility(
     error: f64,
     verdict: &mut Verdict,
 ) -> f64 {
-    match oracle.with_partial_visibility(error, 0.5) {
-        Some(largest) if largest > settings.threshold_into(context.hierarchy, c.receiver) => {}
+    let across_boundary = match oracle.with_partial_visibility(error, 0.5) {
+        Some(largest) if largest > settings.threshold_into(context.hierarchy, c.receiver) => {
+            largest
+        }
         _ => return error,
-    }
+    };
     let h = context.hierarchy;
     let receiver = h.element(c.receiver);
     if settings.outlines == OutlineRule::Split
@@ -1345,7 +1347,7 @@ fn with_visibility(
     {
         // Something lies over part of the receiver: a hard boundary through it (eq. (5) at v = ½),
         // whatever the link's rays saw.
-        return oracle.with_partial_visibility(error, 0.5).unwrap_or(error);
+        return across_boundary;
     }
     if c.coupling.is_none() {
         if let Some(ShaftVerdict::Clear | ShaftVerdict::Blocked) = c.shaft {
