@@ -129,12 +129,14 @@ pub fn nodes_on_into(shape: &Shape, rule: &Rule, out: &mut Vec<Node>) {
 /// the shifted nodes 1% inside the edges (against rays that a touching neighbour would stop) changed
 /// no measured point and missed light seen through a sliver at an element's edge (BENCHMARKS.md,
 /// "Shadow boundaries across sources").
+/// `densities`: each node's weight per unit Jacobian ([`node_densities`]), computed once for all shifts.
 pub fn shifted_nodes<'a>(
     shape: &'a Shape,
     nodes: &'a [Node],
+    densities: &'a [f64],
     shift: DVec2,
 ) -> impl Iterator<Item = Node> + 'a {
-    nodes.iter().map(move |node| {
+    nodes.iter().zip(densities).map(move |(node, density)| {
         let mut uv = DVec2::new((node.uv.x + shift.x).fract(), (node.uv.y + shift.y).fract());
         if matches!(shape, Shape::Triangle(_)) && uv.x + uv.y > 1.0 {
             uv = DVec2::ONE - uv;
@@ -142,9 +144,17 @@ pub fn shifted_nodes<'a>(
         Node {
             point: shape.point_at(uv),
             uv,
-            weight: node.weight / shape.jacobian(node.uv) * shape.jacobian(uv),
+            weight: density * shape.jacobian(uv),
         }
     })
+}
+
+/// Each node's weight over the Jacobian at its parameters: the rule's own weight, which
+/// [`shifted_nodes`] moves to wherever a shift takes the node.
+pub fn node_densities<'a>(shape: &'a Shape, nodes: &'a [Node]) -> impl Iterator<Item = f64> + 'a {
+    nodes
+        .iter()
+        .map(|node| node.weight / shape.jacobian(node.uv))
 }
 
 /// Gauss–Legendre nodes and weights on [0, 1], for 1 to 5 points (`n` clamped), computed once.

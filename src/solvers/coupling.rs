@@ -37,7 +37,9 @@
 //! to the bit ([`crate::visibility::shaft`]).
 
 use super::clustering::couple_cluster;
-use crate::geometry::cubature::{nodes_on, nodes_on_into, rule, shifted_nodes, Node};
+use crate::geometry::cubature::{
+    node_densities, nodes_on, nodes_on_into, rule, shifted_nodes, Node,
+};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::geometry::near_field::{self, is_near, NearField};
 use crate::geometry::{DVec2, DVec3, Shape};
@@ -371,8 +373,13 @@ impl SourceSampler<'_> {
                 self.shaft,
                 Some(ShaftVerdict::Clear) | Some(ShaftVerdict::Blocked)
             );
-        // Shifted source nodes and their basis values, refilled for each receiver node.
-        let (mut shifted, mut phi) = (Vec::new(), Vec::new());
+        // Shifted source nodes, refilled for each receiver node; their weights per unit Jacobian once.
+        let mut shifted = Vec::new();
+        let densities: Vec<f64> = if decided {
+            Vec::new()
+        } else {
+            node_densities(self.source, self.y_nodes).collect()
+        };
         for (k, x) in nodes.iter().enumerate() {
             let exact = point_to_polygon(x.point, self.n_r, self.source);
             out.factor_range = (out.factor_range.0.min(exact), out.factor_range.1.max(exact));
@@ -382,16 +389,16 @@ impl SourceSampler<'_> {
             out.unoccluded += x.weight * exact;
             let row = &mut out.inner[k * size..(k + 1) * size];
             let (rays, saved) = if decided {
-                self.row(x.point, exact, self.y_nodes, self.phi_y, row)
+                self.row(x.point, exact, self.y_nodes, Some(self.phi_y), row)
             } else {
                 shifted.clear();
                 shifted.extend(shifted_nodes(
                     self.source,
                     self.y_nodes,
+                    &densities,
                     self.shift_at(x.point),
                 ));
-                basis_values_into(self.basis, self.source, &shifted, &mut phi);
-                self.row(x.point, exact, &shifted, &phi, row)
+                self.row(x.point, exact, &shifted, None, row)
             };
             out.rays += rays;
             out.rays_saved += saved;
@@ -412,15 +419,16 @@ impl SourceSampler<'_> {
         DVec2::new(unit(first), unit(splitmix64(first)))
     }
 
-    /// One receiver point's row `K_{j,β}(x)` from the source nodes `y_nodes` (basis values `phi_y`),
-    /// scaled so that its unoccluded constant part is the exact factor `exact`; the rays cast and
-    /// saved.
+    /// One receiver point's row `K_{j,β}(x)` from the source nodes `y_nodes` (basis values `phi_y`,
+    /// or, for `None`, evaluated at the nodes that let light through: shifted nodes are used once,
+    /// and a blocked one needs none), scaled so that its unoccluded constant part is the exact factor
+    /// `exact`; the rays cast and saved.
     fn row(
         &self,
         x: DVec3,
         exact: f64,
         y_nodes: &[Node],
-        phi_y: &[f64],
+        phi_y: Option<&[f64]>,
         row: &mut [f64],
     ) -> (u64, u64) {
         let size = row.len();
@@ -456,8 +464,17 @@ impl SourceSampler<'_> {
                 }
             };
             if t > 0.0 {
-                for (beta, value) in row.iter_mut().enumerate() {
-                    *value += g * t * phi_y[l * size + beta];
+                let gt = g * t;
+                let mut evaluated = [0.0; 10];
+                let phi = match phi_y {
+                    Some(table) => &table[l * size..(l + 1) * size],
+                    None => {
+                        self.basis.eval(self.source.domain(), y.uv, &mut evaluated);
+                        &evaluated[..size]
+                    }
+                };
+                for (value, p) in row.iter_mut().zip(phi) {
+                    *value += gt * p;
                 }
             }
         }
