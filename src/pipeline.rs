@@ -23,7 +23,7 @@ use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
 use crate::solvers::{solve, ErrorControl, SolveReport, SolveSettings};
 use crate::visibility::extinction::Extinction;
 use crate::visibility::item_buffer::{IntraClusterKind, ItemBuffers};
-use crate::visibility::multires::{Averaging, Multires};
+use crate::visibility::multires::{Averaging, Multires, SurfaceFeatureSize};
 use crate::visibility::shaft::{ShaftCulled, ShaftCuller, VisibilityReuse};
 use crate::visibility::{brute_force::BruteForce, bvh::Bvh, Visibility};
 use std::sync::Arc;
@@ -127,7 +127,7 @@ pub enum VisibilityKind {
 }
 
 /// Everything that determines a solution.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct SimulationSettings {
     pub method: MethodKind,
     pub oracle: OracleKind,
@@ -143,6 +143,9 @@ pub struct SimulationSettings {
     /// Multi-resolution visibility: the smallest shadow feature (world units on the receiver) computed
     /// exactly; 0 is exact visibility, ∞ extinction.
     pub feature_size: f64,
+    /// Multi-resolution visibility: feature sizes of their own for the surfaces they name, the first
+    /// that names a surface applying (Sillion–Drettakis §6, importance).
+    pub surface_feature_sizes: Vec<SurfaceFeatureSize>,
     /// Multi-resolution visibility: how a cluster it does not descend into attenuates.
     pub multires_averaging: Averaging,
     /// Intra-cluster visibility (Sillion–Drettakis §6.1) when clustering is on.
@@ -255,6 +258,7 @@ impl Default for SimulationSettings {
             clustering: ClusteringKind::None,
             cluster_tree: ClusterTreeKind::Grid,
             feature_size: 0.0,
+            surface_feature_sizes: Vec::new(),
             multires_averaging: Averaging::default(),
             intra_cluster: IntraClusterKind::ItemBuffer,
             eps: 1e-3,
@@ -329,13 +333,29 @@ pub fn build_visibility_for(
     settings: &SimulationSettings,
 ) -> anyhow::Result<Box<dyn Visibility>> {
     let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();
+    anyhow::ensure!(
+        settings.surface_feature_sizes.is_empty()
+            || settings.visibility == VisibilityKind::Multires,
+        "--feature-size-for applies to --visibility multires only"
+    );
     let rays: Box<dyn Visibility> = match settings.visibility {
-        VisibilityKind::Multires => Box::new(Multires::new(
-            &shapes,
-            settings.cluster_tree,
-            settings.feature_size,
-            settings.multires_averaging,
-        )),
+        VisibilityKind::Multires => {
+            let multires = Multires::new(
+                &shapes,
+                settings.cluster_tree,
+                settings.feature_size,
+                settings.multires_averaging,
+            );
+            Box::new(if settings.surface_feature_sizes.is_empty() {
+                multires
+            } else {
+                multires.with_surface_feature_sizes(surface_feature_sizes(
+                    scene,
+                    settings.feature_size,
+                    &settings.surface_feature_sizes,
+                )?)
+            })
+        }
         VisibilityKind::Extinction => {
             return build_visibility_with(scene, settings.visibility, settings.cluster_tree)
         }
@@ -348,6 +368,42 @@ pub fn build_visibility_for(
             culler: ShaftCuller::new(&shapes),
         }),
     })
+}
+
+/// Per polygon of `scene`, the feature size of the first of `rules` that names it
+/// ([`Scene::polygon_named`]), else `default`; a rule that names no polygon is an error (a misspelt
+/// name would otherwise go unnoticed).
+fn surface_feature_sizes(
+    scene: &Scene,
+    default: f64,
+    rules: &[SurfaceFeatureSize],
+) -> anyhow::Result<Vec<f64>> {
+    let mut named = vec![false; rules.len()];
+    let sizes = scene
+        .polygons
+        .iter()
+        .map(|polygon| {
+            match rules
+                .iter()
+                .position(|rule| scene.polygon_named(polygon, &rule.pattern))
+            {
+                Some(k) => {
+                    named[k] = true;
+                    rules[k].size
+                }
+                None => default,
+            }
+        })
+        .collect();
+    if let Some(k) = named.iter().position(|&n| !n) {
+        anyhow::bail!(
+            "--feature-size-for {}: no surface's object or material name matches '{}' (or an \
+             earlier pattern took all it names)",
+            rules[k].pattern,
+            rules[k].pattern
+        );
+    }
+    Ok(sizes)
 }
 
 /// The oracle named in `settings` for refining `hierarchy` (eq. (2) takes its reference area from it).

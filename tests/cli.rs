@@ -456,6 +456,43 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
             vec!["--multires-averaging", "cluster"],
             "--visibility multires",
         ),
+        (
+            vec!["--feature-size-for", "floor=0"],
+            "--visibility multires",
+        ),
+        (
+            vec![
+                "--visibility",
+                "multires",
+                "--feature-size",
+                "inf",
+                "--feature-size-for",
+                "floor",
+            ],
+            "NAME=S",
+        ),
+        (
+            vec![
+                "--visibility",
+                "multires",
+                "--feature-size",
+                "inf",
+                "--feature-size-for",
+                "floor=-2",
+            ],
+            ">= 0",
+        ),
+        (
+            vec![
+                "--visibility",
+                "multires",
+                "--feature-size",
+                "inf",
+                "--feature-size-for",
+                "flor=0",
+            ],
+            "'flor'",
+        ),
     ] {
         let mut args = [vec!["render", "-q"], args].concat();
         args.extend(["-o", "/tmp/radiosity-never.png"]);
@@ -491,6 +528,25 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(png.exists());
+    // Exact shadows on the floor and the blocks, extinction elsewhere.
+    succeeds(&[
+        "render",
+        "-q",
+        "--visibility",
+        "multires",
+        "--feature-size",
+        "inf",
+        "--feature-size-for",
+        "floor=0",
+        "--feature-size-for",
+        "*_block=0.01",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
 }
 
 /// A reference path traced once (`probe --reference --json`) is compared with later solutions at the

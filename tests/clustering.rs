@@ -216,7 +216,7 @@ fn clustered_and_unclustered_cornell_box_agree() {
             let settings = SimulationSettings {
                 clustering,
                 cluster_tree,
-                ..base
+                ..base.clone()
             };
             let clustered = simulate(&scene, &settings, &quiet()).expect("solve");
             let error = relative_rmse(&clustered.hierarchy, &plain.hierarchy);

@@ -609,7 +609,7 @@ fn cube_mgf_with_its_two_sided_lamp_agrees_with_the_reference() {
     let controlled = SimulationSettings {
         oracle: OracleKind::Error,
         accuracy: Some(Accuracy::Relative(0.1)),
-        ..settings
+        ..settings.clone()
     };
     let (solution, controlled_image, _) = solve_and_render(&scene, &controlled, &camera);
     let h = &solution.hierarchy;

@@ -27,7 +27,7 @@ fn progressive(settings: &SimulationSettings, link_budget: usize) -> SimulationS
             link_budget,
             max_steps: 1000,
         }),
-        ..*settings
+        ..settings.clone()
     }
 }
 

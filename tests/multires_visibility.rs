@@ -249,3 +249,116 @@ fn clear_shafts_are_exact_under_multires_at_every_feature_size() {
         );
     }
 }
+
+/// Sillion–Drettakis §6's importance as a feature size per surface: queries onto a receiver with its
+/// own `s` answer as a structure built for that `s` does, bit for bit, and the others keep the scene's.
+#[test]
+fn a_surface_with_its_own_feature_size_is_queried_at_it() {
+    let groups = ShadowGroups::default();
+    let scene = groups.scene();
+    let shapes = shapes(&groups);
+    let wall = scene
+        .polygons
+        .iter()
+        .position(|p| scene.objects[p.object].name == "wall")
+        .expect("a wall tile");
+    let cube = scene
+        .polygons
+        .iter()
+        .position(|p| scene.objects[p.object].name.starts_with("group"))
+        .expect("a cube face");
+    let sizes: Vec<f64> = (0..shapes.len())
+        .map(|i| if i == wall { 0.0 } else { f64::INFINITY })
+        .collect();
+    let averaged = Multires::new(
+        &shapes,
+        ClusterTreeKind::Grid,
+        f64::INFINITY,
+        Averaging::Leaves,
+    );
+    let per_surface = Multires::new(
+        &shapes,
+        ClusterTreeKind::Grid,
+        f64::INFINITY,
+        Averaging::Leaves,
+    )
+    .with_surface_feature_sizes(sizes);
+    let exact = Bvh::new(&shapes);
+    let mut differ = 0;
+    for (from, to) in wall_to_source(&groups, 200) {
+        let truth = exact.transmittance(from, to);
+        let onto_wall = per_surface.transmittance_onto(from, to, wall);
+        assert_eq!(onto_wall.to_bits(), truth.to_bits(), "{from} → {to}");
+        let elsewhere = averaged.transmittance(from, to);
+        assert_eq!(
+            per_surface.transmittance_onto(from, to, cube).to_bits(),
+            elsewhere.to_bits()
+        );
+        assert_eq!(
+            per_surface.transmittance(from, to).to_bits(),
+            elsewhere.to_bits()
+        );
+        differ += usize::from(onto_wall != elsewhere);
+    }
+    // Extinction never gives exact 0 or 1 through the groups: nearly every answer differs.
+    assert!(differ > 700, "{differ} of 800 differ");
+}
+
+/// In a solve: with black cubes the wall receives only the source's direct light, so a wall given
+/// `--feature-size-for wall=0` in a scene averaged everywhere else (s = ∞) gets exact visibility's
+/// solution, while the scene's s alone washes its shadows out.
+#[test]
+fn a_solve_gives_the_named_surfaces_their_own_feature_size() {
+    use radiosity::pipeline::{simulate, SimulationSettings, VisibilityKind};
+    use radiosity::progress::Progress;
+    use radiosity::visibility::multires::SurfaceFeatureSize;
+    use radiosity::visibility::shaft::VisibilityReuse;
+
+    let groups = ShadowGroups {
+        cube_sizes: vec![0.12, 0.24],
+        cube_reflectance: 0.0,
+        ..ShadowGroups::default()
+    };
+    let scene = groups.scene();
+    let wall_radiance = |feature_size: f64, for_wall: Option<f64>| {
+        let settings = SimulationSettings {
+            visibility: VisibilityKind::Multires,
+            // Every query to multires: shaft tests would settle these links exactly.
+            visibility_reuse: VisibilityReuse::None,
+            feature_size,
+            surface_feature_sizes: for_wall
+                .map(|size| SurfaceFeatureSize {
+                    pattern: "wall".into(),
+                    size,
+                })
+                .into_iter()
+                .collect(),
+            ..Default::default()
+        };
+        let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+        let h = &solution.hierarchy;
+        let wall: Vec<f64> = (0..h.elements.len() as u32)
+            .filter(|&id| {
+                h.element(id).surface().is_some()
+                    && h.element(id).is_leaf()
+                    && scene.objects[scene.polygons[h.patch_of(id).polygon].object].name == "wall"
+            })
+            .map(|id| h.average_radiance(id).g)
+            .collect();
+        wall
+    };
+    let exact = wall_radiance(0.0, None);
+    let per_surface = wall_radiance(f64::INFINITY, Some(0.0));
+    let averaged = wall_radiance(f64::INFINITY, None);
+    assert_eq!(per_surface, exact);
+    // Averaged, the umbrae the shaft tests do not find wholly blocked wash out: the wall's leaves
+    // move by a good share of their light.
+    let moved: f64 = averaged
+        .iter()
+        .zip(&exact)
+        .map(|(a, e)| (a - e).abs())
+        .sum();
+    let total: f64 = exact.iter().sum();
+    eprintln!("moved {}", moved / total);
+    assert!(moved > 0.05 * total, "{moved} of {total}");
+}

@@ -17,7 +17,7 @@ use common::{furnace_with_cubes, quiet, with_threads};
 fn solve(scene: &Scene, settings: &SimulationSettings, reuse: VisibilityReuse) -> Solution {
     let settings = SimulationSettings {
         visibility_reuse: reuse,
-        ..*settings
+        ..settings.clone()
     };
     simulate(scene, &settings, &quiet()).expect("solve")
 }

@@ -214,6 +214,12 @@ pub struct SolveArgs {
     /// 0 is exact visibility, inf extinction.
     #[arg(long, value_name = "S")]
     pub feature_size: Option<f64>,
+    /// Multires visibility: feature size S for the surfaces whose object or material name matches NAME
+    /// (`*` for any run of characters; the first option that names a surface applies), the others
+    /// keeping --feature-size: a small S where the shadows matter (Sillion–Drettakis §6). It acts on
+    /// the visibility queries shaft tests leave open (--visibility-reuse). Repeatable.
+    #[arg(long, value_name = "NAME=S")]
+    pub feature_size_for: Vec<crate::visibility::multires::SurfaceFeatureSize>,
     /// Multires visibility: a cluster it does not descend into attenuates by the κ of its leaf clusters
     /// summed along the ray (leaves, the default: equal to --visibility extinction at --feature-size
     /// inf), or as a whole by its own κ = ΣA/(4V) (cluster: the paper's, O(1) per cluster, coarser).
@@ -336,6 +342,10 @@ impl SolveArgs {
             (_, Some(_)) => anyhow::bail!("--feature-size applies to --visibility multires only"),
         };
         anyhow::ensure!(
+            self.feature_size_for.is_empty() || self.visibility == VisibilityKind::Multires,
+            "--feature-size-for applies to --visibility multires only"
+        );
+        anyhow::ensure!(
             self.multires_averaging.is_none() || self.visibility == VisibilityKind::Multires,
             "--multires-averaging applies to --visibility multires only"
         );
@@ -361,6 +371,7 @@ impl SolveArgs {
             clustering: self.clustering,
             cluster_tree: self.cluster_tree,
             feature_size,
+            surface_feature_sizes: self.feature_size_for.clone(),
             multires_averaging: self.multires_averaging.unwrap_or_default(),
             intra_cluster: self.intra_cluster,
             eps,

@@ -67,7 +67,7 @@ impl MeasureCommand {
         let mut levels = Vec::new();
         let mut last_stats = None;
         for &eps in &eps_levels {
-            let mut level_settings = settings;
+            let mut level_settings = settings.clone();
             level_settings.eps = eps;
             let solution = simulate(&scene, &level_settings, progress)?;
             let lines = lines.get_or_insert_with(|| {

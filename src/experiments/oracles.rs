@@ -83,7 +83,10 @@ pub fn solve_at_target(
     let mut solves = 0;
     while solves < max_solves.max(1) {
         solves += 1;
-        let settings = SimulationSettings { eps, ..*base };
+        let settings = SimulationSettings {
+            eps,
+            ..base.clone()
+        };
         let start = Instant::now();
         let solution = simulate(scene, &settings, progress)?;
         let seconds = start.elapsed().as_secs_f64();
@@ -141,7 +144,7 @@ pub fn run_one(
         oracle_samples: samples,
         // The paper's eq. (1), without the power oracle's visibility term.
         shadow_levels: 0.0,
-        ..experiment.base
+        ..experiment.base.clone()
     };
     let (solution, eps, solves, seconds) = solve_at_target(
         scene,

@@ -115,7 +115,7 @@ impl RunStats {
             error: r.error.clone(),
             refused_by_budget: r.refused_by_budget,
             steps: r.steps.clone(),
-            settings: *settings,
+            settings: settings.clone(),
             information: None,
         }
     }

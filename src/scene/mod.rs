@@ -215,6 +215,20 @@ impl Scene {
         &self.materials[polygon.material]
     }
 
+    /// Whether `polygon`'s object or material name matches `pattern`, in which `*` stands for any run
+    /// of characters (`desk*`, `*glass*`): how options name surfaces (`--feature-size-for`).
+    pub fn polygon_named(&self, polygon: &Polygon, pattern: &str) -> bool {
+        let object = self.objects.get(polygon.object).map(|o| o.name.as_str());
+        let material = self
+            .materials
+            .get(polygon.material)
+            .map(|m| m.name.as_str());
+        [object, material]
+            .into_iter()
+            .flatten()
+            .any(|name| matches_pattern(pattern, name))
+    }
+
     /// Total surface area of the input polygons (each polygon counted once, whatever its sidedness).
     pub fn total_area(&self) -> f64 {
         self.polygons.iter().map(|p| p.shape.area()).sum()
@@ -431,5 +445,55 @@ impl fmt::Display for SceneSummary {
         let p = self.emitted_power;
         writeln!(f, "emitted power: ({:.6}, {:.6}, {:.6}) W", p.r, p.g, p.b)?;
         write!(f, "warnings:      {}", self.warnings)
+    }
+}
+
+/// Whether `name` matches `pattern`, where each `*` matches any run of characters (none included) and
+/// everything else itself.
+fn matches_pattern(pattern: &str, name: &str) -> bool {
+    let mut parts = pattern.split('*');
+    let first = parts.next().unwrap_or("");
+    let Some(mut rest) = name.strip_prefix(first) else {
+        return false;
+    };
+    let middle: Vec<&str> = parts.collect();
+    let Some((last, between)) = middle.split_last() else {
+        return rest.is_empty();
+    };
+    for part in between {
+        match rest.find(part) {
+            Some(at) => rest = &rest[at + part.len()..],
+            None => return false,
+        }
+    }
+    rest.len() >= last.len() && rest.ends_with(last)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::matches_pattern;
+
+    #[test]
+    fn patterns_match_whole_names_with_stars_for_any_run() {
+        for (pattern, name) in [
+            ("desk", "desk"),
+            ("desk*", "desk"),
+            ("desk*", "desk_top"),
+            ("*top", "desk_top"),
+            ("*", ""),
+            ("d*k*p", "desk_top"),
+            ("a*b", "ab"),
+        ] {
+            assert!(matches_pattern(pattern, name), "{pattern} {name}");
+        }
+        for (pattern, name) in [
+            ("desk", "desk_top"),
+            ("desk", "des"),
+            ("*top", "topdesk"),
+            ("a*a", "a"),
+            ("d*z*p", "desk_top"),
+        ] {
+            assert!(!matches_pattern(pattern, name), "{pattern} {name}");
+        }
     }
 }

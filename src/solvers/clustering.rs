@@ -306,7 +306,10 @@ pub fn cluster_can_interact(h: &Hierarchy, receiver: ElementId, source: ElementI
 /// (back faces, patches hidden by the cluster's own contents) is not counted a second time as
 /// occluded.
 enum SampleEnd<'a> {
-    Surface(&'a crate::geometry::Shape),
+    Surface {
+        shape: &'a crate::geometry::Shape,
+        polygon: usize,
+    },
     Cluster {
         surfaces: &'a [ElementId],
         groups: Groups<'a>,
@@ -318,7 +321,10 @@ enum SampleEnd<'a> {
 impl<'a> SampleEnd<'a> {
     fn new(h: &'a Hierarchy, id: ElementId, toward: DVec3) -> Self {
         match &h.element(id).kind {
-            ElementKind::Surface(s) => SampleEnd::Surface(&s.shape),
+            ElementKind::Surface(s) => SampleEnd::Surface {
+                shape: &s.shape,
+                polygon: h.patch_of(id).polygon,
+            },
             ElementKind::Cluster(c) => {
                 let groups = groups_toward(h, id, toward);
                 let cumulative = groups
@@ -360,12 +366,14 @@ impl<'a> SampleEnd<'a> {
         }
     }
 
-    /// A sample point and the normal of the surface it lies on, or `None` when nothing at this end
-    /// faces the other.
-    fn sample(&self, h: &Hierarchy, rng: &mut Pcg64Mcg) -> Option<(DVec3, DVec3)> {
+    /// A sample point, the normal of the surface it lies on and its polygon, or `None` when nothing
+    /// at this end faces the other.
+    fn sample(&self, h: &Hierarchy, rng: &mut Pcg64Mcg) -> Option<(DVec3, DVec3, usize)> {
         let uv = DVec2::new(rng.random(), rng.random());
         match self {
-            SampleEnd::Surface(shape) => Some((shape.sample_uniform(uv), shape.normal())),
+            SampleEnd::Surface { shape, polygon } => {
+                Some((shape.sample_uniform(uv), shape.normal(), *polygon))
+            }
             SampleEnd::Cluster {
                 surfaces,
                 groups,
@@ -381,7 +389,8 @@ impl<'a> SampleEnd<'a> {
                     .min(cumulative.len() - 1);
                 let member = surfaces[groups.sample_member(index, rng) as usize];
                 let point = h.element(member).shape().sample_uniform(uv);
-                Some((point, h.patch_of(member).normal))
+                let patch = h.patch_of(member);
+                Some((point, patch.normal, patch.polygon))
             }
         }
     }
@@ -421,18 +430,19 @@ pub fn couple_cluster(
     // The receiver's sample points (with their surfaces' normals) are kept when drawn here (`x`
     // `None`): a cluster receiver's kernel error is taken at them.
     let mut receiver_points = Vec::new();
-    let mut sample_visibility = |x: Option<DVec3>, samples: usize, rng: &mut Pcg64Mcg| {
+    // `x`: a receiver point and its polygon, or `None` to draw one per sample.
+    let mut sample_visibility = |x: Option<(DVec3, usize)>, samples: usize, rng: &mut Pcg64Mcg| {
         let mut total = 0.0;
         for _ in 0..samples {
             let from = match x {
                 Some(x) => Some(x),
-                None => receiver_end.sample(h, rng).map(|(point, normal)| {
+                None => receiver_end.sample(h, rng).map(|(point, normal, polygon)| {
                     receiver_points.push((point, normal));
-                    point
+                    (point, polygon)
                 }),
             };
-            if let (Some(from), Some((to, _))) = (from, source_end.sample(h, rng)) {
-                total += visibility.transmittance_past(from, to, &inside_an_end);
+            if let (Some((from, polygon)), Some((to, ..))) = (from, source_end.sample(h, rng)) {
+                total += visibility.transmittance_past_onto(from, to, polygon, &inside_an_end);
                 rays += 1;
             }
         }
@@ -494,7 +504,8 @@ pub fn couple_cluster(
         }
         ElementKind::Surface(surface) => {
             let shape = &surface.shape;
-            let normal = h.patches[surface.patch as usize].normal;
+            let patch = &h.patches[surface.patch as usize];
+            let (normal, polygon) = (patch.normal, patch.polygon);
             let nodes = nodes_on(shape, rule(shape.domain(), settings.cubature_degree));
             let phi = basis_values(&h.basis, shape, &nodes);
             let mut inner = vec![0.0; nodes.len()];
@@ -508,8 +519,12 @@ pub fn couple_cluster(
                     continue;
                 }
                 unoccluded += x.weight * open / r.area;
-                inner[k] =
-                    open * sample_visibility(Some(x.point), CLUSTER_VISIBILITY_SAMPLES, &mut rng);
+                inner[k] = open
+                    * sample_visibility(
+                        Some((x.point, polygon)),
+                        CLUSTER_VISIBILITY_SAMPLES,
+                        &mut rng,
+                    );
                 let w = x.weight / r.area;
                 for alpha in 0..size {
                     block[alpha * size] += w * phi[k * size + alpha] * inner[k];
@@ -1119,9 +1134,10 @@ fn exposure(
         let facing = h.patches[patch as usize].normal.dot(along) > 0.0;
         facing
             && visible.fraction(k) > 0.0
-            && visibility.transmittance_past(
+            && visibility.transmittance_past_onto(
                 h.element(patch).shape().centroid(),
                 target,
+                h.patch_of(patch).polygon,
                 &transparent,
             ) >= 0.5
     }))

@@ -217,6 +217,7 @@ fn couple_in_full(
         occluders,
         n_r,
         n_s,
+        receiver_polygon: hierarchy.patch_of(receiver).polygon,
         source: s_shape,
         y_nodes,
         phi_y,
@@ -332,6 +333,8 @@ struct SourceSampler<'a> {
     occluders: Option<(&'a [u32], &'a crate::visibility::shaft::ShaftCuller)>,
     n_r: DVec3,
     n_s: DVec3,
+    /// The receiver's polygon (for a feature size of its own, [`Visibility::transmittance_onto`]).
+    receiver_polygon: usize,
     source: &'a Shape,
     y_nodes: &'a [Node],
     phi_y: &'a [f64],
@@ -459,7 +462,10 @@ impl SourceSampler<'_> {
                                 1.0
                             }
                         }
-                        None => self.visibility.transmittance(x, y.point),
+                        None => {
+                            self.visibility
+                                .transmittance_onto(x, y.point, self.receiver_polygon)
+                        }
                     }
                 }
             };

@@ -124,7 +124,8 @@ fn leaf_direct(
     let size = basis.size();
     let e = hierarchy.element(id);
     let shape = e.shape();
-    let normal = hierarchy.patch_of(id).normal;
+    let patch = hierarchy.patch_of(id);
+    let (normal, polygon) = (patch.normal, patch.polygon);
     let nodes = nodes_on(shape, rule(shape.domain(), degree));
     // The centroid too (weight 0: judged, not integrated): the nodes of a symmetric rule can all see
     // the same value of a peak centred on the leaf (a luminaire straight above its middle), which a
@@ -156,7 +157,7 @@ fn leaf_direct(
                 .map(|l| {
                     l.irradiance(node.point, normal, |from, to| {
                         rays += 1;
-                        visibility.transmittance(from, to)
+                        visibility.transmittance_onto(from, to, polygon)
                     })
                 })
                 .sum::<Rgb>()

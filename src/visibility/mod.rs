@@ -56,6 +56,14 @@ pub trait Visibility: Sync + Send {
         }
     }
 
+    /// [`transmittance`](Self::transmittance) of light arriving on polygon `receiver` (an index of
+    /// `Scene::polygons`). Multi-resolution visibility sizes the shadows by that surface's own feature
+    /// size where the user gave one (Sillion–Drettakis §6: importance as a feature size per surface);
+    /// the other back ends do not depend on the receiver.
+    fn transmittance_onto(&self, from: DVec3, to: DVec3, _receiver: usize) -> f64 {
+        self.transmittance(from, to)
+    }
+
     /// [`occluded`](Self::occluded) with the polygons `transparent` accepts let through. The default
     /// steps from closest hit to closest hit; a back end with its own any-hit traversal skips them there.
     fn occluded_past(
@@ -93,6 +101,18 @@ pub trait Visibility: Sync + Send {
         } else {
             1.0
         }
+    }
+
+    /// [`transmittance_past`](Self::transmittance_past) of light arriving on polygon `receiver`, as
+    /// [`transmittance_onto`](Self::transmittance_onto) is of [`transmittance`](Self::transmittance).
+    fn transmittance_past_onto(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        _receiver: usize,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        self.transmittance_past(from, to, transparent)
     }
 
     /// Short name for reports ("bvh", "embree", "brute-force").

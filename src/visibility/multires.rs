@@ -40,8 +40,14 @@
 //! cluster averaging the root cluster's `κ`. In a solve, links whose shaft test is clear or blocked
 //! take that exact verdict instead of a query ([`super::shaft::ShaftCulled`], `--visibility-reuse`):
 //! office3 at `s` = 0.05, 18.0 → 14.1 s; BENCHMARKS.md, "Shaft tests under multires".
-//! The feature size is one for the whole scene: the `Visibility` trait does not say which surface
-//! receives, so a per-surface feature size (importance, §6) is not implemented.
+//!
+//! **A feature size per surface** (§6: "using the concept of importance to assign different feature
+//! sizes of interest to different surfaces"): `--feature-size-for NAME=S` gives the surfaces whose
+//! object or material name matches `NAME` their own `s` ([`SurfaceFeatureSize`],
+//! [`Multires::with_surface_feature_sizes`]); queries that know the receiving polygon
+//! ([`Visibility::transmittance_onto`]: surface and cluster links, the luminaires' first gather) use
+//! it, the others the scene's `--feature-size`. A desk whose shadows matter can be solved exactly in
+//! a room averaged elsewhere.
 
 use super::brute_force::ray_polygon;
 use super::extinction::{Extinction, Segment, WalkStack};
@@ -98,6 +104,43 @@ pub struct Multires {
     bsize: Vec<f64>,
     /// The user's feature size `s` on the receiver (world units), in `[0, ∞]`.
     feature_size: f64,
+    /// Per polygon (receiver), its own `s` ([`Multires::with_surface_feature_sizes`]); empty: every
+    /// receiver takes `feature_size`.
+    surface_feature_sizes: Vec<f64>,
+}
+
+/// `--feature-size-for NAME=S`: the feature size `S` (world units, `inf` allowed) for the surfaces whose
+/// object or material name matches `NAME` (`*` matches any run of characters).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SurfaceFeatureSize {
+    pub pattern: String,
+    pub size: f64,
+}
+
+impl std::str::FromStr for SurfaceFeatureSize {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let (pattern, size) = text
+            .rsplit_once('=')
+            .ok_or_else(|| format!("'{text}' is not NAME=S"))?;
+        let size: f64 = size
+            .trim()
+            .parse()
+            .map_err(|_| format!("'{size}' is not a feature size (a number, or inf)"))?;
+        if size.is_nan() || size < 0.0 {
+            return Err(format!(
+                "the feature size of '{pattern}' must be >= 0, not {size}"
+            ));
+        }
+        if pattern.is_empty() {
+            return Err(format!("'{text}' names no surface"));
+        }
+        Ok(SurfaceFeatureSize {
+            pattern: pattern.to_string(),
+            size,
+        })
+    }
 }
 
 impl Multires {
@@ -133,7 +176,33 @@ impl Multires {
             shapes: shapes.to_vec(),
             bsize,
             feature_size,
+            surface_feature_sizes: Vec::new(),
         }
+    }
+
+    /// The same structure with a feature size per polygon of `shapes` (receivers; `sizes[i] >= 0`),
+    /// which queries that name their receiving polygon ([`Visibility::transmittance_onto`]) use
+    /// instead of the scene's.
+    pub fn with_surface_feature_sizes(mut self, sizes: Vec<f64>) -> Self {
+        assert_eq!(
+            sizes.len(),
+            self.shapes.len(),
+            "one feature size per polygon"
+        );
+        assert!(
+            sizes.iter().all(|&s| s >= 0.0),
+            "feature sizes must be non-negative"
+        );
+        self.surface_feature_sizes = sizes;
+        self
+    }
+
+    /// The feature size of receiving polygon `receiver`: its own, or the scene's.
+    pub fn feature_size_on(&self, receiver: usize) -> f64 {
+        self.surface_feature_sizes
+            .get(receiver)
+            .copied()
+            .unwrap_or(self.feature_size)
     }
 
     /// BSIZE of cluster `node` (world units).
@@ -165,8 +234,13 @@ pub struct Trace {
 
 impl Multires {
     /// The transmittance from the receiving end `from` to the source end `to` (module documentation),
-    /// with the work it took.
+    /// with the work it took, at the scene's feature size.
     pub fn trace(&self, from: DVec3, to: DVec3) -> Trace {
+        self.trace_at(from, to, self.feature_size)
+    }
+
+    /// [`Multires::trace`] for feature size `feature_size` on the receiver.
+    pub fn trace_at(&self, from: DVec3, to: DVec3, feature_size: f64) -> Trace {
         let mut trace = Trace {
             transmittance: 1.0,
             ..Default::default()
@@ -185,7 +259,7 @@ impl Multires {
             // The fictitious blocker at the middle of the crossed part, seen from the source end.
             let to_source = (1.0 - 0.5 * (t0 + t1)) * segment.length;
             let umbra = self.bsize[n as usize] * segment.length / to_source;
-            if umbra < self.feature_size {
+            if umbra < feature_size {
                 depth += match self.averaging {
                     Averaging::Cluster => {
                         self.extinction
@@ -337,6 +411,11 @@ impl Visibility for Multires {
         self.trace(from, to).transmittance
     }
 
+    fn transmittance_onto(&self, from: DVec3, to: DVec3, receiver: usize) -> f64 {
+        self.trace_at(from, to, self.feature_size_on(receiver))
+            .transmittance
+    }
+
     fn transmittance_past(
         &self,
         from: DVec3,
@@ -344,6 +423,16 @@ impl Visibility for Multires {
         _transparent: &dyn Fn(usize) -> bool,
     ) -> f64 {
         self.transmittance(from, to)
+    }
+
+    fn transmittance_past_onto(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        receiver: usize,
+        _transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        self.transmittance_onto(from, to, receiver)
     }
 
     fn name(&self) -> &'static str {

@@ -505,6 +505,10 @@ impl Visibility for ShaftCulled {
         self.rays.transmittance(from, to)
     }
 
+    fn transmittance_onto(&self, from: DVec3, to: DVec3, receiver: usize) -> f64 {
+        self.rays.transmittance_onto(from, to, receiver)
+    }
+
     fn occluded_past(
         &self,
         ray: &Ray,
@@ -522,6 +526,17 @@ impl Visibility for ShaftCulled {
         transparent: &dyn Fn(usize) -> bool,
     ) -> f64 {
         self.rays.transmittance_past(from, to, transparent)
+    }
+
+    fn transmittance_past_onto(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        receiver: usize,
+        transparent: &dyn Fn(usize) -> bool,
+    ) -> f64 {
+        self.rays
+            .transmittance_past_onto(from, to, receiver, transparent)
     }
 
     fn name(&self) -> &'static str {
