@@ -625,6 +625,12 @@ fn probe_at_points_the_camera_sees() {
         String::from_utf8_lossy(&again.stderr)
     );
     assert!(String::from_utf8_lossy(&again.stdout).contains("# luminance error at"));
+    // What was probed: the solution's estimate and size.
+    let header = String::from_utf8_lossy(&again.stdout);
+    assert!(
+        header.contains("# solution: estimated error") && header.contains(" links, "),
+        "{header}"
+    );
     let moved = radiosity(
         &[
             &common[..],

@@ -161,6 +161,15 @@ impl ProbeCommand {
             return Ok(());
         }
         outln!("# {name}: {} points", results.len())?;
+        let h = &solution.hierarchy;
+        outln!(
+            "# solution: {}; {} elements ({} leaves), {} links, {} passes",
+            super::render::error_summary(&solution.report.error, self.units),
+            h.elements.len(),
+            h.leaf_count(),
+            h.link_count(),
+            solution.report.passes
+        )?;
         out!(
             "{:>5} {:>30} {:>6} {:>35}",
             "line",
