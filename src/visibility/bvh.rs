@@ -157,8 +157,10 @@ fn to_f32_edge(e: DVec3) -> [f32; 3] {
     }
 }
 
-/// 2^900: `|x| * 2^900 > |det|` means `x / det` is far from underflowing to zero.
-const TWO_POW_900: f64 = f64::from_bits((1023 + 900) << 52);
+/// `-2^-60`: `x < -2^-60 |det|` means that `x / det` is negative and far from underflowing to `-0`
+/// (one comparison with a bound computed once per lane, where testing the sign and the size of `x`
+/// cost five operations).
+const NEG_TINY_RATIO: f64 = -1.0 / 1_152_921_504_606_846_976.0;
 /// Bound on the filter's error relative to the absolute sum of the products it adds up (see
 /// [`classify`]): `2^-22`, twice the `2^-23` that the `f32` edges and the `f64` roundings can cause.
 const FILTER_ERROR: f64 = 1.0 / 4_194_304.0;
@@ -269,7 +271,7 @@ fn largest(v: DVec3) -> f64 {
 /// roundings of the bounds themselves and of the comparisons below (each `2^-53` of terms no larger
 /// than the sum) and of the reference's divisions (`2^-52`). Given `|det| > err_det`, the
 /// determinant's sign is the reference's, and (sign-normalised, `a = |det|`):
-/// - `U + err_U < 0` means `u < 0` (the `2^900` test keeps `U / det` from underflowing to `-0`),
+/// - `U + err_U < -2^-60 a` means `u < 0` (and `U / det` does not underflow to `-0`),
 ///   `U - err_U > a + err_det` means `u > 1`; likewise `w < 0` and `u + w > 1`;
 /// - `T + err_T < t_min (a - err_det)` means `t < t_min` (for `t_min >= 0`), `T - err_T > t_max (a +
 ///   err_det)` means `t > t_max` (for `t_max >= 0`): a ray leaving a surface is rejected by its own
@@ -301,19 +303,19 @@ fn classify(ray: &FilterRay, a: DVec3, e1: DVec3, e2: DVec3) -> (bool, bool) {
     }
     let sign = if det < 0.0 { -1.0 } else { 1.0 };
     let far = abs + err_det;
-    let negative = |x: f64| x < 0.0 && x.abs() * TWO_POW_900 > abs;
+    let tiny = abs * NEG_TINY_RATIO;
     let (m_s, m_1, m_2) = (largest(s_abs), largest(e1_abs), largest(e2_abs));
     let u = sign * s.dot(p);
     let err_u = ray.error_d * (m_s * m_2) + FILTER_FLOOR;
     let (u_lo, u_hi) = (u - err_u, u + err_u);
-    if negative(u_hi) || u_lo > far {
+    if u_hi < tiny || u_lo > far {
         return (false, false);
     }
     let q = s.cross(e1);
     let w = sign * d.dot(q);
     let err_w = ray.error_d * (m_s * m_1) + FILTER_FLOOR;
     let (w_lo, w_hi) = (w - err_w, w + err_w);
-    if negative(w_hi) || u_lo + w_lo > far {
+    if w_hi < tiny || u_lo + w_lo > far {
         return (false, false);
     }
     let t = sign * e2.dot(q);
@@ -1072,10 +1074,7 @@ macro_rules! avx_kernels {
             let sign = and(det, sign_bit);
             let (far, near) = (add(det_abs, err_det), sub(det_abs, err_det));
             let zero = _mm256_setzero_pd();
-            let negative = |x: __m256d| {
-                let huge = mul(abs(x), _mm256_set1_pd(TWO_POW_900));
-                and(lt(x, zero), gt(huge, det_abs))
-            };
+            let tiny = mul(det_abs, _mm256_set1_pd(NEG_TINY_RATIO));
             let u = _mm256_xor_pd(dot(s, p), sign);
             let (m_s, m_1, m_2) = (largest(s_abs), largest(e1_abs), largest(e2_abs));
             let error_d = _mm256_set1_pd(ray.error_d);
@@ -1091,8 +1090,8 @@ macro_rules! avx_kernels {
             let splat1 = _mm256_set1_pd;
             let reject = or(
                 or(
-                    or(negative(u_hi), gt(u_lo, far)),
-                    or(negative(w_hi), gt(add(u_lo, w_lo), far)),
+                    or(lt(u_hi, tiny), gt(u_lo, far)),
+                    or(lt(w_hi, tiny), gt(add(u_lo, w_lo), far)),
                 ),
                 or(
                     lt(t_hi, mul(splat1(ray.reject_lo), near)),
