@@ -229,7 +229,10 @@ struct Lanes {
 }
 /// `x . y` as the filter computes it: a product and two fused multiply-adds (one rounding fewer
 /// per term, and two operations fewer than a product per term and two sums; the SIMD filters
-/// compute the same fused operations, so they agree bit for bit).
+/// compute the same fused operations, so they agree bit for bit). The filter is a chain of such
+/// operations on every leaf a ray visits, and fusing them took a tenth of its time off office3's
+/// rays. Where the CPU has no FMA only the portable kernel runs, and `mul_add` is a library call
+/// there: correctly rounded, as the error model needs, only slower.
 #[inline(always)]
 fn dot(x: DVec3, y: DVec3) -> f64 {
     x.z.mul_add(y.z, x.y.mul_add(y.y, x.x * y.x))
@@ -275,8 +278,9 @@ fn largest(v: DVec3) -> f64 {
 /// Error model: the determinant `det = e1 . (d x e2)` and the numerators `U = s . (d x e2)`,
 /// `W = d . (s x e1)`, `T = e2 . (s x e1)` are sums of six products of three inputs. The `f32` edges
 /// change each product by at most `2 * 2^-24` of itself (one rounding per edge, relative `2^-24`),
-/// and both `f64` evaluations add a few `2^-53`, so each computed value is within about `2^-23` of
-/// the products' absolute sum of the reference's value. `det` and `T` are triple products of `e1`,
+/// and both `f64` evaluations add a few `2^-53` (the filter's fewer: it fuses its products and
+/// sums), so each computed value is within about `2^-23` of the products' absolute sum of the
+/// reference's value. `det` and `T` are triple products of `e1`,
 /// `e2` and `d` or `s`, so their sums are `|d| . n` and `|s| . n` with one `n = |e1| x+ |e2|`
 /// ([`abs_cross`]). For `U` and `W` a cheaper bound serves: each product is at most the product of
 /// its factors' largest components (`m_d`, `m_s`, `m_1`, `m_2` for `d`, `s`, `e1`, `e2`), so their
