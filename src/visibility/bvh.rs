@@ -230,7 +230,7 @@ struct Lanes {
 /// `x . y` as the filter computes it: a product and two fused multiply-adds (one rounding fewer
 /// per term, and two operations fewer than a product per term and two sums; the SIMD filters
 /// compute the same fused operations, so they agree bit for bit). The filter is a chain of such
-/// operations on every leaf a ray visits, and fusing them took a tenth of its time off office3's
+/// operations on every leaf a ray visits, and fusing them took 5-10% of its time off office3's
 /// rays. Where the CPU has no FMA only the portable kernel runs, and `mul_add` is a library call
 /// there: correctly rounded, as the error model needs, only slower.
 #[inline(always)]
