@@ -105,6 +105,15 @@ impl ProbeCommand {
             attach_stored_reference(&mut results, path)?;
         }
         let compared = self.reference || self.against.is_some();
+        let h = &solution.hierarchy;
+        let solved = format!(
+            "# solution: {}; {} elements ({} leaves), {} links, {} passes",
+            super::render::error_summary(&solution.report.error, self.units),
+            h.elements.len(),
+            h.leaf_count(),
+            h.link_count(),
+            solution.report.passes
+        );
         if self.units == Units::Photometric {
             let gather = IrradianceGather::new(
                 &solution.hierarchy,
@@ -125,6 +134,7 @@ impl ProbeCommand {
                 "# {name}: {} points; luminance cd/m², illuminance lux (179 lm/W × Y)",
                 results.len()
             )?;
+            outln!("{solved}")?;
             out!(
                 "{:>5} {:>30} {:>6} {:>12} {:>12} {:>10}",
                 "line",
@@ -161,15 +171,7 @@ impl ProbeCommand {
             return Ok(());
         }
         outln!("# {name}: {} points", results.len())?;
-        let h = &solution.hierarchy;
-        outln!(
-            "# solution: {}; {} elements ({} leaves), {} links, {} passes",
-            super::render::error_summary(&solution.report.error, self.units),
-            h.elements.len(),
-            h.leaf_count(),
-            h.link_count(),
-            solution.report.passes
-        )?;
+        outln!("{solved}")?;
         out!(
             "{:>5} {:>30} {:>6} {:>35}",
             "line",
