@@ -445,6 +445,17 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
 
 #[test]
 fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
+    // Extinction everywhere but where `rule` says.
+    let multires_for = |rule: &'static str| {
+        vec![
+            "--visibility",
+            "multires",
+            "--feature-size",
+            "inf",
+            "--feature-size-for",
+            rule,
+        ]
+    };
     for (args, says) in [
         (vec!["--visibility", "multires"], "--feature-size"),
         (
@@ -460,39 +471,9 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
             vec!["--feature-size-for", "floor=0"],
             "--visibility multires",
         ),
-        (
-            vec![
-                "--visibility",
-                "multires",
-                "--feature-size",
-                "inf",
-                "--feature-size-for",
-                "floor",
-            ],
-            "NAME=S",
-        ),
-        (
-            vec![
-                "--visibility",
-                "multires",
-                "--feature-size",
-                "inf",
-                "--feature-size-for",
-                "floor=-2",
-            ],
-            ">= 0",
-        ),
-        (
-            vec![
-                "--visibility",
-                "multires",
-                "--feature-size",
-                "inf",
-                "--feature-size-for",
-                "flor=0",
-            ],
-            "'flor'",
-        ),
+        (multires_for("floor"), "NAME=S"),
+        (multires_for("floor=-2"), ">= 0"),
+        (multires_for("flor=0"), "'flor'"),
     ] {
         let mut args = [vec!["render", "-q"], args].concat();
         args.extend(["-o", "/tmp/radiosity-never.png"]);
