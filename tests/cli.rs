@@ -445,6 +445,12 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
 
 #[test]
 fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
+    // The names a rule can match: `info --objects` lists the built-in box's.
+    let objects = succeeds(&["info", "--objects"]);
+    assert!(
+        objects.contains("object floor") && objects.contains("object short_block"),
+        "{objects}"
+    );
     // Extinction everywhere but where `rule` says.
     let multires_for = |rule: &'static str| {
         vec![

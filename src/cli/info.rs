@@ -11,6 +11,10 @@ pub struct InfoCommand {
     /// List every material with its reflectance and emission.
     #[arg(long)]
     pub materials: bool,
+    /// List every object (MGF `o`, OBJ object or group, glTF node) with its polygons and area: the
+    /// names that options naming surfaces match (`--feature-size-for NAME=S`), as materials are.
+    #[arg(long)]
+    pub objects: bool,
 }
 
 impl InfoCommand {
@@ -44,6 +48,18 @@ impl InfoCommand {
                         "one-sided"
                     }
                 )?;
+            }
+        }
+        if self.objects {
+            let mut counts = vec![(0usize, 0.0f64); scene.objects.len()];
+            for p in &scene.polygons {
+                if let Some((count, area)) = counts.get_mut(p.object) {
+                    *count += 1;
+                    *area += p.shape.area();
+                }
+            }
+            for (o, (count, area)) in scene.objects.iter().zip(counts) {
+                outln!("object {:<24} {count:>7} polygons  area {area:.4}", o.name)?;
             }
         }
         Ok(())
