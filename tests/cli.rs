@@ -615,7 +615,9 @@ fn probe_at_points_the_camera_sees() {
     // What was probed: the solution's estimate and size.
     let header = String::from_utf8_lossy(&again.stdout);
     assert!(
-        header.contains("# solution: estimated error") && header.contains(" links, "),
+        header.contains("# solution: estimated error")
+            && header.contains("of the mean radiance")
+            && header.contains(" links, "),
         "{header}"
     );
     let moved = radiosity(

@@ -108,7 +108,11 @@ impl ProbeCommand {
         let h = &solution.hierarchy;
         let solved = format!(
             "# solution: {}; {} elements ({} leaves), {} links, {} passes",
-            super::render::error_summary(&solution.report.error, self.units),
+            super::render::error_summary(
+                &solution.report.error,
+                self.units,
+                crate::pipeline::mean_radiance_estimate(h)
+            ),
             h.elements.len(),
             h.leaf_count(),
             h.link_count(),

@@ -214,7 +214,11 @@ impl RenderCommand {
                 "{name}: {}; {} elements ({} leaves), {} links, {} rays ({} saved by shaft tests), \
                  {} passes, {} sweeps; \
                  load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
-                error_summary(&solution.report.error, self.units),
+                error_summary(
+                    &solution.report.error,
+                    self.units,
+                    crate::pipeline::mean_radiance_estimate(&solution.hierarchy)
+                ),
                 stats.elements,
                 stats.leaf_elements,
                 stats.links,
@@ -235,8 +239,14 @@ impl RenderCommand {
 }
 
 /// "estimated error ≤ X (accuracy Y reached)" or how many leaves missed the accuracy, and by how much,
-/// in `units` (a radiance error's largest channel bounds the error of its luminance).
-pub fn error_summary(error: &crate::solvers::ErrorReport, units: Units) -> String {
+/// in `units` (a radiance error's largest channel bounds the error of its luminance). Without error
+/// control, also as shares of `mean_radiance` (the energy balance's, what `--accuracy P%` is relative
+/// to), so that the figures read without knowing the scene's scale.
+pub fn error_summary(
+    error: &crate::solvers::ErrorReport,
+    units: Units,
+    mean_radiance: f64,
+) -> String {
     let s = &error.summary;
     let (k, unit) = (units.scale(), units.radiance());
     match error.accuracy.map(|a| a * k) {
@@ -253,6 +263,14 @@ pub fn error_summary(error: &crate::solvers::ErrorReport, units: Units) -> Strin
             100.0 * s.area_fraction_above,
             s.leaves_above_at_min_area,
             k * s.max_estimate
+        ),
+        None if mean_radiance > 0.0 => format!(
+            "estimated error: max {:.3}, mean {:.3} {unit} ({:.0}%, {:.1}% of the mean radiance {:.3})",
+            k * s.max_estimate,
+            k * s.mean_estimate,
+            100.0 * s.max_estimate / mean_radiance,
+            100.0 * s.mean_estimate / mean_radiance,
+            k * mean_radiance
         ),
         None => format!(
             "estimated error: max {:.3}, mean {:.3} {unit}",
