@@ -493,46 +493,29 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
     }
     let dir = temp_dir("multires");
     let png = dir.join("box.png");
-    let out = radiosity(&[
-        "render",
-        "-q",
-        "--visibility",
-        "multires",
-        "--feature-size",
-        "0.05",
-        "--multires-averaging",
-        "cluster",
-        "--width",
-        "32",
-        "--height",
-        "32",
-        "-o",
-        png.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(png.exists());
+    let small_render = |options: &[&str]| {
+        let mut args = vec!["render", "-q", "--visibility", "multires"];
+        args.extend(options);
+        args.extend([
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "-o",
+            png.to_str().unwrap(),
+        ]);
+        succeeds(&args);
+        assert!(png.exists());
+    };
+    small_render(&["--feature-size", "0.05", "--multires-averaging", "cluster"]);
     // Exact shadows on the floor and the blocks, extinction elsewhere.
-    succeeds(&[
-        "render",
-        "-q",
-        "--visibility",
-        "multires",
+    small_render(&[
         "--feature-size",
         "inf",
         "--feature-size-for",
         "floor=0",
         "--feature-size-for",
         "*_block=0.01",
-        "--width",
-        "32",
-        "--height",
-        "32",
-        "-o",
-        png.to_str().unwrap(),
     ]);
 }
 
