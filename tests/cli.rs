@@ -122,6 +122,31 @@ fn render_writes_png_exr_models_and_stats() {
 }
 
 #[test]
+fn every_shading_renders() {
+    let dir = temp_dir("shadings");
+    for shading in ["basis", "continuous", "flat", "smooth"] {
+        let png = dir.join(format!("{shading}.png"));
+        let png = png.to_str().unwrap();
+        succeeds(&[
+            "render",
+            "-q",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--eps",
+            "2e-3",
+            "--shading",
+            shading,
+            "-o",
+            png,
+        ]);
+        let image = image::open(png).expect("png").to_rgb8();
+        assert!(image.pixels().any(|p| p.0 != [0, 0, 0]), "{shading}");
+    }
+}
+
+#[test]
 fn info_prints_counts_of_a_renderpark_scene() {
     let scene =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark/cube.mgf");

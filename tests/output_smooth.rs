@@ -81,9 +81,21 @@ fn rel_diff(a: Rgb, b: Rgb) -> f64 {
 }
 
 /// Samples every leaf edge of `patches` (at dyadic points, which include all T-vertices, and at generic
-/// points), steps a tiny distance to both sides and compares the interpolated values. Returns the number of
-/// comparisons made.
+/// points), steps a tiny distance to both sides and compares the interpolated values, which must agree.
+/// Returns the number of comparisons made.
 fn check_continuity(h: &Hierarchy, vr: &VertexRadiosity, patches: &[u32]) -> usize {
+    let (compared, worst) = edge_differences(h, patches, |leaf, p| vr.evaluate(h, leaf, p));
+    assert!(worst < 1e-6, "worst relative difference {worst:e}");
+    compared
+}
+
+/// [`check_continuity`]'s comparisons of a shading `value(leaf, point)`: their number and the largest
+/// relative difference across an edge.
+fn edge_differences(
+    h: &Hierarchy,
+    patches: &[u32],
+    value: impl Fn(ElementId, DVec3) -> Rgb,
+) -> (usize, f64) {
     let delta = 1e-10;
     let mut params: Vec<f64> = (1..32).map(|k| k as f64 / 32.0).collect();
     params.extend([0.1234, 0.377, 0.618, 0.9001, 1e-6, 1.0 - 1e-6]);
@@ -108,23 +120,17 @@ fn check_continuity(h: &Hierarchy, vr: &VertexRadiosity, patches: &[u32]) -> usi
                     else {
                         continue; // the edge is on the boundary of the surface
                     };
-                    let mine = vr.evaluate(h, leaf, inside);
                     let neighbour_leaf: ElementId = h.locate(other, outside);
                     assert_ne!(neighbour_leaf, leaf);
-                    let theirs = vr.evaluate(h, neighbour_leaf, outside);
-                    let d = rel_diff(mine, theirs);
+                    let d = rel_diff(value(leaf, inside), value(neighbour_leaf, outside));
                     worst = worst.max(d);
-                    assert!(
-                        d < 1e-6,
-                        "leaf {leaf} edge {k} at s = {s}: {mine:?} vs {theirs:?} (leaf {neighbour_leaf})"
-                    );
                     compared += 1;
                 }
             }
         }
     }
     eprintln!("{compared} comparisons, worst relative difference {worst:e}");
-    compared
+    (compared, worst)
 }
 
 #[test]
@@ -292,4 +298,96 @@ fn vertex_values_are_area_weighted_and_t_vertices_interpolated() {
     // The T-vertex (0.5, 0.25) lies inside child 1's left edge: the mean of its end points.
     assert!((at(0.5, 0.25) - 0.5 * (bottom + centre)).abs() < 1e-12);
     assert!((at(0.5 + 1e-12, 0.25) - 0.5 * (bottom + centre)).abs() < 1e-9);
+}
+
+/// Gives every leaf arbitrary coefficients of its basis expansion (all of them, not only the mean).
+fn scramble_expansions(h: &mut Hierarchy) {
+    for leaf in h.leaves() {
+        let c = h.element(leaf).shape().centroid();
+        for (k, coefficient) in h.radiance_mut(leaf).iter_mut().enumerate() {
+            let value = scrambled(c + DVec3::splat(k as f64));
+            *coefficient = if k == 0 {
+                value * 4.0
+            } else {
+                value - Rgb::splat(1.5)
+            };
+        }
+    }
+}
+
+/// A refined unit square with T-vertices of several depths.
+fn refined_square(basis: radiosity::bases::BasisKind) -> Hierarchy {
+    let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, basis);
+    h.subdivide(h.patches[0].root);
+    refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
+    refine_at(&mut h, 0, DVec3::new(0.49, 0.1, 0.0), 4);
+    refine_at(&mut h, 0, DVec3::new(0.7, 0.2, 0.0), 2);
+    h
+}
+
+#[test]
+fn continuous_shading_leaves_no_step_between_linear_and_bilinear_leaves() {
+    for basis in [
+        radiosity::bases::BasisKind::Linear,
+        radiosity::bases::BasisKind::Bilinear,
+    ] {
+        let mut h = refined_square(basis);
+        scramble_expansions(&mut h);
+        let vr = VertexRadiosity::new(&h);
+        assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+        // The expansion itself jumps at the leaves' edges; the continuous shading does not.
+        let (_, jump) = edge_differences(&h, &[0], |leaf, p| h.radiance_at(leaf, p));
+        assert!(jump > 0.1, "{basis:?}: the test needs steps ({jump})");
+        let (compared, worst) =
+            edge_differences(&h, &[0], |leaf, p| vr.evaluate_continuous(&h, leaf, p));
+        assert!(compared > 500 && worst < 1e-6, "{basis:?}: {worst:e}");
+    }
+}
+
+#[test]
+fn continuous_shading_is_the_expansion_where_neighbours_agree() {
+    // Every leaf holds the exact restriction of one quadratic over the square (pushed down from the
+    // root, which the quadtree's affine child maps keep exact), positive everywhere: the averaged
+    // vertex values are the polynomial's own, and the continuous shading is the expansion itself.
+    let mut h = refined_square(radiosity::bases::BasisKind::Quadratic);
+    let root = h.patches[0].root;
+    let field = |p: DVec3| Rgb::new(2.0 + p.x * p.y, 3.0 - p.x * p.x, 1.0 + p.y * (1.0 - p.y));
+    let square = *h.element(root).shape();
+    let mut moments = vec![Rgb::BLACK; h.basis_size()];
+    let rule = radiosity::geometry::cubature::rule(square.domain(), 8);
+    let mut phi = vec![0.0; h.basis_size()];
+    for node in radiosity::geometry::cubature::nodes_on(&square, rule) {
+        h.basis
+            .eval(square.domain(), square.parameters_of(node.point), &mut phi);
+        for (m, &b) in moments.iter_mut().zip(&phi) {
+            *m += field(node.point) * (b * node.weight / h.element(root).area);
+        }
+    }
+    h.radiance_mut(root).copy_from_slice(&moments);
+    let mut stack = vec![root];
+    while let Some(id) = stack.pop() {
+        let children = h.element(id).children.clone();
+        let parent = h.radiance(id).to_vec();
+        for (k, &child) in children.iter().enumerate() {
+            let mut out = vec![Rgb::BLACK; parent.len()];
+            h.basis.push_rgb(square.domain(), k, &parent, &mut out);
+            h.radiance_mut(child).copy_from_slice(&out);
+            stack.push(child);
+        }
+    }
+    let vr = VertexRadiosity::new(&h);
+    assert!(vr.fanned_leaf_count() >= 2);
+    for leaf in h.leaves() {
+        let shape = *h.element(leaf).shape();
+        for p in [
+            shape.centroid(),
+            shape.vertices()[1] * 0.7 + shape.centroid() * 0.3,
+            shape.vertices()[3] * 0.95 + shape.vertices()[0] * 0.05,
+        ] {
+            assert!(rel_diff(h.radiance_at(leaf, p), field(p)) < 1e-9, "{p}");
+            let d = rel_diff(vr.evaluate_continuous(&h, leaf, p), field(p));
+            assert!(d < 1e-9, "leaf {leaf} at {p}: {d:e}");
+        }
+    }
 }

@@ -33,8 +33,10 @@ pub struct RenderCommand {
     /// PNG image to write (exposed, tone-mapped, sRGB).
     #[arg(short, long, default_value = "radiosity.png")]
     pub output: PathBuf,
-    /// Basis: each element's basis expansion (the computed solution). Flat: element averages. Smooth:
-    /// values averaged to vertices and interpolated (Gouraud, crack free).
+    /// Basis: each element's basis expansion (the computed solution). Continuous: the expansion with its
+    /// steps at element edges removed (vertex averages of the expansions; slightly less accurate).
+    /// Flat: element averages. Smooth: values averaged to vertices and interpolated (Gouraud, crack
+    /// free).
     #[arg(long, value_enum, default_value_t = Shading::Basis)]
     pub shading: Shading,
     /// What the PNG shows: the radiance, or each element's a-posteriori error estimate in false colour
@@ -117,8 +119,10 @@ impl RenderCommand {
             let path = self.progressive.then(|| step_path(&self.output, step.step));
             if let Some(path) = &path {
                 super::args::check_outputs(&[("--progressive", path.as_path())], &scene.sources)?;
-                let vertices =
-                    (self.shading == Shading::Smooth).then(|| VertexRadiosity::new(hierarchy));
+                let vertices = self
+                    .shading
+                    .needs_vertices()
+                    .then(|| VertexRadiosity::new(hierarchy));
                 let image =
                     render_with(hierarchy, visibility, &camera, &options, vertices.as_ref());
                 self.write_image(path, &image, &tone)?;
@@ -147,7 +151,7 @@ impl RenderCommand {
         let solution = simulate_observed(&scene, &settings, progress, &mut on_step)?;
 
         let start = Instant::now();
-        let vertices = (self.shading == Shading::Smooth || !self.export.is_empty())
+        let vertices = (self.shading.needs_vertices() || !self.export.is_empty())
             .then(|| VertexRadiosity::new(&solution.hierarchy));
         let image = render_with(
             &solution.hierarchy,

@@ -22,7 +22,8 @@ pub struct ViewCommand {
     pub camera: CameraArgs,
     #[command(flatten)]
     pub tone: ToneArgs,
-    /// Basis: each element's basis expansion; flat: element averages; smooth: vertex values (Gouraud).
+    /// Basis: each element's basis expansion; continuous: the expansion without its steps at element
+    /// edges; flat: element averages; smooth: vertex values (Gouraud).
     #[arg(long, value_enum, default_value_t = Shading::Basis)]
     pub shading: Shading,
     /// The page to write (default: SCENE.html in a new directory under the system's temporary directory).

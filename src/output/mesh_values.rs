@@ -36,7 +36,12 @@ const MAX_EDGE_DEPTH: u32 = 40;
 pub struct VertexRadiosity {
     positions: Vec<DVec3>,
     normals: Vec<DVec3>,
+    /// Smooth shading's vertex values: the leaves' own values at their corners, area-weighted, with
+    /// T-vertices interpolated along the longest edge holding them.
     values: Vec<Rgb>,
+    /// Continuous shading's vertex values ([`VertexRadiosity::evaluate_continuous`]): the own
+    /// values, area-weighted, of every leaf whose outline passes through the vertex.
+    outline_values: Vec<Rgb>,
     /// Per element of the hierarchy: index into `leaves`, or [`NOT_A_LEAF`].
     leaf_slot: Vec<u32>,
     leaves: Vec<LeafVertices>,
@@ -148,10 +153,12 @@ impl VertexRadiosity {
                 boundary: None,
             });
         }
-        let mut values: Vec<Rgb> = sums
-            .iter()
-            .map(|&(v, a)| if a > 0.0 { v / a } else { Rgb::BLACK })
-            .collect();
+        let average = |sums: &[(Rgb, f64)]| -> Vec<Rgb> {
+            sums.iter()
+                .map(|&(v, a)| if a > 0.0 { v / a } else { Rgb::BLACK })
+                .collect()
+        };
+        let mut values = average(&sums);
 
         // T-vertices: dyadic points of each leaf edge that are vertices of the same group.
         let lookup = VertexLookup {
@@ -202,7 +209,20 @@ impl VertexRadiosity {
         // Anchor each T-vertex on the longest edge containing it; resolve in dependency order so that an
         // edge's end points (themselves possibly T-vertices of larger edges) are final first.
         let mut anchor_of: Vec<Option<Anchor>> = vec![None; positions.len()];
+        // For continuous shading every leaf whose outline passes through a vertex counts there with
+        // its own expansion, T-vertices included (not anchored): a polynomial the leaves share is
+        // then every vertex's value.
+        let mut outline_sums = sums;
         for (record, (boundary, anchors)) in records.iter_mut().zip(found) {
+            if let Some(boundary) = &boundary {
+                let element = hierarchy.element(record.element);
+                for &v in boundary.iter().filter(|v| !record.corners.contains(v)) {
+                    let (value, area) = &mut outline_sums[v as usize];
+                    let at = hierarchy.exitant_radiance_at(record.element, positions[v as usize]);
+                    *value += at * element.area;
+                    *area += element.area;
+                }
+            }
             record.boundary = boundary;
             for (v, anchor) in anchors {
                 let slot = &mut anchor_of[v as usize];
@@ -217,6 +237,7 @@ impl VertexRadiosity {
             positions,
             normals,
             values,
+            outline_values: average(&outline_sums),
             leaf_slot,
             leaves: records,
         }
@@ -255,19 +276,52 @@ impl VertexRadiosity {
     /// bilinear on a quad, or barycentric in the fan triangle containing `p` when the leaf has T-vertices.
     /// Returns the leaf's own radiance for an element that was not a leaf when this was built.
     pub fn evaluate(&self, hierarchy: &Hierarchy, leaf: ElementId, p: DVec3) -> Rgb {
+        self.interpolate(hierarchy, leaf, p, |v| self.values[v as usize])
+            .unwrap_or_else(|| hierarchy.average_radiance(leaf))
+    }
+
+    /// The leaf's basis expansion at `p` with its jumps at the leaf's edges removed: the expansion,
+    /// plus the smooth interpolation of the averaged vertex values ([`Self::evaluate`]), minus the same
+    /// interpolation of the leaf's own expansion at those vertices. Along an edge a linear or
+    /// bilinear expansion equals the interpolation of its own values at the edge's vertices (corners
+    /// and T-vertices), so there the value is the smooth one, which both sides share: continuous across
+    /// every edge of a smoothing group; inside the leaf it keeps the expansion's shape (with quadratic
+    /// and cubic bases the jumps shrink to the expansion's curvature along the edge). Returns the
+    /// leaf's expansion for an element that was not a leaf when this was built.
+    pub fn evaluate_continuous(&self, hierarchy: &Hierarchy, leaf: ElementId, p: DVec3) -> Rgb {
+        let expansion = hierarchy.radiance_at(leaf, p);
+        let own = |v: u32| hierarchy.radiance_at(leaf, self.positions[v as usize]);
+        match (
+            self.interpolate(hierarchy, leaf, p, |v| self.outline_values[v as usize]),
+            self.interpolate(hierarchy, leaf, p, own),
+        ) {
+            (Some(smooth), Some(own)) => expansion + smooth - own,
+            _ => expansion,
+        }
+        .map(|c| c.max(0.0))
+    }
+
+    /// Interpolation at point `p` of leaf `leaf` of the values `value` gives its vertices (by welded
+    /// vertex id): barycentric on a triangle, bilinear on a quad, or barycentric in the fan triangle
+    /// containing `p` when the leaf has T-vertices. `None` for an element that was not a leaf when
+    /// this was built.
+    fn interpolate(
+        &self,
+        hierarchy: &Hierarchy,
+        leaf: ElementId,
+        p: DVec3,
+        value: impl Fn(u32) -> Rgb,
+    ) -> Option<Rgb> {
         let element = hierarchy.element(leaf);
         let slot = self
             .leaf_slot
             .get(leaf as usize)
             .copied()
-            .unwrap_or(NOT_A_LEAF);
-        if slot == NOT_A_LEAF {
-            return hierarchy.average_radiance(leaf);
-        }
+            .filter(|&slot| slot != NOT_A_LEAF)?;
         let record = &self.leaves[slot as usize];
         let shape = element.shape();
-        let c = |k: usize| self.values[record.corners[k] as usize];
-        match &record.boundary {
+        let c = |k: usize| value(record.corners[k]);
+        Some(match &record.boundary {
             None => match shape {
                 Shape::Triangle(_) => {
                     let uv = shape.parameters_of(p);
@@ -280,24 +334,28 @@ impl VertexRadiosity {
             },
             Some(boundary) => {
                 let normal = hierarchy.patch_of(leaf).normal;
-                let (centre, centre_value) = self.fan_centre(shape, &record.corners);
-                let mut best = (f64::NEG_INFINITY, Rgb::BLACK);
+                let centre = fan_centre(shape);
+                let mut best = (f64::NEG_INFINITY, 0, [0.0; 3]);
                 for i in 0..boundary.len() {
-                    let (a, b) = (
-                        boundary[i] as usize,
-                        boundary[(i + 1) % boundary.len()] as usize,
+                    let (a, b) = (boundary[i], boundary[(i + 1) % boundary.len()]);
+                    let w = barycentric(
+                        centre,
+                        self.positions[a as usize],
+                        self.positions[b as usize],
+                        p,
+                        normal,
                     );
-                    let w = barycentric(centre, self.positions[a], self.positions[b], p, normal);
                     let margin = w[0].min(w[1]).min(w[2]);
                     if margin > best.0 {
-                        let value =
-                            centre_value * w[0] + self.values[a] * w[1] + self.values[b] * w[2];
-                        best = (margin, value);
+                        best = (margin, i, w);
                     }
                 }
-                best.1
+                let (_, i, w) = best;
+                let (a, b) = (boundary[i], boundary[(i + 1) % boundary.len()]);
+                let corners = &record.corners[..shape.vertex_count()];
+                corner_average(corners, &value) * w[0] + value(a) * w[1] + value(b) * w[2]
             }
-        }
+        })
     }
 
     /// The leaves as a triangle mesh: triangles as they are, quads split along the diagonal (0, 2), and
@@ -319,7 +377,9 @@ impl VertexRadiosity {
                     mesh.triangles.push([c[0], c[2], c[3]]);
                 }
                 (Some(boundary), _) => {
-                    let (centre, value) = self.fan_centre(shape, &c);
+                    let n = shape.vertex_count();
+                    let centre = fan_centre(shape);
+                    let value = corner_average(&c[..n], |v| self.values[v as usize]);
                     let centre_id = mesh.positions.len() as u32;
                     mesh.positions.push(centre);
                     mesh.normals.push(self.normals[c[0] as usize]);
@@ -333,21 +393,19 @@ impl VertexRadiosity {
         }
         mesh
     }
+}
 
-    /// Centre of a fanned leaf and its value: the interpolation of the corners there (the average of the
-    /// corners, both barycentric at a triangle's centroid and bilinear at a quad's (1/2, 1/2)).
-    fn fan_centre(&self, shape: &Shape, corners: &[u32; 4]) -> (DVec3, Rgb) {
-        let n = shape.vertex_count();
-        let value = corners[..n]
-            .iter()
-            .map(|&v| self.values[v as usize])
-            .sum::<Rgb>()
-            / n as f64;
-        let centre = match shape {
-            Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
-            Shape::Quad(_) => shape.point_at(DVec2::splat(0.5)),
-        };
-        (centre, value)
+/// The average of `value` over a leaf's corners: its interpolation at the [`fan_centre`].
+fn corner_average(corners: &[u32], value: impl Fn(u32) -> Rgb) -> Rgb {
+    corners.iter().map(|&v| value(v)).sum::<Rgb>() / corners.len() as f64
+}
+
+/// Centre of a fanned leaf, where the interpolation of its corners is their average (barycentric at a
+/// triangle's centroid, bilinear at a quad's (1/2, 1/2)).
+fn fan_centre(shape: &Shape) -> DVec3 {
+    match shape {
+        Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
+        Shape::Quad(_) => shape.point_at(DVec2::splat(0.5)),
     }
 }
 

@@ -26,6 +26,17 @@ pub enum Shading {
     /// The leaf's basis expansion evaluated at the point (Bekaert–Willems §2): exactly the computed
     /// solution, smooth within elements for non-constant bases.
     Basis,
+    /// The basis expansion with its jumps at element edges removed
+    /// ([`VertexRadiosity::evaluate_continuous`]): continuous across edges for linear and bilinear
+    /// bases, no steps between leaves of different sizes.
+    Continuous,
+}
+
+impl Shading {
+    /// Whether this shading reads radiance averaged to the leaves' vertices ([`VertexRadiosity`]).
+    pub fn needs_vertices(self) -> bool {
+        matches!(self, Shading::Smooth | Shading::Continuous)
+    }
 }
 
 /// Where a pixel takes its `samples_per_pixel` stratified samples.
@@ -103,7 +114,10 @@ pub fn render(
     camera: &Camera,
     options: &RenderOptions,
 ) -> Image {
-    let vertices = (options.shading == Shading::Smooth).then(|| VertexRadiosity::new(hierarchy));
+    let vertices = options
+        .shading
+        .needs_vertices()
+        .then(|| VertexRadiosity::new(hierarchy));
     render_with(hierarchy, visibility, camera, options, vertices.as_ref())
 }
 
@@ -117,8 +131,8 @@ pub fn render_with(
     vertices: Option<&VertexRadiosity>,
 ) -> Image {
     let built;
-    let vertices = match (options.shading, vertices) {
-        (Shading::Smooth, None) => {
+    let vertices = match (options.shading.needs_vertices(), vertices) {
+        (true, None) => {
             built = VertexRadiosity::new(hierarchy);
             Some(&built)
         }
@@ -239,6 +253,9 @@ impl Tracer<'_> {
         }
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
+            (Shading::Continuous, Some(vertices)) => {
+                vertices.evaluate_continuous(self.hierarchy, leaf, p)
+            }
             (Shading::Basis, _) => self.hierarchy.exitant_radiance_at_parameters(leaf, uv),
             _ => self.hierarchy.average_radiance(leaf),
         }

@@ -11,7 +11,8 @@
 //! Shading follows `render --shading`: `basis` samples each leaf's expansion (Bekaert–Willems §2) on a
 //! grid of `max(1, degree)` cells per edge (exact for constant and linear bases on triangles and
 //! parallelograms, whose parametrisation is affine; piecewise linear otherwise), `flat` draws the leaf
-//! averages, `smooth` the crack-free vertex values of [`VertexRadiosity`] (as PLY/GLB export does).
+//! averages, `smooth` the crack-free vertex values of [`VertexRadiosity`] (as PLY/GLB export does),
+//! `continuous` the expansion with its jumps at edges removed, on the grid of `basis`.
 //! Elements keep their own vertices in `basis` and `flat`, so discontinuities between them stay; a leaf
 //! with T-vertices (a smaller neighbour's corner inside one of its edges) is a fan from its centre
 //! through its whole outline instead, so that no crack opens where the neighbours meet it (again exact
@@ -109,9 +110,11 @@ impl ViewerMesh {
                 }
                 mesh.triangles = shaded.triangles;
             }
-            Shading::Flat | Shading::Basis => {
+            Shading::Flat | Shading::Basis | Shading::Continuous => {
                 let cells = match shading {
-                    Shading::Basis => hierarchy.basis.kind().polynomial_degree().max(1),
+                    Shading::Basis | Shading::Continuous => {
+                        hierarchy.basis.kind().polynomial_degree().max(1)
+                    }
                     _ => 1,
                 };
                 let per_leaf = |leaf: ElementId| match vertices.outline(leaf) {
@@ -134,6 +137,10 @@ impl ViewerMesh {
                     // and clamps per pixel, as the PNG render clamps the expansion at each pixel.
                     let value = |uv: DVec2| match shading {
                         Shading::Basis => hierarchy.radiance_at_parameters(leaf, uv),
+                        Shading::Continuous => {
+                            let p = hierarchy.element(leaf).shape().point_at(uv);
+                            vertices.evaluate_continuous(hierarchy, leaf, p)
+                        }
                         _ => hierarchy.average_radiance(leaf),
                     };
                     let shape = element.shape();
@@ -298,6 +305,7 @@ pub fn page_html(mesh: &ViewerMesh, page: &Page) -> Result<String> {
         Shading::Basis => "basis",
         Shading::Flat => "flat",
         Shading::Smooth => "smooth",
+        Shading::Continuous => "continuous",
     };
     let config = json!({
         "title": page.title,
