@@ -10,7 +10,9 @@ mod common;
 use radiosity::bases::BasisKind;
 use radiosity::geometry::form_factor::parallel_rectangles;
 use radiosity::hierarchy::{Hierarchy, Link, OracleFactor};
-use radiosity::measures::link_audit::{audit_closure, audit_links, audit_transport, AuditSettings};
+use radiosity::measures::link_audit::{
+    audit_closure, audit_links, audit_transport, AuditSettings, AuditedSource,
+};
 use radiosity::pipeline::{simulate, SimulationSettings, Solution};
 use radiosity::progress::Progress;
 use radiosity::scene::generators;
@@ -221,5 +223,121 @@ fn the_transport_audit_finds_the_bias_of_fixed_source_nodes() {
     assert!(
         (shifted.solved / shifted.gathered - 1.0).abs() < 0.06,
         "shifted: {shifted:?}"
+    );
+}
+
+#[test]
+fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents() {
+    // A 2 m floor under a cloud of small black emitting squares 3 m up, facing it: with clusters and a
+    // coarse ε the floor's elements gather from clusters of the squares. No square hides another
+    // (they are coplanar) and each emits a constant radiance, so the light a link from a cluster
+    // stands for is exactly Σ_k A_i F_ik L_k over the squares k it holds, F_ik by cubature of the
+    // closed-form point-to-polygon factor.
+    use radiosity::color::Rgb;
+    use radiosity::geometry::cubature::{nodes_on, rule};
+    use radiosity::geometry::form_factor::point_to_polygon;
+    use radiosity::geometry::{DVec3, Shape};
+    use radiosity::hierarchy::clusters::ClusteringKind;
+    use radiosity::scene::{Material, Object, Polygon, Scene};
+    let floor = Shape::Quad([
+        DVec3::ZERO,
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(2.0, 2.0, 0.0),
+        DVec3::new(0.0, 2.0, 0.0),
+    ]);
+    let square = |x: f64, y: f64| {
+        let (a, s, z) = (DVec3::new(x, y, 3.0), 0.1, 3.0);
+        Shape::Quad([
+            a,
+            DVec3::new(x, y + s, z),
+            DVec3::new(x + s, y + s, z),
+            DVec3::new(x + s, y, z),
+        ])
+    };
+    let mut polygons = vec![Polygon {
+        shape: floor,
+        material: 0,
+        object: 0,
+        two_sided: false,
+    }];
+    for k in 0..12 {
+        // Apart from each other (0.1 m squares at least 0.12 m apart): none hides another.
+        let (x, y) = (0.2 + 0.2 * (k % 4) as f64, 0.5 + 0.37 * (k / 4) as f64);
+        polygons.push(Polygon {
+            shape: square(x + 0.04 * (k % 3) as f64, y),
+            material: 1,
+            object: 0,
+            two_sided: false,
+        });
+    }
+    let scene = Scene {
+        polygons,
+        materials: vec![
+            Material::diffuse("floor", Rgb::splat(0.5)),
+            Material::emitter("lamp", Rgb::BLACK, Rgb::new(1.0, 2.0, 3.0)),
+        ],
+        objects: vec![Object {
+            name: "test".into(),
+        }],
+        ..Default::default()
+    };
+    let solution = simulate(
+        &scene,
+        &SimulationSettings {
+            clustering: ClusteringKind::Oriented,
+            eps: 1e-2,
+            ..SimulationSettings::default()
+        },
+        &Progress::new(true),
+    )
+    .expect("solve");
+    let h = &solution.hierarchy;
+    let audit = audit_links(h, solution.visibility.as_ref(), &settings(4096)).expect("audit");
+    let from_clusters: Vec<_> = audit
+        .rows
+        .iter()
+        .filter(|row| matches!(row.source, AuditedSource::Cluster { .. }))
+        .collect();
+    assert!(
+        !from_clusters.is_empty(),
+        "the test needs links from clusters"
+    );
+    // The exact light of every link from a cluster into the floor's elements.
+    let mut exact = 0.0;
+    for (id, element) in h.elements.iter().enumerate() {
+        let id = id as u32;
+        if h.is_cluster(id) || h.patch_of(id).polygon != 0 {
+            continue;
+        }
+        let nodes = nodes_on(element.shape(), rule(element.shape().domain(), 12));
+        for link in element.links.iter().filter(|l| h.is_cluster(l.source)) {
+            for &patch in h.contents(h.cluster(link.source).expect("cluster")) {
+                let shape = h.element(patch).shape();
+                let radiance = h.average_radiance(patch).luminance();
+                let factor: f64 = nodes
+                    .iter()
+                    .map(|x| x.weight * point_to_polygon(x.point, DVec3::Z, shape))
+                    .sum();
+                exact += factor * radiance;
+            }
+        }
+    }
+    let estimated: f64 = from_clusters.iter().map(|row| row.estimated).sum();
+    let error = from_clusters
+        .iter()
+        .map(|row| row.standard_error.powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        (estimated - exact).abs() < 4.0 * error && error < 0.05 * exact,
+        "estimated {estimated:.6} ± {error:.1e}, exact {exact:.6}"
+    );
+    // The couplings' centre-to-centre transfer is close to it too: clusters about R = 0.5 m across
+    // seen from 3 m, a far-field error of order (R / r)² ≈ 3%.
+    let coupled: f64 = from_clusters.iter().map(|row| row.coupled).sum();
+    eprintln!("estimated {estimated:.6} ± {error:.1e}, coupled {coupled:.6}, exact {exact:.6}");
+    assert!(
+        (coupled / exact - 1.0).abs() < 0.05,
+        "coupled {coupled:.6}, exact {exact:.6}"
     );
 }

@@ -1,11 +1,11 @@
-//! `radiosity audit`: solve, then audit the surface links into chosen polygons against an unbiased
+//! `radiosity audit`: solve, then audit the links into chosen polygons against an unbiased
 //! Monte Carlo estimate with visibility (`measures::link_audit`): which sources the couplings see too
 //! bright or too dark, by how many standard errors; or the whole transport (`--transport`), or the
 //! links' closure (`--closure`).
 
 use super::args::{SceneArgs, SolveArgs};
 use crate::measures::link_audit::{
-    audit_closure, audit_links, audit_transport, AuditSettings, SourceRow,
+    audit_closure, audit_links, audit_transport, AuditSettings, AuditedSource, SourceRow,
 };
 use crate::pipeline::simulate;
 use crate::progress::Progress;
@@ -82,8 +82,8 @@ impl AuditCommand {
             return Ok(());
         }
         outln!(
-            "# {name}: light carried by {} surface links (Σ A_i F_ij L_j, luminance), coupled against \
-             {} point pairs each; {} links at clusters not audited",
+            "# {name}: light carried by {} links (Σ A_i F_ij L_j, luminance; source `cN`: cluster N), \
+             coupled against {} point pairs each; {} links into clusters above them not audited",
             audit.total.links,
             self.samples,
             audit.cluster_links
@@ -98,9 +98,10 @@ impl AuditCommand {
             "ratio",
             "z"
         )?;
-        let line = |label: String, row: &SourceRow| {
+        let line = |row: &SourceRow| {
             outln!(
-                "{label:>9} {:>6} {:>12.4e} {:>12.4e} {:>10.2e} {:>8.4} {:>7.1}",
+                "{:>9} {:>6} {:>12.4e} {:>12.4e} {:>10.2e} {:>8.4} {:>7.1}",
+                row.source.to_string(),
                 row.links,
                 row.coupled,
                 row.estimated,
@@ -110,12 +111,33 @@ impl AuditCommand {
             )
         };
         for row in audit.rows.iter().take(self.rows) {
-            line(
-                format!("{}{}", row.polygon, if row.front { "" } else { "b" }),
-                row,
-            )?;
+            line(row)?;
         }
-        line("total".to_string(), &audit.total)?;
+        line(&audit.total)?;
+        // What the listed clusters hold, so that a row can be traced back to the scene.
+        let h = &solution.hierarchy;
+        for row in audit.rows.iter().take(self.rows) {
+            if let AuditedSource::Cluster { element } = row.source {
+                let cluster = h.cluster(element).expect("a cluster");
+                let polygons: std::collections::BTreeSet<usize> = h
+                    .contents(cluster)
+                    .iter()
+                    .map(|&s| h.patch_of(s).polygon)
+                    .collect();
+                let shown: Vec<String> = polygons.iter().take(8).map(|p| p.to_string()).collect();
+                let more = polygons.len().saturating_sub(shown.len());
+                outln!(
+                    "# c{element}: {} patches of polygons {}{}",
+                    h.contents(cluster).len(),
+                    shown.join(", "),
+                    if more > 0 {
+                        format!(" and {more} more")
+                    } else {
+                        String::new()
+                    }
+                )?;
+            }
+        }
         Ok(())
     }
 

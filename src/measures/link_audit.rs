@@ -10,10 +10,14 @@
 //! `L_j` the luminance of the source element's average radiance, as coupled and as estimated, with
 //! the estimate's standard error. It found a classroom lamp housing's reflector seen 3% too bright
 //! from the floor below and a corridor's ceiling beside its lamps seen with a quarter of its light
-//! (BENCHMARKS.md, "`radiosity audit`"). Links at a cluster are counted, not audited (their couplings
-//! sample their contents, not a surface pair). Between elements that share an edge the kernel's
-//! variance is unbounded (`1/r²` at the edge), so there the standard error understates the estimate's
-//! spread.
+//! (BENCHMARKS.md, "`radiosity audit`"). A link from a cluster is audited as the light it carries,
+//! `A_i F_ij L_sent` with the radiance the cluster sends toward the receiver
+//! ([`ClusterSweep::radiance_toward`]), against `∫_i ∫ G V L dA_y dA_x` over the cluster's contents
+//! with each point's own radiance: the centre-to-centre transfer, its mean cosines, its few visibility
+//! rays and what the cluster sends, all at once. Links into a cluster are counted, not audited (what
+//! the cluster shares among its patches is [`audit_transport`]'s). Between elements that share an
+//! edge the kernel's variance is unbounded (`1/r²` at the edge), so there the standard error
+//! understates the estimate's spread.
 //!
 //! [`audit_closure`] checks the links' closure: a white furnace gathered once over the solution's own
 //! links, every element at radiance 1 and reflectance 1, gives each leaf the total factor it gathers,
@@ -57,11 +61,35 @@ pub struct AuditSettings {
 /// Random stream of the audit's point pairs (apart from the solver's streams of the same link).
 const AUDIT_STREAM: u64 = 0xA0D1;
 
-/// The audited links from one side of one source polygon.
+/// Where the light of audited links comes from: one side of a polygon, or a cluster.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+pub enum AuditedSource {
+    /// The links from the elements of one side of one polygon (the front unless `front` is false).
+    Polygon { polygon: usize, front: bool },
+    /// The links from one cluster (its element id).
+    Cluster { element: ElementId },
+    /// Every audited link ([`LinkAudit::total`]).
+    #[default]
+    All,
+}
+
+impl std::fmt::Display for AuditedSource {
+    /// As the audit's table names it: `12` or `12b` (the back side), `c4711`, `total`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AuditedSource::Polygon { polygon, front } => {
+                write!(f, "{polygon}{}", if *front { "" } else { "b" })
+            }
+            AuditedSource::Cluster { element } => write!(f, "c{element}"),
+            AuditedSource::All => write!(f, "total"),
+        }
+    }
+}
+
+/// The audited links from one source.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SourceRow {
-    pub polygon: usize,
-    pub front: bool,
+    pub source: AuditedSource,
     pub links: usize,
     /// `Σ A_i F_ij L_j` with the coupled form factors.
     pub coupled: f64,
@@ -90,7 +118,7 @@ impl SourceRow {
 pub struct LinkAudit {
     pub rows: Vec<SourceRow>,
     pub total: SourceRow,
-    /// Links with a cluster at either end into the audited elements, not audited.
+    /// Links into clusters above the audited elements' patches, not audited.
     pub cluster_links: usize,
 }
 
@@ -107,16 +135,22 @@ pub fn audit_links(
             && (settings.polygons.is_empty() || chosen[h.patch_of(id as ElementId).polygon])
     };
     let mut links = Vec::new();
-    let mut cluster_links = 0;
     for (id, e) in h.elements.iter().enumerate().filter(|&(id, _)| audited(id)) {
-        for link in &e.links {
-            if h.is_cluster(link.source) {
-                cluster_links += 1;
-            } else {
-                links.push((id as ElementId, link.source, link.form_factor()));
-            }
-        }
+        links.extend(e.links.iter().map(|link| (id as ElementId, link)));
     }
+    // Links into the clusters above the audited patches (a cluster holds a patch's polygon when one
+    // of its patches belongs to it).
+    let cluster_links = h
+        .elements
+        .iter()
+        .enumerate()
+        .filter(|&(id, _)| h.is_cluster(id as ElementId))
+        .filter(|&(id, _)| {
+            let contents = h.contents(h.cluster(id as ElementId).expect("a cluster"));
+            settings.polygons.is_empty() || contents.iter().any(|&s| chosen[h.patch_of(s).polygon])
+        })
+        .map(|(_, e)| e.links.len())
+        .sum();
     anyhow::ensure!(
         links.len() <= settings.max_links,
         "{} links to audit, more than --max-links {}: name fewer receiving polygons (--polygon) or \
@@ -124,29 +158,55 @@ pub fn audit_links(
         links.len(),
         settings.max_links
     );
-    let audited: Vec<(ElementId, ElementId, f64, f64, f64)> = links
+    let sweep = links
+        .iter()
+        .any(|(_, link)| h.is_cluster(link.source))
+        .then(|| ClusterSweep::new(h));
+    // Per link: its source, and the light it carries as coupled and as estimated, with the
+    // estimate's standard error (luminance times receiver area).
+    let audited: Vec<(AuditedSource, f64, f64, f64)> = links
         .par_iter()
-        .map(|&(receiver, source, coupled)| {
-            let (mean, standard_error) = estimate(h, visibility, receiver, source, settings);
-            (receiver, source, coupled, mean, standard_error)
+        .map(|&(receiver, link)| {
+            let area = h.element(receiver).area;
+            match &sweep {
+                Some(sweep) if h.is_cluster(link.source) => {
+                    let centre = h.center_of(receiver);
+                    let sent =
+                        sweep.radiance_toward(h, link.source, centre, link.coupling.visibility);
+                    let coupled = area * link.form_factor() * sent.luminance();
+                    let (mean, standard_error) =
+                        estimate_from_cluster(h, visibility, receiver, link.source, settings);
+                    let source = AuditedSource::Cluster {
+                        element: link.source,
+                    };
+                    (source, coupled, area * mean, area * standard_error)
+                }
+                _ => {
+                    let patch = h.patch_of(link.source);
+                    let weight = area * h.average_radiance(link.source).luminance();
+                    let (mean, standard_error) =
+                        estimate(h, visibility, receiver, link.source, settings);
+                    let source = AuditedSource::Polygon {
+                        polygon: patch.polygon,
+                        front: patch.front,
+                    };
+                    let coupled = weight * link.form_factor();
+                    (source, coupled, weight * mean, weight * standard_error)
+                }
+            }
         })
         .collect();
-    let mut by_source: BTreeMap<(usize, bool), SourceRow> = BTreeMap::new();
-    for (receiver, source, coupled, mean, standard_error) in audited {
-        let patch = h.patch_of(source);
-        let weight = h.element(receiver).area * h.average_radiance(source).luminance();
-        let row = by_source
-            .entry((patch.polygon, patch.front))
-            .or_insert_with(|| SourceRow {
-                polygon: patch.polygon,
-                front: patch.front,
-                ..SourceRow::default()
-            });
+    let mut by_source: BTreeMap<AuditedSource, SourceRow> = BTreeMap::new();
+    for (source, coupled, estimated, standard_error) in audited {
+        let row = by_source.entry(source).or_insert_with(|| SourceRow {
+            source,
+            ..SourceRow::default()
+        });
         row.links += 1;
-        row.coupled += weight * coupled;
-        row.estimated += weight * mean;
+        row.coupled += coupled;
+        row.estimated += estimated;
         // Variances add; the square root is taken below.
-        row.standard_error += (weight * standard_error).powi(2);
+        row.standard_error += standard_error.powi(2);
     }
     let mut rows: Vec<SourceRow> = by_source.into_values().collect();
     let mut total = SourceRow::default();
@@ -162,14 +222,62 @@ pub fn audit_links(
         (b.coupled - b.estimated)
             .abs()
             .total_cmp(&(a.coupled - a.estimated).abs())
-            .then(a.polygon.cmp(&b.polygon))
-            .then(a.front.cmp(&b.front))
+            .then(a.source.cmp(&b.source))
     });
     Ok(LinkAudit {
         rows,
         total,
         cluster_links,
     })
+}
+
+/// The light per unit receiver area that the contents of cluster `cluster` send to surface element
+/// `receiver`, `(1/A_i) ∫_i ∫_c G(x, y) V(x, y) L(y) dA_y dA_x` (luminance): the mean over independent
+/// pairs of `A_c G V L(y)`, x uniform on the receiver, y uniform over the cluster's patches (by area),
+/// `L(y)` the exitant radiance of the leaf there, exact occlusion (the cluster's own contents
+/// included); with its standard error.
+fn estimate_from_cluster(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    cluster: ElementId,
+    settings: &AuditSettings,
+) -> (f64, f64) {
+    let mut rng = link_rng(settings.seed, receiver, cluster, AUDIT_STREAM);
+    let contents = h.contents(h.cluster(cluster).expect("a cluster"));
+    let cumulative: Vec<f64> = contents
+        .iter()
+        .scan(0.0, |sum, &s| {
+            *sum += h.element(s).area;
+            Some(*sum)
+        })
+        .collect();
+    let total = cumulative.last().copied().unwrap_or(0.0);
+    if total <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let shape = h.element(receiver).shape();
+    let normal = h.patch_of(receiver).normal;
+    let values: Vec<f64> = (0..settings.samples)
+        .map(|_| {
+            let x = shape.sample_uniform(DVec2::new(rng.random(), rng.random()));
+            let pick = rng.random::<f64>() * total;
+            let k = cumulative
+                .partition_point(|&c| c <= pick)
+                .min(contents.len() - 1);
+            let surface = contents[k];
+            let uv = DVec2::new(rng.random(), rng.random());
+            let y = h.element(surface).shape().sample_uniform(uv);
+            let patch = h.element(surface).patch();
+            let f = point_to_point(x, normal, y, h.patches[patch as usize].normal);
+            if f <= 0.0 || visibility.segment_occluded(x, y) {
+                return 0.0;
+            }
+            let leaf = h.locate(patch, y);
+            total * f * h.exitant_radiance_at(leaf, y).luminance()
+        })
+        .collect();
+    mean_and_standard_error(&values)
 }
 
 /// `A_j · mean(G V)` over independent uniform point pairs on the receiver and the source, with exact
