@@ -972,8 +972,9 @@ pub fn moved_by_exposure(h: &Hierarchy) -> Vec<Rgb> {
 
 /// Per element (by id), the radiance that sending by exposure ([`Sent::through`]) moved on the
 /// element's own links with the current radiances: the largest channel of
-/// `ρ Σ_l F_l |L_exposed − L_visible|` over its partly blocked links from clusters (one number an
-/// element: this list is alive at the solve's peak of memory). The link's visibility says how much of its source reaches, the
+/// `ρ Σ_l F_l |L_carried − L_visible|` over its partly blocked links from clusters, `L_carried` as
+/// [`Sent::through`] gives it (one number an element: this list is alive at the solve's peak of
+/// memory). The link's visibility says how much of its source reaches, the
 /// one centroid ray per patch which part; the received light is uncertain by as much as that choice
 /// moved it, which the error estimate adds to the element's level (`solvers::error_estimate`), as it
 /// adds [`moved_by_exposure`] for the receiving side. Zero without item buffers.
@@ -993,7 +994,8 @@ pub fn moved_by_sending(h: &Hierarchy) -> Vec<f64> {
                 .filter(|l| carries_light(l) && l.coupling.visibility < 1.0)
                 .filter_map(|l| {
                     let sent = sweep.sent_toward(h, l.source, centre)?;
-                    Some((sent.exposed - sent.visible).map(f64::abs) * l.coupling.form_factor())
+                    let carried = sent.through(f64::from(l.coupling.visibility));
+                    Some((carried - sent.visible).map(f64::abs) * l.coupling.form_factor())
                 })
                 .sum();
             (h.reflectance_of(id) * moved).max_channel()
@@ -1193,6 +1195,7 @@ fn sent_along(
     Sent {
         visible,
         exposed: average(&split.exposed, split.exposed_total),
+        exposed_share: split.exposed_share(),
     }
 }
 
@@ -1274,8 +1277,13 @@ pub fn exposure_shares(e: f64, v: f64) -> (f64, f64) {
 struct Sent {
     /// Radiance averaged over the visible projected areas of the patches facing the bucket.
     visible: Rgb,
-    /// The same over the exposed patches only.
+    /// The same over the patches exposed toward the bucket's nearest receiver ([`expose`]).
     exposed: Rgb,
+    /// `e`, the exposed patches' share of the visible projected area, in (0, 1); 0 where exposure
+    /// tells no patch from another ([`ExposureSplit::new`]). (The other patches' average is
+    /// `(visible − e exposed) / (1 − e)`: not stored, as the table holds one entry per (cluster,
+    /// bucket) in use, 50k on office3.)
+    exposed_share: f64,
 }
 
 impl Sent {
@@ -1283,24 +1291,36 @@ impl Sent {
         Sent {
             visible: radiance,
             exposed: radiance,
+            exposed_share: 0.0,
         }
     }
 
     /// The radiance a link with visibility `v` carries: the visible average where every ray of the
-    /// link reached (`v = 1`), the exposed average where some were blocked. Why: the link multiplies
-    /// one average radiance by one average visibility, and where what its rays find blocked is the
-    /// bright part of the cluster (the ceiling over a lamp hung 2 cm under it, lit by the lamp's back)
-    /// the product of the averages sends the hidden light into the room (the corridor read 11% too
-    /// bright with clusters; BENCHMARKS.md, "Exposure of what clusters send"). Not a blend by `v`
-    /// between the two: `v` is sampled by a few rays per receiver node, and its noise above the exposed
-    /// share would let the hidden light through in proportion to the contrast (tried: the corridor
-    /// +2.2% instead of 0).
+    /// link reached (`v = 1`) or where exposure tells no patch from another; where some were blocked,
+    /// what the patches send by their own exposure, as a receiving cluster shares by it
+    /// ([`exposure_shares`]): `(e/v) L_exposed + (max(0, v − v_e)/v) L_others`, so that the link's
+    /// `F v` times it is `F_unoccluded (e L_exposed + max(0, v − v_e) L_others)`: each exposed patch
+    /// sends what it would unoccluded, the others only what the link's rays saw beyond what the exposed
+    /// ones explain (with the receiving side's margin for `N` = 8 rays, conservative where a link into
+    /// a surface sampled more).
+    ///
+    /// Why not one average by `v`: where what the link's rays find blocked is the bright part of the
+    /// cluster (the ceiling over a lamp hung 2 cm under it, lit by the lamp's back) the product of the
+    /// averages sends the hidden light into the room (the corridor read 11% too bright with clusters;
+    /// BENCHMARKS.md, "Exposure of what clusters send"). Why not the exposed average alone (until
+    /// 2026-11-29): where the exposed patches are a small bright part of what the rays see (a
+    /// window's white frame around a black pane, the pane's centroid hidden behind desks), `F v`
+    /// counts the whole visible area at the frame's radiance: links from the classroom's windows
+    /// sent the ceiling 9 to 12 times the light of their contents (`radiosity audit`; BENCHMARKS.md,
+    /// "What clusters send, by exposure").
     fn through(self, v: f64) -> Rgb {
-        if v >= 1.0 {
-            self.visible
-        } else {
-            self.exposed
+        let e = self.exposed_share;
+        if v >= 1.0 || e <= 0.0 {
+            return self.visible;
         }
+        let others = ((self.visible - self.exposed * e) / (1.0 - e)).map(|c| c.max(0.0));
+        let (to_exposed, to_others) = exposure_shares(e, v);
+        self.exposed * to_exposed + others * to_others
     }
 }
 
