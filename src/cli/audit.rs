@@ -83,10 +83,11 @@ impl AuditCommand {
         }
         outln!(
             "# {name}: light carried by {} links (Σ A_i F_ij L_j, luminance; source `cN`: cluster N), \
-             coupled against {} point pairs each; {} links into clusters above them not audited",
+             coupled against {} point pairs each; `pushed`: what the clusters above these polygons \
+             push down to them, against their {} links' sources (not in the total)",
             audit.total.links,
             self.samples,
-            audit.cluster_links
+            audit.into_clusters.links
         )?;
         outln!(
             "{:>9} {:>6} {:>12} {:>12} {:>10} {:>8} {:>7}",
@@ -114,6 +115,7 @@ impl AuditCommand {
             line(row)?;
         }
         line(&audit.total)?;
+        line(&audit.into_clusters)?;
         // What the listed clusters hold, so that a row can be traced back to the scene.
         let h = &solution.hierarchy;
         for row in audit.rows.iter().take(self.rows) {

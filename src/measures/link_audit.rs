@@ -14,10 +14,11 @@
 //! `A_i F_ij L_sent` with the radiance the cluster sends toward the receiver
 //! ([`ClusterSweep::radiance_toward`]), against `∫_i ∫ G V L dA_y dA_x` over the cluster's contents
 //! with each point's own radiance: the centre-to-centre transfer, its mean cosines, its few visibility
-//! rays and what the cluster sends, all at once. Links into a cluster are counted, not audited (what
-//! the cluster shares among its patches is [`audit_transport`]'s). Between elements that share an
-//! edge the kernel's variance is unbounded (`1/r²` at the edge), so there the standard error
-//! understates the estimate's spread.
+//! rays and what the cluster sends, all at once. Links into clusters are audited per patch root, in
+//! one row ([`LinkAudit::into_clusters`]): what the clusters above it push down
+//! ([`ClusterSweep::pushed`]) against the light all their links' sources send it. Between elements
+//! that share an edge the kernel's variance is unbounded (`1/r²` at the edge), so there the standard
+//! error understates the estimate's spread.
 //!
 //! [`audit_closure`] checks the links' closure: a white furnace gathered once over the solution's own
 //! links, every element at radiance 1 and reflectance 1, gives each leaf the total factor it gathers,
@@ -35,7 +36,7 @@
 use crate::color::Rgb;
 use crate::geometry::form_factor::point_to_point;
 use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
-use crate::hierarchy::{ElementId, ElementKind, Hierarchy};
+use crate::hierarchy::{ElementId, ElementKind, Hierarchy, Link};
 use crate::oracles::{sample_kernel, OracleContext};
 use crate::solvers::clustering::ClusterSweep;
 use crate::solvers::gathering::{GatheringSolver, Jacobi};
@@ -68,6 +69,8 @@ pub enum AuditedSource {
     Polygon { polygon: usize, front: bool },
     /// The links from one cluster (its element id).
     Cluster { element: ElementId },
+    /// What the clusters above the audited patches push down to them ([`LinkAudit::into_clusters`]).
+    IntoClusters,
     /// Every audited link ([`LinkAudit::total`]).
     #[default]
     All,
@@ -81,6 +84,7 @@ impl std::fmt::Display for AuditedSource {
                 write!(f, "{polygon}{}", if *front { "" } else { "b" })
             }
             AuditedSource::Cluster { element } => write!(f, "c{element}"),
+            AuditedSource::IntoClusters => write!(f, "pushed"),
             AuditedSource::All => write!(f, "total"),
         }
     }
@@ -118,8 +122,10 @@ impl SourceRow {
 pub struct LinkAudit {
     pub rows: Vec<SourceRow>,
     pub total: SourceRow,
-    /// Links into clusters above the audited elements' patches, not audited.
-    pub cluster_links: usize,
+    /// What the clusters above the audited patches push down to their patch roots
+    /// ([`ClusterSweep::pushed`]), against the light the sources of those clusters' links send the
+    /// patch roots; `links` counts (patch root, link) pairs. Not in `total`.
+    pub into_clusters: SourceRow,
 }
 
 /// Audits the surface links into the elements of `settings.polygons` (see the module doc).
@@ -138,64 +144,91 @@ pub fn audit_links(
     for (id, e) in h.elements.iter().enumerate().filter(|&(id, _)| audited(id)) {
         links.extend(e.links.iter().map(|link| (id as ElementId, link)));
     }
-    // Links into the clusters above the audited patches (a cluster holds a patch's polygon when one
-    // of its patches belongs to it).
-    let cluster_links = h
-        .elements
+    // The links into the clusters above the audited patches, per patch root: what those clusters
+    // push down to it is audited against the light of all their links' sources on it.
+    let mut above: BTreeMap<ElementId, Vec<ElementId>> = BTreeMap::new();
+    for id in 0..h.elements.len() as ElementId {
+        if !h.is_cluster(id) || h.element(id).links.is_empty() {
+            continue;
+        }
+        for &root in h.contents(h.cluster(id).expect("a cluster")) {
+            if settings.polygons.is_empty() || chosen[h.patch_of(root).polygon] {
+                above.entry(root).or_default().push(id);
+            }
+        }
+    }
+    let pairs: Vec<(ElementId, &Link)> = above
         .iter()
-        .enumerate()
-        .filter(|&(id, _)| h.is_cluster(id as ElementId))
-        .filter(|&(id, _)| {
-            let contents = h.contents(h.cluster(id as ElementId).expect("a cluster"));
-            settings.polygons.is_empty() || contents.iter().any(|&s| chosen[h.patch_of(s).polygon])
+        .flat_map(|(&root, clusters)| {
+            clusters
+                .iter()
+                .flat_map(move |&c| h.element(c).links.iter().map(move |l| (root, l)))
         })
-        .map(|(_, e)| e.links.len())
-        .sum();
+        .collect();
     anyhow::ensure!(
-        links.len() <= settings.max_links,
-        "{} links to audit, more than --max-links {}: name fewer receiving polygons (--polygon) or \
-         raise the bound",
-        links.len(),
+        links.len() + pairs.len() <= settings.max_links,
+        "{} links to audit (and patches under clusters' links), more than --max-links {}: name fewer \
+         receiving polygons (--polygon) or raise the bound",
+        links.len() + pairs.len(),
         settings.max_links
     );
-    let sweep = links
-        .iter()
-        .any(|(_, link)| h.is_cluster(link.source))
-        .then(|| ClusterSweep::new(h));
+    let sweep = h.root_cluster.map(|_| ClusterSweep::new(h));
     // Per link: its source, and the light it carries as coupled and as estimated, with the
     // estimate's standard error (luminance times receiver area).
     let audited: Vec<(AuditedSource, f64, f64, f64)> = links
         .par_iter()
         .map(|&(receiver, link)| {
             let area = h.element(receiver).area;
+            let (estimated, standard_error) = light_from(h, visibility, receiver, link.source, settings);
             match &sweep {
                 Some(sweep) if h.is_cluster(link.source) => {
                     let centre = h.center_of(receiver);
                     let sent =
                         sweep.radiance_toward(h, link.source, centre, link.coupling.visibility);
                     let coupled = area * link.form_factor() * sent.luminance();
-                    let (mean, standard_error) =
-                        estimate_from_cluster(h, visibility, receiver, link.source, settings);
                     let source = AuditedSource::Cluster {
                         element: link.source,
                     };
-                    (source, coupled, area * mean, area * standard_error)
+                    (source, coupled, estimated, standard_error)
                 }
                 _ => {
                     let patch = h.patch_of(link.source);
-                    let weight = area * h.average_radiance(link.source).luminance();
-                    let (mean, standard_error) =
-                        estimate(h, visibility, receiver, link.source, settings);
+                    let coupled =
+                        area * h.average_radiance(link.source).luminance() * link.form_factor();
                     let source = AuditedSource::Polygon {
                         polygon: patch.polygon,
                         front: patch.front,
                     };
-                    let coupled = weight * link.form_factor();
-                    (source, coupled, weight * mean, weight * standard_error)
+                    (source, coupled, estimated, standard_error)
                 }
             }
         })
         .collect();
+    // Into clusters: per patch root, what the clusters above it push down, against the light of
+    // their links' sources on it.
+    let estimates: Vec<(ElementId, f64, f64)> = pairs
+        .par_iter()
+        .map(|&(root, link)| {
+            let (estimated, standard_error) = light_from(h, visibility, root, link.source, settings);
+            (root, estimated, standard_error)
+        })
+        .collect();
+    let mut into_clusters = SourceRow {
+        source: AuditedSource::IntoClusters,
+        links: pairs.len(),
+        ..SourceRow::default()
+    };
+    if let Some(sweep) = &sweep {
+        into_clusters.coupled = above
+            .keys()
+            .map(|&root| h.element(root).area * sweep.pushed(root).luminance())
+            .sum();
+    }
+    for (_, estimated, standard_error) in estimates {
+        into_clusters.estimated += estimated;
+        into_clusters.standard_error += standard_error.powi(2);
+    }
+    into_clusters.standard_error = into_clusters.standard_error.sqrt();
     let mut by_source: BTreeMap<AuditedSource, SourceRow> = BTreeMap::new();
     for (source, coupled, estimated, standard_error) in audited {
         let row = by_source.entry(source).or_insert_with(|| SourceRow {
@@ -227,8 +260,30 @@ pub fn audit_links(
     Ok(LinkAudit {
         rows,
         total,
-        cluster_links,
+        into_clusters,
     })
+}
+
+/// The light (luminance times receiver area) that `source` sends to surface element `receiver`,
+/// estimated ([`estimate`] times the source's average radiance for a surface, [`estimate_from_cluster`]
+/// for a cluster), with its standard error.
+fn light_from(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    settings: &AuditSettings,
+) -> (f64, f64) {
+    let area = h.element(receiver).area;
+    let (mean, standard_error, weight) = if h.is_cluster(source) {
+        let (mean, standard_error) =
+            estimate_from_cluster(h, visibility, receiver, source, settings);
+        (mean, standard_error, area)
+    } else {
+        let (mean, standard_error) = estimate(h, visibility, receiver, source, settings);
+        (mean, standard_error, area * h.average_radiance(source).luminance())
+    };
+    (weight * mean, weight * standard_error)
 }
 
 /// The light per unit receiver area that the contents of cluster `cluster` send to surface element
