@@ -179,7 +179,8 @@ pub fn audit_links(
         .par_iter()
         .map(|&(receiver, link)| {
             let area = h.element(receiver).area;
-            let (estimated, standard_error) = light_from(h, visibility, receiver, link.source, settings);
+            let (estimated, standard_error) =
+                light_from(h, visibility, receiver, link.source, settings);
             match &sweep {
                 Some(sweep) if h.is_cluster(link.source) => {
                     let centre = h.center_of(receiver);
@@ -209,7 +210,8 @@ pub fn audit_links(
     let estimates: Vec<(ElementId, f64, f64)> = pairs
         .par_iter()
         .map(|&(root, link)| {
-            let (estimated, standard_error) = light_from(h, visibility, root, link.source, settings);
+            let (estimated, standard_error) =
+                light_from(h, visibility, root, link.source, settings);
             (root, estimated, standard_error)
         })
         .collect();
@@ -281,7 +283,11 @@ fn light_from(
         (mean, standard_error, area)
     } else {
         let (mean, standard_error) = estimate(h, visibility, receiver, source, settings);
-        (mean, standard_error, area * h.average_radiance(source).luminance())
+        (
+            mean,
+            standard_error,
+            area * h.average_radiance(source).luminance(),
+        )
     };
     (weight * mean, weight * standard_error)
 }
