@@ -128,7 +128,8 @@ pub struct LinkAudit {
     pub into_clusters: SourceRow,
 }
 
-/// Audits the surface links into the elements of `settings.polygons` (see the module doc).
+/// Audits the links into the surface elements of `settings.polygons`, and what the clusters above
+/// their patches push down to them (see the module doc).
 pub fn audit_links(
     h: &Hierarchy,
     visibility: &dyn Visibility,
@@ -181,28 +182,31 @@ pub fn audit_links(
             let area = h.element(receiver).area;
             let (estimated, standard_error) =
                 light_from(h, visibility, receiver, link.source, settings);
-            match &sweep {
-                Some(sweep) if h.is_cluster(link.source) => {
-                    let centre = h.center_of(receiver);
-                    let sent =
-                        sweep.radiance_toward(h, link.source, centre, link.coupling.visibility);
-                    let coupled = area * link.form_factor() * sent.luminance();
-                    let source = AuditedSource::Cluster {
+            // What the link multiplies its form factor with: what a cluster sends toward the
+            // receiver, a surface's average radiance.
+            let (source, radiance) = match &sweep {
+                Some(sweep) if h.is_cluster(link.source) => (
+                    AuditedSource::Cluster {
                         element: link.source,
-                    };
-                    (source, coupled, estimated, standard_error)
-                }
+                    },
+                    sweep.radiance_toward(
+                        h,
+                        link.source,
+                        h.center_of(receiver),
+                        link.coupling.visibility,
+                    ),
+                ),
                 _ => {
                     let patch = h.patch_of(link.source);
-                    let coupled =
-                        area * h.average_radiance(link.source).luminance() * link.form_factor();
                     let source = AuditedSource::Polygon {
                         polygon: patch.polygon,
                         front: patch.front,
                     };
-                    (source, coupled, estimated, standard_error)
+                    (source, h.average_radiance(link.source))
                 }
-            }
+            };
+            let coupled = area * link.form_factor() * radiance.luminance();
+            (source, coupled, estimated, standard_error)
         })
         .collect();
     // Into clusters: per patch root, what the clusters above it push down, against the light of
