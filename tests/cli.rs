@@ -655,6 +655,36 @@ fn probe_at_points_the_camera_sees() {
 }
 
 #[test]
+fn audit_lists_clusters_with_what_they_hold_and_what_they_push_down() {
+    let dir = temp_dir("audit_clusters");
+    let scene = dir.join("groups.mgf");
+    let scene = scene.to_str().unwrap();
+    succeeds(&["scene", "shadow-groups", "-o", scene]);
+    let text = succeeds(&[
+        "audit",
+        scene,
+        "--clustering",
+        "oriented",
+        "--polygon",
+        "0",
+        "--samples",
+        "16",
+        "--rows",
+        "8",
+    ]);
+    let cluster_rows = text
+        .lines()
+        .filter(|l| l.trim_start().starts_with('c') && !l.starts_with('#'))
+        .count();
+    let held = text.lines().filter(|l| l.starts_with("# c")).count();
+    assert!(cluster_rows > 0 && held == cluster_rows, "{text}");
+    assert!(
+        text.lines().any(|l| l.trim_start().starts_with("pushed")),
+        "{text}"
+    );
+}
+
+#[test]
 fn audit_lists_the_sources_of_a_polygon_its_closure_and_rejects_an_unknown_one() {
     let text = succeeds(&["audit", "--polygon", "0", "--samples", "16", "--rows", "3"]);
     assert!(text.contains("coupled") && text.contains("total"), "{text}");

@@ -81,13 +81,21 @@ impl AuditCommand {
             outln!("{}", serde_json::to_string_pretty(&audit)?)?;
             return Ok(());
         }
+        let pushed = audit.into_clusters.links > 0;
         outln!(
             "# {name}: light carried by {} links (Σ A_i F_ij L_j, luminance; source `cN`: cluster N), \
-             coupled against {} point pairs each; `pushed`: what the clusters above these polygons \
-             push down to them, against their {} links' sources (not in the total)",
+             coupled against {} point pairs each{}",
             audit.total.links,
             self.samples,
-            audit.into_clusters.links
+            if pushed {
+                format!(
+                    "; `pushed`: what the clusters above these polygons push down to them, against \
+                     their {} links' sources (not in the total)",
+                    audit.into_clusters.links
+                )
+            } else {
+                String::new()
+            }
         )?;
         outln!(
             "{:>9} {:>6} {:>12} {:>12} {:>10} {:>8} {:>7}",
@@ -115,7 +123,9 @@ impl AuditCommand {
             line(row)?;
         }
         line(&audit.total)?;
-        line(&audit.into_clusters)?;
+        if pushed {
+            line(&audit.into_clusters)?;
+        }
         // What the listed clusters hold, so that a row can be traced back to the scene.
         let h = &solution.hierarchy;
         for row in audit.rows.iter().take(self.rows) {
