@@ -995,7 +995,7 @@ pub fn moved_by_sending(h: &Hierarchy) -> Vec<f64> {
                 .filter_map(|l| {
                     let sent = sweep.sent_toward(h, l.source, centre)?;
                     let carried = sent.through(f64::from(l.coupling.visibility));
-                    Some((carried - sent.visible).map(f64::abs) * l.coupling.form_factor())
+                    Some((carried - sent.visible()).map(f64::abs) * l.coupling.form_factor())
                 })
                 .sum();
             (h.reflectance_of(id) * moved).max_channel()
@@ -1192,11 +1192,11 @@ fn sent_along(
     else {
         return Sent::even(visible);
     };
-    Sent {
+    Sent::new(
         visible,
-        exposed: average(&split.exposed, split.exposed_total),
-        exposed_share: split.exposed_share(),
-    }
+        average(&split.exposed, split.exposed_total),
+        split.exposed_share(),
+    )
 }
 
 /// A cluster's visible projected areas along a bucket split by exposure ([`expose`]): the exposed
@@ -1276,23 +1276,43 @@ pub fn exposure_shares(e: f64, v: f64) -> (f64, f64) {
 #[derive(Clone, Copy, Debug)]
 struct Sent {
     /// Radiance averaged over the visible projected areas of the patches facing the bucket.
-    visible: Rgb,
+    visible: [f32; 3],
     /// The same over the patches exposed toward the bucket's nearest receiver ([`expose`]).
-    exposed: Rgb,
+    exposed: [f32; 3],
     /// `e`, the exposed patches' share of the visible projected area, in (0, 1); 0 where exposure
     /// tells no patch from another ([`ExposureSplit::new`]). (The other patches' average is
-    /// `(visible − e exposed) / (1 − e)`: not stored, as the table holds one entry per (cluster,
-    /// bucket) in use, 50k on office3.)
-    exposed_share: f64,
+    /// `(visible − e exposed) / (1 − e)`.)
+    ///
+    /// Single precision (a relative rounding of 6·10⁻⁸, far below what the averages estimate) and
+    /// no third average: the table holds one entry per (cluster, bucket) in use, 50k on office3.
+    exposed_share: f32,
+}
+
+/// An [`Rgb`] in single precision, and back.
+fn narrow(c: Rgb) -> [f32; 3] {
+    [c.r as f32, c.g as f32, c.b as f32]
+}
+
+fn widen(c: [f32; 3]) -> Rgb {
+    Rgb::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]))
 }
 
 impl Sent {
-    fn even(radiance: Rgb) -> Self {
+    fn new(visible: Rgb, exposed: Rgb, exposed_share: f64) -> Self {
         Sent {
-            visible: radiance,
-            exposed: radiance,
-            exposed_share: 0.0,
+            visible: narrow(visible),
+            exposed: narrow(exposed),
+            exposed_share: exposed_share as f32,
         }
+    }
+
+    fn even(radiance: Rgb) -> Self {
+        Sent::new(radiance, radiance, 0.0)
+    }
+
+    /// Radiance averaged over the visible projected areas of the patches facing the bucket.
+    fn visible(self) -> Rgb {
+        widen(self.visible)
     }
 
     /// The radiance a link with visibility `v` carries: the visible average where every ray of the
@@ -1314,13 +1334,15 @@ impl Sent {
     /// sent the ceiling 9 to 12 times the light of their contents (`radiosity audit`; BENCHMARKS.md,
     /// "What clusters send, by exposure").
     fn through(self, v: f64) -> Rgb {
-        let e = self.exposed_share;
+        let e = f64::from(self.exposed_share);
+        let visible = self.visible();
         if v >= 1.0 || e <= 0.0 {
-            return self.visible;
+            return visible;
         }
-        let others = ((self.visible - self.exposed * e) / (1.0 - e)).map(|c| c.max(0.0));
+        let exposed = widen(self.exposed);
+        let others = ((visible - exposed * e) / (1.0 - e)).map(|c| c.max(0.0));
         let (to_exposed, to_others) = exposure_shares(e, v);
-        self.exposed * to_exposed + others * to_others
+        exposed * to_exposed + others * to_others
     }
 }
 
