@@ -2,20 +2,26 @@
 //! Carlo estimate of the receiver's total transfer matches Howell's closed form (C-11) within four of
 //! its standard errors, and so do the couplings within 1%; with an emitter 30% hidden by a strip just
 //! under it, it finds the fixed source nodes' bias (Bekaert–Willems Algorithm 4.1 as published) many
-//! standard errors away, and none beyond the noise of shifted ones. The closure audit of a closed box
-//! gives every leaf a total factor of 1.
+//! standard errors away, and none beyond the noise of shifted ones. Links from clusters and what
+//! clusters push down are estimated to the closed form of unoccluded sources, and coupled within the
+//! centre-to-centre transfer's error. The closure audit of a closed box gives every leaf a total
+//! factor of 1.
 
 #[allow(dead_code)] // each test file uses part of the shared module
 mod common;
 use radiosity::bases::BasisKind;
-use radiosity::geometry::form_factor::parallel_rectangles;
+use radiosity::color::Rgb;
+use radiosity::geometry::cubature::{nodes_on, rule};
+use radiosity::geometry::form_factor::{parallel_rectangles, point_to_polygon};
+use radiosity::geometry::{DVec3, Shape};
+use radiosity::hierarchy::clusters::ClusteringKind;
 use radiosity::hierarchy::{Hierarchy, Link, OracleFactor};
 use radiosity::measures::link_audit::{
     audit_closure, audit_links, audit_transport, AuditSettings, AuditedSource,
 };
 use radiosity::pipeline::{simulate, SimulationSettings, Solution};
 use radiosity::progress::Progress;
-use radiosity::scene::generators;
+use radiosity::scene::{generators, Material, Object, Polygon, Scene};
 use radiosity::solvers::coupling::{couple, CouplingSettings, SourceRule};
 use radiosity::visibility::brute_force::BruteForce;
 
@@ -26,6 +32,28 @@ fn settings(samples: usize) -> AuditSettings {
         max_links: 100_000,
         seed: 7,
     }
+}
+
+/// The audit's estimate of some light within four of its standard errors of the exact value `exact`
+/// (and those errors below 5% of it), and what the solution coupled within `tolerance` of it.
+fn assert_matches_exact(
+    coupled: f64,
+    estimated: f64,
+    standard_error: f64,
+    exact: f64,
+    tolerance: f64,
+) {
+    eprintln!(
+        "coupled {coupled:.6}, estimated {estimated:.6} ± {standard_error:.1e}, exact {exact:.6}"
+    );
+    assert!(
+        (estimated - exact).abs() < 4.0 * standard_error && standard_error < 0.05 * exact,
+        "estimated {estimated:.6} ± {standard_error:.1e}, exact {exact:.6}"
+    );
+    assert!(
+        (coupled / exact - 1.0).abs() < tolerance,
+        "coupled {coupled:.6}, exact {exact:.6}"
+    );
 }
 
 #[test]
@@ -52,17 +80,7 @@ fn the_audit_of_two_parallel_plates_matches_the_closed_form() {
     // links carry A_r F_re L_e in all.
     let exact = parallel_rectangles(1.0, 1.0, 1.0) * emission;
     let t = &audit.total;
-    assert!(
-        (t.estimated - exact).abs() < 4.0 * t.standard_error,
-        "estimated {:.6} ± {:.1e}, exact {exact:.6}",
-        t.estimated,
-        t.standard_error
-    );
-    assert!(
-        (t.coupled / exact - 1.0).abs() < 0.01,
-        "coupled {:.6}, exact {exact:.6}",
-        t.coupled
-    );
+    assert_matches_exact(t.coupled, t.estimated, t.standard_error, exact, 0.01);
 }
 
 #[test]
@@ -226,54 +244,42 @@ fn the_transport_audit_finds_the_bias_of_fixed_source_nodes() {
     );
 }
 
-#[test]
-fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents() {
-    // A 2 m floor under a cloud of small black emitting squares 3 m up, facing it: with clusters and a
-    // coarse ε the floor's elements gather from clusters of the squares. No square hides another
-    // (they are coplanar) and each emits a constant radiance, so the light a link from a cluster
-    // stands for is exactly Σ_k A_i F_ik L_k over the squares k it holds, F_ik by cubature of the
-    // closed-form point-to-polygon factor.
-    use radiosity::color::Rgb;
-    use radiosity::geometry::cubature::{nodes_on, rule};
-    use radiosity::geometry::form_factor::point_to_polygon;
-    use radiosity::geometry::{DVec3, Shape};
-    use radiosity::hierarchy::clusters::ClusteringKind;
-    use radiosity::scene::{Material, Object, Polygon, Scene};
-    let floor = Shape::Quad([
-        DVec3::ZERO,
-        DVec3::new(2.0, 0.0, 0.0),
-        DVec3::new(2.0, 2.0, 0.0),
-        DVec3::new(0.0, 2.0, 0.0),
-    ]);
-    let square = |x: f64, y: f64| {
-        let (a, s, z) = (DVec3::new(x, y, 3.0), 0.1, 3.0);
-        Shape::Quad([
-            a,
-            DVec3::new(x, y + s, z),
-            DVec3::new(x + s, y + s, z),
-            DVec3::new(x + s, y, z),
-        ])
-    };
-    let mut polygons = vec![Polygon {
-        shape: floor,
-        material: 0,
-        object: 0,
-        two_sided: false,
-    }];
-    for k in 0..12 {
-        // Apart from each other (0.1 m squares at least 0.12 m apart): none hides another.
-        let (x, y) = (0.2 + 0.2 * (k % 4) as f64, 0.5 + 0.37 * (k / 4) as f64);
-        polygons.push(Polygon {
-            shape: square(x + 0.04 * (k % 3) as f64, y),
-            material: 1,
-            object: 0,
-            two_sided: false,
-        });
-    }
+/// Twelve 0.1 m squares at height `z`, facing up or down, of material `material`, at least 0.12 m
+/// apart: none hides another.
+fn twelve_squares(z: f64, up: bool, material: usize) -> Vec<Polygon> {
+    (0..12)
+        .map(|k| {
+            let (x, y) = (
+                0.2 + 0.2 * (k % 4) as f64 + 0.04 * (k % 3) as f64,
+                0.5 + 0.37 * (k / 4) as f64,
+            );
+            let s = 0.1;
+            let mut corners = [
+                DVec3::new(x, y, z),
+                DVec3::new(x + s, y, z),
+                DVec3::new(x + s, y + s, z),
+                DVec3::new(x, y + s, z),
+            ];
+            if !up {
+                corners.reverse();
+            }
+            Polygon {
+                shape: Shape::Quad(corners),
+                material,
+                object: 0,
+                two_sided: false,
+            }
+        })
+        .collect()
+}
+
+/// Solves `polygons` (material 0 a grey reflector, 1 a black lamp) with oriented clusters at a
+/// coarse ε, so that light goes through cluster links.
+fn clustered(polygons: Vec<Polygon>) -> Solution {
     let scene = Scene {
         polygons,
         materials: vec![
-            Material::diffuse("floor", Rgb::splat(0.5)),
+            Material::diffuse("grey", Rgb::splat(0.5)),
             Material::emitter("lamp", Rgb::BLACK, Rgb::new(1.0, 2.0, 3.0)),
         ],
         objects: vec![Object {
@@ -281,7 +287,7 @@ fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents
         }],
         ..Default::default()
     };
-    let solution = simulate(
+    simulate(
         &scene,
         &SimulationSettings {
             clustering: ClusteringKind::Oriented,
@@ -290,7 +296,51 @@ fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents
         },
         &Progress::new(true),
     )
-    .expect("solve");
+    .expect("solve")
+}
+
+/// `Σ A F L` from what `source` stands for (a surface, or a cluster's patches, at their average
+/// radiance) to the surface `receiver`, which faces +z; `A F` by cubature of the closed-form
+/// point-to-polygon factor. Exact where nothing hides anything and the sources' radiance is constant.
+fn exact_light(h: &Hierarchy, receiver: &Shape, source: u32) -> f64 {
+    let nodes = nodes_on(receiver, rule(receiver.domain(), 12));
+    let sources = match h.cluster(source) {
+        Some(cluster) => h.contents(cluster).to_vec(),
+        None => vec![source],
+    };
+    sources
+        .iter()
+        .map(|&s| {
+            let shape = h.element(s).shape();
+            let factor: f64 = nodes
+                .iter()
+                .map(|x| x.weight * point_to_polygon(x.point, DVec3::Z, shape))
+                .sum();
+            factor * h.average_radiance(s).luminance()
+        })
+        .sum()
+}
+
+#[test]
+fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents() {
+    // A 2 m floor under twelve small black emitting squares 3 m up, facing it: with clusters and a
+    // coarse ε the floor's elements gather from clusters of the squares. No square hides another
+    // (they are coplanar) and each emits a constant radiance, so the light a link from a cluster
+    // stands for is exactly Σ_k A_i F_ik L_k over the squares k it holds.
+    let floor = Shape::Quad([
+        DVec3::ZERO,
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(2.0, 2.0, 0.0),
+        DVec3::new(0.0, 2.0, 0.0),
+    ]);
+    let mut polygons = vec![Polygon {
+        shape: floor,
+        material: 0,
+        object: 0,
+        two_sided: false,
+    }];
+    polygons.extend(twelve_squares(3.0, false, 1));
+    let solution = clustered(polygons);
     let h = &solution.hierarchy;
     let audit = audit_links(h, solution.visibility.as_ref(), &settings(4096)).expect("audit");
     let from_clusters: Vec<_> = audit
@@ -309,17 +359,8 @@ fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents
         if h.is_cluster(id) || h.patch_of(id).polygon != 0 {
             continue;
         }
-        let nodes = nodes_on(element.shape(), rule(element.shape().domain(), 12));
         for link in element.links.iter().filter(|l| h.is_cluster(l.source)) {
-            for &patch in h.contents(h.cluster(link.source).expect("cluster")) {
-                let shape = h.element(patch).shape();
-                let radiance = h.average_radiance(patch).luminance();
-                let factor: f64 = nodes
-                    .iter()
-                    .map(|x| x.weight * point_to_polygon(x.point, DVec3::Z, shape))
-                    .sum();
-                exact += factor * radiance;
-            }
+            exact += exact_light(h, element.shape(), link.source);
         }
     }
     let estimated: f64 = from_clusters.iter().map(|row| row.estimated).sum();
@@ -328,18 +369,10 @@ fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents
         .map(|row| row.standard_error.powi(2))
         .sum::<f64>()
         .sqrt();
-    assert!(
-        (estimated - exact).abs() < 4.0 * error && error < 0.05 * exact,
-        "estimated {estimated:.6} ± {error:.1e}, exact {exact:.6}"
-    );
     // The couplings' centre-to-centre transfer is close to it too: clusters about R = 0.5 m across
     // seen from 3 m, a far-field error of order (R / r)² ≈ 3%.
     let coupled: f64 = from_clusters.iter().map(|row| row.coupled).sum();
-    eprintln!("estimated {estimated:.6} ± {error:.1e}, coupled {coupled:.6}, exact {exact:.6}");
-    assert!(
-        (coupled / exact - 1.0).abs() < 0.05,
-        "coupled {coupled:.6}, exact {exact:.6}"
-    );
+    assert_matches_exact(coupled, estimated, error, exact, 0.05);
 }
 
 #[test]
@@ -347,33 +380,8 @@ fn the_audit_of_what_clusters_push_down_matches_the_exact_transfer() {
     // Twelve small grey tiles on the ground, apart, under a black emitting square 3 m up: with
     // clusters and a coarse ε the tiles gather through links into clusters that hold them. Nothing
     // hides anything, so the light that the sources of those links send a tile is exactly
-    // Σ A_tile F L over them, F by cubature of the closed-form point-to-polygon factor.
-    use radiosity::color::Rgb;
-    use radiosity::geometry::cubature::{nodes_on, rule};
-    use radiosity::geometry::form_factor::point_to_polygon;
-    use radiosity::geometry::{DVec3, Shape};
-    use radiosity::hierarchy::clusters::ClusteringKind;
-    use radiosity::scene::{Material, Object, Polygon, Scene};
-    let tile = |x: f64, y: f64| {
-        let s = 0.1;
-        Shape::Quad([
-            DVec3::new(x, y, 0.0),
-            DVec3::new(x + s, y, 0.0),
-            DVec3::new(x + s, y + s, 0.0),
-            DVec3::new(x, y + s, 0.0),
-        ])
-    };
-    let mut polygons: Vec<Polygon> = (0..12)
-        .map(|k| Polygon {
-            shape: tile(
-                0.2 + 0.2 * (k % 4) as f64 + 0.04 * (k % 3) as f64,
-                0.5 + 0.37 * (k / 4) as f64,
-            ),
-            material: 0,
-            object: 0,
-            two_sided: false,
-        })
-        .collect();
+    // Σ A_tile F L over them.
+    let mut polygons = twelve_squares(0.0, true, 0);
     // The lamp small against its height, so that the centre-to-centre transfer is accurate.
     polygons.push(Polygon {
         shape: Shape::Quad([
@@ -386,27 +394,7 @@ fn the_audit_of_what_clusters_push_down_matches_the_exact_transfer() {
         object: 0,
         two_sided: false,
     });
-    let scene = Scene {
-        polygons,
-        materials: vec![
-            Material::diffuse("tile", Rgb::splat(0.5)),
-            Material::emitter("lamp", Rgb::BLACK, Rgb::new(1.0, 2.0, 3.0)),
-        ],
-        objects: vec![Object {
-            name: "test".into(),
-        }],
-        ..Default::default()
-    };
-    let solution = simulate(
-        &scene,
-        &SimulationSettings {
-            clustering: ClusteringKind::Oriented,
-            eps: 1e-2,
-            ..SimulationSettings::default()
-        },
-        &Progress::new(true),
-    )
-    .expect("solve");
+    let solution = clustered(polygons);
     let h = &solution.hierarchy;
     let tiles: Vec<usize> = (0..12).collect();
     let audit = audit_links(
@@ -414,9 +402,7 @@ fn the_audit_of_what_clusters_push_down_matches_the_exact_transfer() {
         solution.visibility.as_ref(),
         &AuditSettings {
             polygons: tiles.clone(),
-            samples: 4096,
-            max_links: 100_000,
-            seed: 7,
+            ..settings(4096)
         },
     )
     .expect("audit");
@@ -429,44 +415,20 @@ fn the_audit_of_what_clusters_push_down_matches_the_exact_transfer() {
             continue;
         };
         for &root in h.contents(cluster) {
-            if !tiles.contains(&h.patch_of(root).polygon) {
-                continue;
-            }
-            let shape = h.element(root).shape();
-            let nodes = nodes_on(shape, rule(shape.domain(), 12));
-            for link in &h.element(id).links {
-                let sources = match h.cluster(link.source) {
-                    Some(c) => h.contents(c).to_vec(),
-                    None => vec![link.source],
-                };
-                for source in sources {
-                    let radiance = h.average_radiance(source).luminance();
-                    let source_shape = h.element(source).shape();
-                    let factor: f64 = nodes
-                        .iter()
-                        .map(|x| x.weight * point_to_polygon(x.point, DVec3::Z, source_shape))
-                        .sum();
-                    exact += factor * radiance;
+            if tiles.contains(&h.patch_of(root).polygon) {
+                for link in &h.element(id).links {
+                    exact += exact_light(h, h.element(root).shape(), link.source);
                 }
             }
         }
     }
-    eprintln!(
-        "pushed {:.6}, estimated {:.6} ± {:.1e}, exact {exact:.6}",
-        pushed.coupled, pushed.estimated, pushed.standard_error
-    );
-    assert!(
-        (pushed.estimated - exact).abs() < 4.0 * pushed.standard_error
-            && pushed.standard_error < 0.05 * exact,
-        "estimated {:.6} ± {:.1e}, exact {exact:.6}",
-        pushed.estimated,
-        pushed.standard_error
-    );
     // What the clusters push down is the same light, up to the centre-to-centre transfer's error,
     // of order (R / r)² ≈ 5.4% for the tiles' cluster (bounding radius R ≈ 0.7 m) 3 m from the lamp.
-    assert!(
-        (pushed.coupled / exact - 1.0).abs() < 0.06,
-        "pushed {:.6}, exact {exact:.6}",
-        pushed.coupled
+    assert_matches_exact(
+        pushed.coupled,
+        pushed.estimated,
+        pushed.standard_error,
+        exact,
+        0.06,
     );
 }
