@@ -173,7 +173,9 @@ pub fn audit_links(
         links.len() + pairs.len(),
         settings.max_links
     );
-    let sweep = h.root_cluster.map(|_| ClusterSweep::new(h));
+    // The clusters' exchange, only where a cluster link is audited (a sweep over the whole scene).
+    let sweep = (!pairs.is_empty() || links.iter().any(|(_, link)| h.is_cluster(link.source)))
+        .then(|| ClusterSweep::new(h));
     // Per link: its source, and the light it carries as coupled and as estimated, with the
     // estimate's standard error (luminance times receiver area).
     let audited: Vec<(AuditedSource, f64, f64, f64)> = links
