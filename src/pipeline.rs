@@ -245,7 +245,7 @@ impl SimulationSettings {
 
 /// The library's default is the classic solver the oracle experiments start from (constant basis,
 /// power oracle, `eps`, visibility at fixed source nodes); the command line's defaults differ (linear
-/// basis, ε = 3e-5, one shadow level, clustering where needed, shifted source nodes: `radiosity render
+/// basis, ε = 3e-5, one shadow level, clustering where needed, jittered source nodes: `radiosity render
 /// --help`).
 impl Default for SimulationSettings {
     fn default() -> Self {

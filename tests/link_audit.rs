@@ -2,7 +2,7 @@
 //! Carlo estimate of the receiver's total transfer matches Howell's closed form (C-11) within four of
 //! its standard errors, and so do the couplings within 1%; with an emitter 30% hidden by a strip just
 //! under it, it finds the fixed source nodes' bias (Bekaert–Willems Algorithm 4.1 as published) many
-//! standard errors away, and none beyond the noise of shifted ones. Links from clusters and what
+//! standard errors away, and none beyond the noise of jittered ones. Links from clusters and what
 //! clusters push down are estimated to the closed form of unoccluded sources, and coupled within the
 //! centre-to-centre transfer's error. The closure audit of a closed box gives every leaf a total
 //! factor of 1.
@@ -122,15 +122,15 @@ fn the_audit_finds_the_bias_of_fixed_source_nodes_behind_a_near_occluder() {
         fixed.estimated,
         fixed.standard_error
     );
-    // The shifted couplings are themselves random (about 1.5% over these 64 receivers, see
+    // The jittered couplings are themselves random (about 1.5% over these 64 receivers, see
     // galerkin.rs), the audit's estimate much less: four of the couplings' standard errors.
-    let shifted = audited(SourceRule::Shifted);
+    let jittered = audited(SourceRule::Jittered);
     assert!(
-        (shifted.coupled / shifted.estimated - 1.0).abs() < 0.06,
-        "shifted nodes: coupled {:.5}, estimated {:.5} ± {:.1e}",
-        shifted.coupled,
-        shifted.estimated,
-        shifted.standard_error
+        (jittered.coupled / jittered.estimated - 1.0).abs() < 0.06,
+        "jittered nodes: coupled {:.5}, estimated {:.5} ± {:.1e}",
+        jittered.coupled,
+        jittered.estimated,
+        jittered.standard_error
     );
 }
 
@@ -203,7 +203,7 @@ fn the_closure_audit_of_a_closed_box_is_one_everywhere() {
 
 /// The transport audit sees the fixed source nodes' bias behind a near occluder (the whole receiver's
 /// reflected light, from a full solve: +6%, its sign set by where refinement leaves the emitter's
-/// element boundaries against the strip's edge) and not the shifted ones' beyond their noise (their
+/// element boundaries against the strip's edge) and not the jittered ones' beyond their noise (their
 /// couplings' own, about 1.5%, and the gather's 0.45% at 2¹⁸ rays: 6% allowed).
 #[test]
 fn the_transport_audit_finds_the_bias_of_fixed_source_nodes() {
@@ -233,14 +233,14 @@ fn the_transport_audit_finds_the_bias_of_fixed_source_nodes() {
         .expect("the receiver's front")
     };
     let fixed = audit(SourceRule::Fixed);
-    let shifted = audit(SourceRule::Shifted);
+    let jittered = audit(SourceRule::Jittered);
     assert!(
         ((fixed.solved - fixed.gathered) / fixed.standard_error).abs() > 8.0,
         "fixed: {fixed:?}"
     );
     assert!(
-        (shifted.solved / shifted.gathered - 1.0).abs() < 0.06,
-        "shifted: {shifted:?}"
+        (jittered.solved / jittered.gathered - 1.0).abs() < 0.06,
+        "jittered: {jittered:?}"
     );
 }
 

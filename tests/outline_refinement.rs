@@ -87,7 +87,7 @@ fn error_across_the_outline(outlines: OutlineRule) -> (f64, f64) {
         basis: BasisKind::Linear,
         eps: 1e-6,
         shadow_levels: 1.0,
-        source_rule: radiosity::solvers::coupling::SourceRule::Shifted,
+        source_rule: radiosity::solvers::coupling::SourceRule::Jittered,
         outlines,
         ..Default::default()
     };

@@ -257,11 +257,12 @@ pub struct SolveArgs {
     /// centre estimate.
     #[arg(long, value_enum, default_value_t = NearField::Adaptive)]
     pub near_field: NearField,
-    /// Where visibility rays of a link whose shaft is partly blocked end on its source: shifted (the
-    /// default), a random shift of the source's cubature nodes per receiver node, unbiased across a
-    /// shadow boundary on the source (a lamp reflector hidden behind its tube, a ceiling seen past a
-    /// fixture); fixed, the nodes themselves (Bekaert–Willems as published), less noisy but biased there.
-    #[arg(long, value_enum, default_value_t = SourceRule::Shifted)]
+    /// Where visibility rays of a link whose shaft is partly blocked end on its source: jittered (the
+    /// default; `shifted` is accepted), random nodes per receiver node, one in each cell of a regular
+    /// partition of the source, unbiased across a shadow boundary on the source (a lamp reflector hidden
+    /// behind its tube, a ceiling seen past a fixture); fixed, the cubature nodes themselves
+    /// (Bekaert–Willems as published), less noisy but biased there.
+    #[arg(long, value_enum, default_value_t = SourceRule::Jittered)]
     pub source_rule: SourceRule,
     /// Receivers that something lies over in part, nearer than half their size (a lamp housing under
     /// a ceiling, a shelf, a picture off a wall; found by five rays along the normal): split (the

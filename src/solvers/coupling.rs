@@ -17,10 +17,11 @@
 //! the bilinear map's varying Jacobian makes it `A_i G` with a full `G` ([`crate::bases::Overlap`]),
 //! which step 4a solves with (else a uniformly lit trapezoid would get a false gradient).
 //!
-//! Partly visible sources (`--source-rule shifted`): where the shaft test leaves visibility open,
-//! each receiver node sees the source through a random shift of the source rule (Cranley–Patterson
-//! rotation, [`shifted_nodes`]), so that a shadow boundary across the source is sampled without a bias
-//! common to all receivers (`SourceSampler::rows`).
+//! Partly visible sources (`--source-rule jittered`): where the shaft test leaves visibility open,
+//! each receiver node sees the source through its own random nodes, one in each cell of a regular
+//! partition of the source ([`jittered_nodes`]), so that a shadow boundary across the source is sampled
+//! without a bias common to all receivers; at least [`NEAR_SOURCE`] of the source's diameter away the
+//! plain sum replaces the ratio estimator, which is biased at random nodes (`SourceSampler::rows`).
 //!
 //! Near sources: where the source lies within half the receiver's diameter of its centroid or of a
 //! corner and the exact point factor varies more than twofold over the receiver's nodes, the light may
@@ -37,12 +38,10 @@
 //! to the bit ([`crate::visibility::shaft`]).
 
 use super::clustering::couple_cluster;
-use crate::geometry::cubature::{
-    node_densities, nodes_on, nodes_on_into, rule, shifted_nodes, Node,
-};
+use crate::geometry::cubature::{jittered_nodes, nodes_on, nodes_on_into, rule, Node};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
-use crate::geometry::near_field::{self, is_near, NearField};
-use crate::geometry::{DVec2, DVec3, Shape};
+use crate::geometry::near_field::{self, distance_to_polygon, is_near, NearField};
+use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::{ElementId, ErrorStorage, Hierarchy, LinkCoupling};
 use crate::random::splitmix64;
 use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
@@ -75,10 +74,13 @@ pub enum SourceRule {
     /// receiver.
     #[default]
     Fixed,
-    /// At a random shift of the source rule per receiver node (`shifted_nodes`; the command line's
-    /// default): unbiased over a shadow boundary across the source, at the price of noise
-    /// (BENCHMARKS.md, "Shadow boundaries across sources").
-    Shifted,
+    /// At random nodes per receiver node, one in each cell of a regular partition of the source
+    /// ([`jittered_nodes`]; the command line's default): unbiased over a shadow boundary across the
+    /// source, at the price of noise (BENCHMARKS.md, "Shadow boundaries across sources" and "Partly
+    /// visible sources by jittered strata"). `shifted` names it too: a random shift of the fixed
+    /// nodes, which it replaced.
+    #[value(alias = "shifted")]
+    Jittered,
 }
 
 /// Relative difference between the regular receiver rule's unoccluded transfer and the adaptive one
@@ -86,6 +88,12 @@ pub enum SourceRule {
 /// kept: its point factors of a closed scene sum to exactly 1 at every node, which a mix of rules would
 /// break by up to the difference.
 pub const NEAR_FIELD_MISS: f64 = 0.1;
+
+/// Receiver nodes nearer a partly visible source than this share of its diameter take the ratio
+/// estimator at their jittered source nodes; farther ones the plain sum (`SourceSampler::rows`). At
+/// half the diameter `1/r²` varies at most ninefold across the source, which bounds (cosines aside)
+/// how far one jittered node can carry more than its share.
+pub const NEAR_SOURCE: f64 = 0.5;
 
 impl Default for CouplingSettings {
     fn default() -> Self {
@@ -340,25 +348,36 @@ struct SourceSampler<'a> {
     phi_y: &'a [f64],
     basis: &'a crate::bases::Basis,
     source_rule: SourceRule,
-    /// Seed of the shifted source rules of partly visible links.
+    /// Seed of the jittered source nodes of partly visible links.
     seed: u64,
 }
 
 impl SourceSampler<'_> {
     /// Step 1 (the kernel at each node pair, with its transmittance) and step 2 at `nodes`.
     ///
-    /// With [`SourceRule::Shifted`], where the shaft test left the source's visibility open, each
-    /// receiver node sees the source through its own random shift of the source rule
-    /// ([`shifted_nodes`], seeded by `--seed` and the node's position), not through the fixed nodes:
+    /// With [`SourceRule::Jittered`], where the shaft test left the source's visibility open, each
+    /// receiver node sees the source through its own jittered nodes, as many as the source rule has
+    /// ([`jittered_nodes`], seeded by `--seed` and the node's position), not through the fixed nodes:
     /// with fixed nodes a shadow boundary across the source is sampled at the same places from every
     /// receiver, and the error adds up instead of averaging out. A lamp housing's reflector above its
     /// tube, 4 cm wide with nodes at 21% and 79% of its width, was seen 10% brighter from the whole
     /// floor below, the housing sent 1–2% too much light, and the classroom read 2% bright; a
     /// corridor's ceiling pieces beside its lamps were seen from a wall with 27% of their light
-    /// (shifted: 77%; BENCHMARKS.md, "Shadow boundaries across sources"). Links with a Clear or
+    /// (random nodes: 77%; BENCHMARKS.md, "Shadow boundaries across sources"). Links with a Clear or
     /// Blocked shaft keep the fixed rule, whose higher-order moments are exact. The command line's
     /// default; the library's stays the published fixed rule, which is less noisy where occluders are
     /// far from the sources they hide (the Cornell box: 1.78% against 1.9% |error|/mean).
+    ///
+    /// Random nodes and the exact factor: the fixed rule's rows are scaled to the exact
+    /// point-to-polygon factor (a ratio `F Σ w G V φ / Σ w G`), but at random nodes that ratio is
+    /// biased wherever the kernel and the visibility vary together across the source, both sums
+    /// coming from the same draw: a strip whose near end is hidden was seen 12% too bright with
+    /// jittered nodes, 26% with the randomly shifted Gauss nodes used before (`tests/galerkin.rs`),
+    /// and the classroom's tubes sent its walls 1.9% too much through their housings' openings. So
+    /// receiver nodes at least [`NEAR_SOURCE`] of the source's diameter away take the plain sum
+    /// `Σ w G V φ`, which is unbiased (every jittered node is uniform over its cell); only nearer
+    /// ones, where a node may land next to the receiver point and the plain sum has no bound, keep
+    /// the ratio (BENCHMARKS.md, "Partly visible sources by jittered strata").
     /// `inner`: a vector to fill (its contents are replaced).
     fn rows(&self, nodes: &[Node], mut inner: Vec<f64>) -> NodeRows {
         let size = self.basis.size();
@@ -376,13 +395,11 @@ impl SourceSampler<'_> {
                 self.shaft,
                 Some(ShaftVerdict::Clear) | Some(ShaftVerdict::Blocked)
             );
-        // Shifted source nodes, refilled for each receiver node; their weights per unit Jacobian once.
-        let mut shifted = Vec::new();
-        let densities: Vec<f64> = if decided {
-            Vec::new()
-        } else {
-            node_densities(self.source, self.y_nodes).collect()
-        };
+        // Jittered source nodes, refilled for each receiver node: as many cells as the rule has nodes
+        // (`m × m` on either domain).
+        let mut jittered = Vec::new();
+        let cells = (self.y_nodes.len() as f64).sqrt().round() as usize;
+        let far = NEAR_SOURCE * self.source.diameter();
         for (k, x) in nodes.iter().enumerate() {
             let exact = point_to_polygon(x.point, self.n_r, self.source);
             out.factor_range = (out.factor_range.0.min(exact), out.factor_range.1.max(exact));
@@ -392,16 +409,16 @@ impl SourceSampler<'_> {
             out.unoccluded += x.weight * exact;
             let row = &mut out.inner[k * size..(k + 1) * size];
             let (rays, saved) = if decided {
-                self.row(x.point, exact, self.y_nodes, Some(self.phi_y), row)
+                self.row(x.point, Some(exact), self.y_nodes, Some(self.phi_y), row)
             } else {
-                shifted.clear();
-                shifted.extend(shifted_nodes(
-                    self.source,
-                    self.y_nodes,
-                    &densities,
-                    self.shift_at(x.point),
-                ));
-                self.row(x.point, exact, &shifted, None, row)
+                let mut state = self.stream_at(x.point);
+                let unit = || {
+                    state = splitmix64(state);
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                };
+                jittered_nodes(self.source, cells, unit, &mut jittered);
+                let near = distance_to_polygon(x.point, self.source) < far;
+                self.row(x.point, near.then_some(exact), &jittered, None, row)
             };
             out.rays += rays;
             out.rays_saved += saved;
@@ -409,27 +426,25 @@ impl SourceSampler<'_> {
         out
     }
 
-    /// The shift of the source rule seen from receiver point `x`: a function of the seed and of `x`
-    /// alone, so that a coupling is the same whichever thread or pass computes it.
-    fn shift_at(&self, x: DVec3) -> DVec2 {
-        let first = splitmix64(
+    /// The random stream of the source nodes seen from receiver point `x`: a function of the seed and
+    /// of `x` alone, so that a coupling is the same whichever thread or pass computes it.
+    fn stream_at(&self, x: DVec3) -> u64 {
+        splitmix64(
             self.seed
                 ^ x.x.to_bits()
                 ^ x.y.to_bits().rotate_left(21)
                 ^ x.z.to_bits().rotate_left(42),
-        );
-        let unit = |bits: u64| (bits >> 11) as f64 / (1u64 << 53) as f64;
-        DVec2::new(unit(first), unit(splitmix64(first)))
+        )
     }
 
     /// One receiver point's row `K_{j,β}(x)` from the source nodes `y_nodes` (basis values `phi_y`,
-    /// or, for `None`, evaluated at the nodes that let light through: shifted nodes are used once,
+    /// or, for `None`, evaluated at the nodes that let light through: jittered nodes are used once,
     /// and a blocked one needs none), scaled so that its unoccluded constant part is the exact factor
-    /// `exact`; the rays cast and saved.
+    /// where `exact` is given, the plain cubature sum where not; the rays cast and saved.
     fn row(
         &self,
         x: DVec3,
-        exact: f64,
+        exact: Option<f64>,
         y_nodes: &[Node],
         phi_y: Option<&[f64]>,
         row: &mut [f64],
@@ -484,7 +499,7 @@ impl SourceSampler<'_> {
                 }
             }
         }
-        if open_sum > 0.0 {
+        if let Some(exact) = exact.filter(|_| open_sum > 0.0) {
             let scale = exact / open_sum;
             row.iter_mut().for_each(|v| *v *= scale);
         }
