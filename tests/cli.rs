@@ -596,6 +596,40 @@ fn probe_compares_with_a_stored_reference_at_the_same_points() {
     assert!(!other.status.success());
     let stderr = String::from_utf8_lossy(&other.stderr);
     assert!(stderr.contains("ref.json: point 1 is"), "{stderr}");
+    // Alone, --against probes the reference's own points, whatever the seed.
+    let own_points = [
+        "probe",
+        "-q",
+        "--eps",
+        "1e-3",
+        "--seed",
+        "7",
+        "--against",
+        path.to_str().unwrap(),
+    ];
+    let reseeded = radiosity(&own_points);
+    assert!(
+        reseeded.status.success(),
+        "{}",
+        String::from_utf8_lossy(&reseeded.stderr)
+    );
+    assert_eq!(summary(&reseeded).len(), 3);
+    let as_json = radiosity(&[&own_points[..], &["--json"]].concat());
+    let points = |out: &std::process::Output| -> Vec<serde_json::Value> {
+        let rows: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).expect("probe JSON");
+        rows.iter().map(|row| row["point"].clone()).collect()
+    };
+    assert_eq!(points(&as_json), points(&stored));
+    assert_eq!(points(&stored).len(), 30);
+    let not_a_probe = dir.join("not_a_probe.json");
+    std::fs::write(&not_a_probe, "{\"rows\": []}").unwrap();
+    let refused = radiosity(&["probe", "-q", "--against", not_a_probe.to_str().unwrap()]);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("not_a_probe.json: not the JSON"),
+        "{stderr}"
+    );
 }
 
 /// `probe --seen N`: points the camera sees, the same for the same camera and seed (a stored reference

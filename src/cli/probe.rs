@@ -9,7 +9,8 @@ use crate::measures::point_errors::{point_errors, LIT_FRACTION};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use crate::reference::probe::{
-    attach_stored_reference, probe_points, random_points, read_points, seen_points, ProbeReference,
+    attach_stored_reference, probe_points, random_points, read_points, read_stored_points,
+    seen_points, ProbeReference,
 };
 use anyhow::Result;
 use clap::Args;
@@ -23,7 +24,7 @@ pub struct ProbeCommand {
     pub solve: SolveArgs,
     /// Points file: one `x y z nx ny nz` per line (whitespace or commas, `#` comments); the normal points
     /// out of the probed side.
-    #[arg(long, value_name = "FILE", required_unless_present_any = ["random", "seen"])]
+    #[arg(long, value_name = "FILE", required_unless_present_any = ["random", "seen", "against"])]
     pub points: Option<PathBuf>,
     /// Instead of a points file: N points uniform by area over the surfaces that do not emit (each side
     /// of a two-sided polygon by its area), from --seed.
@@ -41,7 +42,8 @@ pub struct ProbeCommand {
     pub reference: bool,
     /// A stored reference: the JSON of an earlier `probe --reference --json` at the same points (same
     /// scene, --points, --random N or --seen N with the same camera, and --seed), compared instead of
-    /// path tracing anew.
+    /// path tracing anew. Alone (without --points, --random or --seen) it probes the reference's own
+    /// points, with any --seed: the solution's noise over seeds at fixed points.
     #[arg(long, value_name = "REF.json", conflicts_with = "reference")]
     pub against: Option<PathBuf>,
     /// Paths per point for `--reference` (rounded up to a multiple of 16).
@@ -85,7 +87,12 @@ impl ProbeCommand {
                 }
                 (points, PathBuf::from("points seen by the camera"))
             }
-            (None, None, None) => anyhow::bail!("give --points FILE, --random N or --seen N"),
+            (None, None, None) => match &self.against {
+                Some(path) => (read_stored_points(path)?, path.clone()),
+                None => {
+                    anyhow::bail!("give --points FILE, --random N, --seen N or --against REF.json")
+                }
+            },
         };
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;

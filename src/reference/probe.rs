@@ -341,6 +341,40 @@ pub struct ProbeResult {
     pub reference: Option<Estimate>,
 }
 
+/// The points of an earlier `probe --json` run, read from `path` (`probe --against REF.json` without
+/// `--points`, `--random` or `--seen`): a stored reference compared at its own points with solutions of
+/// any `--seed`, so that the solver's random choices vary and the points do not.
+pub fn read_stored_points(path: &Path) -> anyhow::Result<Vec<ProbePoint>> {
+    #[derive(serde::Deserialize)]
+    struct Stored {
+        point: [f64; 3],
+        normal: [f64; 3],
+    }
+    let stored: Vec<Stored> = serde_json::from_str(&read_stored(path)?).with_context(|| {
+        format!(
+            "{}: not the JSON of `radiosity probe --json`",
+            path.display()
+        )
+    })?;
+    anyhow::ensure!(!stored.is_empty(), "{}: no points", path.display());
+    Ok(stored
+        .into_iter()
+        .enumerate()
+        .map(|(k, entry)| ProbePoint {
+            line: k + 1,
+            point: DVec3::from_array(entry.point),
+            normal: DVec3::from_array(entry.normal),
+        })
+        .collect())
+}
+
+/// The text of a stored probe run, bounded like every input.
+fn read_stored(path: &Path) -> anyhow::Result<String> {
+    let bytes = crate::scene::read_bounded(path)
+        .map_err(|e| anyhow::anyhow!("cannot read the stored reference {}: {e}", path.display()))?;
+    String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", path.display()))
+}
+
 /// Puts on `results` the reference estimates of an earlier `probe --reference --json` run at the same
 /// points, read from `path` (`probe --against`): a reference is path traced once and compared with
 /// many solutions. Every entry's point must be the result's (same scene, points and seed).
@@ -350,9 +384,7 @@ pub fn attach_stored_reference(results: &mut [ProbeResult], path: &Path) -> anyh
         point: [f64; 3],
         reference: Option<Estimate>,
     }
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the stored reference {}", path.display()))?;
-    let stored: Vec<Stored> = serde_json::from_str(&text).with_context(|| {
+    let stored: Vec<Stored> = serde_json::from_str(&read_stored(path)?).with_context(|| {
         format!(
             "{}: not the JSON of `radiosity probe --reference --json`",
             path.display()
