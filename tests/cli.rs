@@ -764,3 +764,28 @@ fn audit_lists_the_sources_of_a_polygon_its_closure_and_rejects_an_unknown_one()
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// `bench rays --agreeing` times the back ends on the segments where their answers agree and says how
+/// many it left out: none between the BVH and the brute-force reference, which are both exact.
+#[test]
+fn bench_rays_at_equal_answers() {
+    let out = succeeds(&[
+        "bench",
+        "rays",
+        "--rays",
+        "2000",
+        "--backend",
+        "bvh",
+        "--backend",
+        "brute-force",
+        "--agreeing",
+    ]);
+    assert!(
+        out.contains("# 0 of 2000 segments answered differently by the back ends, left out"),
+        "{out}"
+    );
+    assert!(
+        out.contains("| bvh |") && out.contains("| brute-force |"),
+        "{out}"
+    );
+}

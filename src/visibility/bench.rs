@@ -49,6 +49,22 @@ pub fn random_segments(shapes: &[Shape], count: usize, seed: u64) -> Vec<(DVec3,
         .collect()
 }
 
+/// The `segments` that every back end of `backends` finds blocked, or every one finds free
+/// (`radiosity bench rays --agreeing`): speed compared at equal answers.
+pub fn agreeing_segments(
+    backends: &[&dyn Visibility],
+    segments: Vec<(DVec3, DVec3)>,
+) -> Vec<(DVec3, DVec3)> {
+    segments
+        .into_par_iter()
+        .filter(|&(a, b)| {
+            let mut answers = backends.iter().map(|v| v.segment_occluded(a, b));
+            let first = answers.next();
+            answers.all(|answer| Some(answer) == first)
+        })
+        .collect()
+}
+
 /// Occlusion throughput of `vis` over `segments` (via [`Visibility::segment_occluded`]) on a rayon pool
 /// of `threads` threads (0: rayon's default). `blocked` counts the blocked segments.
 pub fn occlusion_rate(
