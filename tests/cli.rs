@@ -124,7 +124,7 @@ fn render_writes_png_exr_models_and_stats() {
 #[test]
 fn every_shading_renders() {
     let dir = temp_dir("shadings");
-    for shading in ["basis", "continuous", "flat", "smooth"] {
+    for shading in ["seamless", "basis", "continuous", "flat", "smooth"] {
         let png = dir.join(format!("{shading}.png"));
         let png = png.to_str().unwrap();
         succeeds(&[

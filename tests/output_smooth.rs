@@ -339,8 +339,9 @@ fn continuous_shading_leaves_no_step_between_linear_and_bilinear_leaves() {
         // The expansion itself jumps at the leaves' edges; the continuous shading does not.
         let (_, jump) = edge_differences(&h, &[0], |leaf, p| h.radiance_at(leaf, p));
         assert!(jump > 0.1, "{basis:?}: the test needs steps ({jump})");
-        let (compared, worst) =
-            edge_differences(&h, &[0], |leaf, p| vr.evaluate_continuous(&h, leaf, p));
+        let (compared, worst) = edge_differences(&h, &[0], |leaf, p| {
+            vr.evaluate_continuous(&h, leaf, p, f64::INFINITY)
+        });
         assert!(compared > 500 && worst < 1e-6, "{basis:?}: {worst:e}");
     }
 }
@@ -386,8 +387,64 @@ fn continuous_shading_is_the_expansion_where_neighbours_agree() {
             shape.vertices()[3] * 0.95 + shape.vertices()[0] * 0.05,
         ] {
             assert!(rel_diff(h.radiance_at(leaf, p), field(p)) < 1e-9, "{p}");
-            let d = rel_diff(vr.evaluate_continuous(&h, leaf, p), field(p));
+            let d = rel_diff(vr.evaluate_continuous(&h, leaf, p, f64::INFINITY), field(p));
             assert!(d < 1e-9, "leaf {leaf} at {p}: {d:e}");
         }
     }
+}
+
+/// The unit square split once, its left half's leaves at radiance `left` and its right half's at
+/// `right` (constant expansions on the linear basis).
+fn two_halves(left: f64, right: f64) -> Hierarchy {
+    let s = scene(&[(unit_square(), 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Linear);
+    h.subdivide(h.patches[0].root);
+    for leaf in h.leaves() {
+        let value = if h.element(leaf).shape().centroid().x < 0.5 {
+            left
+        } else {
+            right
+        };
+        let coefficients = h.radiance_mut(leaf);
+        coefficients.fill(Rgb::BLACK);
+        coefficients[0] = Rgb::splat(value);
+        let centre = h.element(leaf).shape().centroid();
+        assert!((h.radiance_at(leaf, centre).r - value).abs() < 1e-12);
+    }
+    h
+}
+
+/// Seamless shading removes a step of 2% between the halves (a band the eye would see on a flat
+/// wall) and keeps one of 100% (a steep change the solution resolved), which continuous shading
+/// smooths over. `SEAMLESS_STEP` is 5%: wholly removed below it, kept from twice it.
+#[test]
+fn seamless_shading_removes_small_steps_and_keeps_large_ones() {
+    use radiosity::output::render::{Shading, SEAMLESS_STEP};
+    let below = Shading::Seamless.steps_removed_below().unwrap();
+    assert_eq!(below, SEAMLESS_STEP);
+    let small = two_halves(1.0, 1.02);
+    let vr = VertexRadiosity::new(&small);
+    let (_, jump) = edge_differences(&small, &[0], |leaf, p| small.radiance_at(leaf, p));
+    assert!(jump > 0.015, "the test needs a step ({jump})");
+    let (compared, worst) = edge_differences(&small, &[0], |leaf, p| {
+        vr.evaluate_continuous(&small, leaf, p, below)
+    });
+    assert!(compared > 100 && worst < 1e-9, "small step left: {worst:e}");
+    let large = two_halves(1.0, 2.0);
+    let vr = VertexRadiosity::new(&large);
+    let (_, step) = edge_differences(&large, &[0], |leaf, p| large.radiance_at(leaf, p));
+    let (_, kept) = edge_differences(&large, &[0], |leaf, p| {
+        vr.evaluate_continuous(&large, leaf, p, below)
+    });
+    assert!(
+        step > 0.4 && (kept - step).abs() < 1e-9,
+        "large step {step} became {kept}"
+    );
+    let (_, smoothed) = edge_differences(&large, &[0], |leaf, p| {
+        vr.evaluate_continuous(&large, leaf, p, f64::INFINITY)
+    });
+    assert!(
+        smoothed < 1e-9,
+        "continuous shading keeps a step: {smoothed:e}"
+    );
 }

@@ -33,11 +33,12 @@ pub struct RenderCommand {
     /// PNG image to write (exposed, tone-mapped, sRGB).
     #[arg(short, long, default_value = "radiosity.png")]
     pub output: PathBuf,
-    /// Basis: each element's basis expansion (the computed solution). Continuous: the expansion with its
-    /// steps at element edges removed (vertex averages of the expansions; slightly less accurate).
-    /// Flat: element averages. Smooth: values averaged to vertices and interpolated (Gouraud, crack
-    /// free).
-    #[arg(long, value_enum, default_value_t = Shading::Basis)]
+    /// Seamless (the default): each element's basis expansion with its small steps at element edges
+    /// (under 5–10% of the luminance) removed, larger ones kept. Basis: the expansion itself (the
+    /// computed solution). Continuous: every step removed (vertex averages of the expansions; smears
+    /// steep light). Flat: element averages. Smooth: values averaged to vertices and interpolated
+    /// (Gouraud, crack free).
+    #[arg(long, value_enum, default_value_t = Shading::Seamless)]
     pub shading: Shading,
     /// What the PNG shows: the radiance, or each element's a-posteriori error estimate in false colour
     /// with a colour bar (W/(m² sr); compare with `compare --diff`).

@@ -22,9 +22,10 @@ pub struct ViewCommand {
     pub camera: CameraArgs,
     #[command(flatten)]
     pub tone: ToneArgs,
-    /// Basis: each element's basis expansion; continuous: the expansion without its steps at element
-    /// edges; flat: element averages; smooth: vertex values (Gouraud).
-    #[arg(long, value_enum, default_value_t = Shading::Basis)]
+    /// Seamless (the default): each element's basis expansion without its small steps at element
+    /// edges; basis: the expansion itself; continuous: without any steps; flat: element averages;
+    /// smooth: vertex values (Gouraud).
+    #[arg(long, value_enum, default_value_t = Shading::Seamless)]
     pub shading: Shading,
     /// The page to write (default: SCENE.html in a new directory under the system's temporary directory).
     #[arg(long, value_name = "FILE.html")]

@@ -288,17 +288,30 @@ impl VertexRadiosity {
     /// every edge of a smoothing group; inside the leaf it keeps the expansion's shape (with quadratic
     /// and cubic bases the jumps shrink to the expansion's curvature along the edge). Returns the
     /// leaf's expansion for an element that was not a leaf when this was built.
-    pub fn evaluate_continuous(&self, hierarchy: &Hierarchy, leaf: ElementId, p: DVec3) -> Rgb {
+    ///
+    /// `below`: the relative luminance step between the leaf's own value at a vertex and the vertex's
+    /// averaged value below which the step is removed wholly (`f64::INFINITY`: every step); steps of
+    /// twice that or more are kept, those in between removed in part ([`Shading::Seamless`]).
+    ///
+    /// [`Shading::Seamless`]: super::render::Shading::Seamless
+    pub fn evaluate_continuous(
+        &self,
+        hierarchy: &Hierarchy,
+        leaf: ElementId,
+        p: DVec3,
+        below: f64,
+    ) -> Rgb {
         let expansion = hierarchy.radiance_at(leaf, p);
-        let own = |v: u32| hierarchy.radiance_at(leaf, self.positions[v as usize]);
-        match (
-            self.interpolate(hierarchy, leaf, p, |v| self.outline_values[v as usize]),
-            self.interpolate(hierarchy, leaf, p, own),
-        ) {
-            (Some(smooth), Some(own)) => expansion + smooth - own,
-            _ => expansion,
-        }
-        .map(|c| c.max(0.0))
+        let correction = |v: u32| {
+            let own = hierarchy.radiance_at(leaf, self.positions[v as usize]);
+            let shared = self.outline_values[v as usize];
+            let (a, b) = (own.luminance(), shared.luminance());
+            let step = (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
+            (shared - own) * (2.0 - step / below).clamp(0.0, 1.0)
+        };
+        self.interpolate(hierarchy, leaf, p, correction)
+            .map_or(expansion, |c| expansion + c)
+            .map(|c| c.max(0.0))
     }
 
     /// Interpolation at point `p` of leaf `leaf` of the values `value` gives its vertices (by welded

@@ -110,9 +110,9 @@ impl ViewerMesh {
                 }
                 mesh.triangles = shaded.triangles;
             }
-            Shading::Flat | Shading::Basis | Shading::Continuous => {
+            Shading::Flat | Shading::Basis | Shading::Continuous | Shading::Seamless => {
                 let cells = match shading {
-                    Shading::Basis | Shading::Continuous => {
+                    Shading::Basis | Shading::Continuous | Shading::Seamless => {
                         hierarchy.basis.kind().polynomial_degree().max(1)
                     }
                     _ => 1,
@@ -137,9 +137,10 @@ impl ViewerMesh {
                     // and clamps per pixel, as the PNG render clamps the expansion at each pixel.
                     let value = |uv: DVec2| match shading {
                         Shading::Basis => hierarchy.radiance_at_parameters(leaf, uv),
-                        Shading::Continuous => {
+                        Shading::Continuous | Shading::Seamless => {
                             let p = hierarchy.element(leaf).shape().point_at(uv);
-                            vertices.evaluate_continuous(hierarchy, leaf, p)
+                            let below = shading.steps_removed_below().unwrap_or(0.0);
+                            vertices.evaluate_continuous(hierarchy, leaf, p, below)
                         }
                         _ => hierarchy.average_radiance(leaf),
                     };
@@ -306,6 +307,7 @@ pub fn page_html(mesh: &ViewerMesh, page: &Page) -> Result<String> {
         Shading::Flat => "flat",
         Shading::Smooth => "smooth",
         Shading::Continuous => "continuous",
+        Shading::Seamless => "seamless",
     };
     let config = json!({
         "title": page.title,
