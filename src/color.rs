@@ -75,6 +75,16 @@ impl Rgb {
         (self.r + self.g + self.b) / 3.0
     }
 
+    /// The channels in single precision (EXR pixels, the viewer's vertex colours, compact tables).
+    pub fn to_f32(self) -> [f32; 3] {
+        [self.r as f32, self.g as f32, self.b as f32]
+    }
+
+    /// [`Rgb::to_f32`] back.
+    pub fn from_f32(c: [f32; 3]) -> Rgb {
+        Rgb::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]))
+    }
+
     pub fn max_channel(self) -> f64 {
         self.r.max(self.g).max(self.b)
     }

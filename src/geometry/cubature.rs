@@ -456,7 +456,7 @@ mod tests {
         let mut state = 7u64;
         let mut unit = || {
             state = crate::random::splitmix64(state);
-            (state >> 11) as f64 / (1u64 << 53) as f64
+            crate::random::unit_interval(state)
         };
         let mut nodes = Vec::new();
         for cells in 1..=4 {

@@ -35,8 +35,8 @@ impl Image {
         use exr::prelude::{Image as Exr, SpecificChannels, Vec2, WritableImage};
         // Encoded in memory: exr's `to_file` deletes its target on a write error, even a device.
         let channels = SpecificChannels::rgb(|Vec2(x, y)| {
-            let c = self.get(x, y);
-            (c.r as f32, c.g as f32, c.b as f32)
+            let [r, g, b] = self.get(x, y).to_f32();
+            (r, g, b)
         });
         let mut bytes = std::io::Cursor::new(Vec::new());
         Exr::from_channels((self.width, self.height), channels)

@@ -184,8 +184,7 @@ impl ViewerMesh {
     fn push_vertex(&mut self, p: DVec3, radiance: Rgb) {
         let p = p - self.origin;
         self.positions.push([p.x as f32, p.y as f32, p.z as f32]);
-        self.radiance
-            .push([radiance.r as f32, radiance.g as f32, radiance.b as f32]);
+        self.radiance.push(radiance.to_f32());
     }
 
     /// A `cells` × `cells` grid in the parameter domain of `shape` (the triangle's grid of lines parallel

@@ -459,7 +459,7 @@ impl BoxHall {
         for i in 0..m {
             for j in 0..m {
                 let key = crate::random::splitmix64((i * m + j) as u64);
-                let height = 0.3 + 0.6 * (key >> 11) as f64 / (1u64 << 53) as f64;
+                let height = 0.3 + 0.6 * crate::random::unit_interval(key);
                 let corner = p(
                     (i as f64 + 0.25) * Self::PITCH,
                     (j as f64 + 0.25) * Self::PITCH,

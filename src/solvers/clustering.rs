@@ -1288,20 +1288,11 @@ struct Sent {
     exposed_share: f32,
 }
 
-/// An [`Rgb`] in single precision, and back.
-fn narrow(c: Rgb) -> [f32; 3] {
-    [c.r as f32, c.g as f32, c.b as f32]
-}
-
-fn widen(c: [f32; 3]) -> Rgb {
-    Rgb::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2]))
-}
-
 impl Sent {
     fn new(visible: Rgb, exposed: Rgb, exposed_share: f64) -> Self {
         Sent {
-            visible: narrow(visible),
-            exposed: narrow(exposed),
+            visible: visible.to_f32(),
+            exposed: exposed.to_f32(),
             exposed_share: exposed_share as f32,
         }
     }
@@ -1312,7 +1303,7 @@ impl Sent {
 
     /// Radiance averaged over the visible projected areas of the patches facing the bucket.
     fn visible(self) -> Rgb {
-        widen(self.visible)
+        Rgb::from_f32(self.visible)
     }
 
     /// The radiance a link with visibility `v` carries: the visible average where every ray of the
@@ -1339,7 +1330,7 @@ impl Sent {
         if v >= 1.0 || e <= 0.0 {
             return visible;
         }
-        let exposed = widen(self.exposed);
+        let exposed = Rgb::from_f32(self.exposed);
         let others = ((visible - exposed * e) / (1.0 - e)).map(|c| c.max(0.0));
         let (to_exposed, to_others) = exposure_shares(e, v);
         exposed * to_exposed + others * to_others

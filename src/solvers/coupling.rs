@@ -43,7 +43,7 @@ use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::geometry::near_field::{self, distance_to_polygon, is_near, NearField};
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::{ElementId, ErrorStorage, Hierarchy, LinkCoupling};
-use crate::random::splitmix64;
+use crate::random::{splitmix64, unit_interval};
 use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
 use crate::visibility::Visibility;
 
@@ -414,7 +414,7 @@ impl SourceSampler<'_> {
                 let mut state = self.stream_at(x.point);
                 let unit = || {
                     state = splitmix64(state);
-                    (state >> 11) as f64 / (1u64 << 53) as f64
+                    unit_interval(state)
                 };
                 jittered_nodes(self.source, cells, unit, &mut jittered);
                 let near = distance_to_polygon(x.point, self.source) < far;
