@@ -218,17 +218,16 @@ pub fn default_max_memory() -> usize {
 }
 
 impl SimulationSettings {
-    /// The cubature degree couplings use: the basis's default under error control, whose estimate reads
-    /// the error coefficients at the nodes (it needs `d + 3` receiver nodes per direction, see
-    /// [`BasisKind::default_cubature_degree`]), whatever the oracle; one point per direction fewer
-    /// otherwise, where only the coupling itself counts (a 2×2 receiver rule for the constant basis).
+    /// The cubature degree couplings use: the basis's default with the link error oracle, whose
+    /// refinement reads the error coefficients at the nodes (`d + 3` receiver nodes per direction, see
+    /// [`BasisKind::default_cubature_degree`]); one point per direction fewer otherwise (a 2×2 receiver
+    /// rule for the constant basis), also under error control where the estimate's maximum over the
+    /// nodes sees the leading error term ([`BasisKind::estimating_cubature_degree`]).
     pub fn cubature_degree(&self) -> usize {
-        self.cubature_degree.unwrap_or_else(|| {
-            if self.controlled_accuracy().is_some() {
-                self.basis.default_cubature_degree()
-            } else {
-                self.basis.default_cubature_degree() - 2
-            }
+        self.cubature_degree.unwrap_or_else(|| match self.controlled_accuracy() {
+            Some(_) if self.oracle == OracleKind::Error => self.basis.default_cubature_degree(),
+            Some(_) => self.basis.estimating_cubature_degree(),
+            None => self.basis.default_cubature_degree() - 2,
         })
     }
 

@@ -389,7 +389,26 @@ fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
 fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     let dir = temp_dir("accuracy");
     let (png, stats, errors) = (dir.join("c.png"), dir.join("c.json"), dir.join("e.png"));
-    // The summary line and the stats of a controlled render with `oracle` options.
+    // The stats of a render with `options`.
+    let stats_of = |options: &[&str]| {
+        let mut args = vec!["render", "-q", "--width", "32", "--height", "32"];
+        args.extend_from_slice(options);
+        args.extend([
+            "-o",
+            png.to_str().unwrap(),
+            "--stats",
+            stats.to_str().unwrap(),
+        ]);
+        let out = radiosity(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&stats).unwrap())
+            .unwrap()
+    };
+    // The summary line and the stats of a render controlled to 40% with `oracle` options.
     let controlled = |oracle: &[&str]| {
         let mut args = vec![
             "render",
@@ -416,12 +435,22 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
         assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
         json
     };
+    // Alone, the accuracy controls the default power oracle: the same as no options at all.
     let json = controlled(&[]);
-    assert_eq!(json["settings"]["oracle"], "error");
-    assert!(json["residuals"].as_array().is_some_and(|r| !r.is_empty()));
-    // With another oracle the accuracy is not ignored: the same control runs on that oracle.
-    let json = controlled(&["--oracle", "power"]);
     assert_eq!(json["settings"]["oracle"], "power");
+    assert!(json["residuals"].as_array().is_some_and(|r| !r.is_empty()));
+    let default = stats_of(&[]);
+    assert_eq!(default["settings"]["oracle"], "power");
+    assert_eq!(default["error"]["accuracy"], json["error"]["accuracy"]);
+    assert_eq!(default["leaf_elements"], json["leaf_elements"]);
+    // The paper's own link error oracle.
+    let json = controlled(&["--oracle", "error"]);
+    assert_eq!(json["settings"]["oracle"], "error");
+    // Off, and off by default for the oracles of the Feixas et al. experiments.
+    for options in [&["--accuracy", "off"][..], &["--oracle", "mi"]] {
+        let json = stats_of(options);
+        assert!(json["error"]["accuracy"].is_null(), "{options:?}: {json}");
+    }
     // Monte Carlo radiosity has no error control: refused, not ignored.
     let out = radiosity(&[
         "render",
@@ -654,10 +683,10 @@ fn probe_at_points_the_camera_sees() {
         String::from_utf8_lossy(&again.stderr)
     );
     assert!(String::from_utf8_lossy(&again.stdout).contains("# luminance error at"));
-    // What was probed: the solution's estimate and size.
+    // What was probed: the solution's accuracy (the default error control's) and size.
     let header = String::from_utf8_lossy(&again.stdout);
     assert!(
-        header.contains("# solution: estimated error")
+        header.contains("# solution: accuracy")
             && header.contains("of the mean radiance")
             && header.contains(" links, "),
         "{header}"

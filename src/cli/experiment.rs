@@ -148,7 +148,12 @@ impl OraclesExperiment {
         std::fs::create_dir_all(&self.out)
             .with_context(|| format!("creating {}", self.out.display()))?;
         let camera = self.camera.camera(&scene, 256)?;
-        let base = self.solve.settings(seed)?;
+        let mut base = self.solve.settings(seed)?;
+        if self.solve.accuracy.is_none() {
+            // The experiment compares the oracles alone (Feixas et al. §4), at equal element counts: the
+            // power oracle's default error control stays off unless asked for.
+            base.accuracy = None;
+        }
         let reference = self.reference(&scene, &camera, seed, progress)?;
         let features = reference_features(&reference)?;
         let yardstick = Yardstick {

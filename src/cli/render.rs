@@ -243,10 +243,11 @@ impl RenderCommand {
     }
 }
 
-/// "estimated error ≤ X (accuracy Y reached)" or how many leaves missed the accuracy, and by how much,
-/// in `units` (a radiance error's largest channel bounds the error of its luminance). Without error
-/// control, also as shares of `mean_radiance` (the energy balance's, what `--accuracy P%` is relative
-/// to), so that the figures read without knowing the scene's scale.
+/// "estimated error ≤ X: accuracy Y reached" or how many leaves missed the accuracy, and by how much,
+/// in `units` (a radiance error's largest channel bounds the error of its luminance), with the
+/// accuracy (or, without error control, the estimate) as a share of `mean_radiance` (the energy
+/// balance's, what `--accuracy P%` is relative to), so that the figures read without knowing the
+/// scene's scale.
 pub fn error_summary(
     error: &crate::solvers::ErrorReport,
     units: Units,
@@ -254,19 +255,28 @@ pub fn error_summary(
 ) -> String {
     let s = &error.summary;
     let (k, unit) = (units.scale(), units.radiance());
-    match error.accuracy.map(|a| a * k) {
+    // The accuracy as a share of the mean radiance, as `--accuracy P%` gives it.
+    let share = |accuracy: f64| match mean_radiance > 0.0 {
+        true => format!(" ({:.0}% of the mean radiance)", 100.0 * accuracy / mean_radiance),
+        false => String::new(),
+    };
+    match error.accuracy {
         Some(accuracy) if s.leaves_above == 0 => format!(
-            "estimated error ≤ {:.3} {unit} (accuracy {accuracy:.3} reached)",
-            k * s.max_estimate
+            "estimated error ≤ {:.3} {unit}: accuracy {:.3} {unit}{} reached",
+            k * s.max_estimate,
+            k * accuracy,
+            share(accuracy)
         ),
         Some(accuracy) => format!(
-            "accuracy {accuracy:.3} {unit} NOT reached ({}): {} of {} leaves ({:.1}% of the area) \
-             above it ({} at the minimum element area), worst estimate {:.3}",
-            error.stopped_by,
+            "accuracy {:.3} {unit}{} NOT reached on {} of {} leaves, {:.1}% of the area ({} at the \
+             minimum element area; stopped: {}), worst estimate {:.3}",
+            k * accuracy,
+            share(accuracy),
             s.leaves_above,
             s.leaves,
             100.0 * s.area_fraction_above,
             s.leaves_above_at_min_area,
+            error.stopped_by,
             k * s.max_estimate
         ),
         None if mean_radiance > 0.0 => format!(

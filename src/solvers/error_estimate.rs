@@ -367,13 +367,16 @@ pub struct ErrorSummary {
     /// Area-weighted mean of the leaf estimates.
     pub mean_estimate: f64,
     pub area_fraction_above: f64,
+    /// The share of the area in leaves above the accuracy that refinement can still split: what a
+    /// further pass of error control can improve.
+    pub area_fraction_above_splittable: f64,
 }
 
 /// Summary of `Element::error` over the leaves, against `accuracy` (radiance); surface leaves of at most
 /// `min_area` cannot be split further.
 pub fn summarize(h: &Hierarchy, accuracy: f64, min_area: f64) -> ErrorSummary {
     let mut s = ErrorSummary::default();
-    let (mut area, mut area_above, mut weighted) = (0.0, 0.0, 0.0);
+    let (mut area, mut area_above, mut area_splittable, mut weighted) = (0.0, 0.0, 0.0, 0.0);
     for id in h.leaves() {
         let e = h.element(id);
         s.leaves += 1;
@@ -385,12 +388,15 @@ pub fn summarize(h: &Hierarchy, accuracy: f64, min_area: f64) -> ErrorSummary {
             area_above += e.area;
             if !h.is_cluster(id) && e.area <= min_area {
                 s.leaves_above_at_min_area += 1;
+            } else {
+                area_splittable += e.area;
             }
         }
     }
     if area > 0.0 {
         s.mean_estimate = weighted / area;
         s.area_fraction_above = area_above / area;
+        s.area_fraction_above_splittable = area_splittable / area;
     }
     s
 }
