@@ -224,11 +224,12 @@ impl SimulationSettings {
     /// rule for the constant basis), also under error control where the estimate's maximum over the
     /// nodes sees the leading error term ([`BasisKind::estimating_cubature_degree`]).
     pub fn cubature_degree(&self) -> usize {
-        self.cubature_degree.unwrap_or_else(|| match self.controlled_accuracy() {
-            Some(_) if self.oracle == OracleKind::Error => self.basis.default_cubature_degree(),
-            Some(_) => self.basis.estimating_cubature_degree(),
-            None => self.basis.default_cubature_degree() - 2,
-        })
+        self.cubature_degree
+            .unwrap_or_else(|| match self.controlled_accuracy() {
+                Some(_) if self.oracle == OracleKind::Error => self.basis.default_cubature_degree(),
+                Some(_) => self.basis.estimating_cubature_degree(),
+                None => self.basis.default_cubature_degree() - 2,
+            })
     }
 
     /// The accuracy error control aims at, if it runs: the one asked for, or

@@ -748,12 +748,9 @@ mod tests {
                 );
             }
         }
-        let (nodes, truth) = node_and_true_error(
-            BasisKind::Constant,
-            Domain::Square,
-            2,
-            |uv| (uv.x - 0.5).powi(2) + (uv.y - 0.5).powi(2),
-        );
+        let (nodes, truth) = node_and_true_error(BasisKind::Constant, Domain::Square, 2, |uv| {
+            (uv.x - 0.5).powi(2) + (uv.y - 0.5).powi(2)
+        });
         assert!(nodes < 1e-12 * truth, "{nodes} against {truth}");
     }
 

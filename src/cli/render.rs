@@ -257,7 +257,10 @@ pub fn error_summary(
     let (k, unit) = (units.scale(), units.radiance());
     // The accuracy as a share of the mean radiance, as `--accuracy P%` gives it.
     let share = |accuracy: f64| match mean_radiance > 0.0 {
-        true => format!(" ({:.0}% of the mean radiance)", 100.0 * accuracy / mean_radiance),
+        true => format!(
+            " ({:.0}% of the mean radiance)",
+            100.0 * accuracy / mean_radiance
+        ),
         false => String::new(),
     };
     match error.accuracy {

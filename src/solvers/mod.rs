@@ -221,7 +221,8 @@ pub fn solve(
                 last.summary = report.error.summary;
                 last.solve_seconds = report.solve_seconds;
             }
-            if report.error.summary.leaves_above > 0 && report.error.stopped_by == ACCURACY_REACHED {
+            if report.error.summary.leaves_above > 0 && report.error.stopped_by == ACCURACY_REACHED
+            {
                 report.error.stopped_by = "accuracy reached before the last sweeps".into();
             }
         }
