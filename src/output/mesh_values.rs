@@ -35,7 +35,8 @@ const MAX_EDGE_DEPTH: u32 = 40;
 #[derive(Clone, Debug)]
 pub struct VertexRadiosity {
     positions: Vec<DVec3>,
-    normals: Vec<DVec3>,
+    /// Per vertex, its smoothing group: the patch whose normal it takes.
+    vertex_group: Vec<u32>,
     /// Smooth shading's vertex values: the leaves' own values at their corners, area-weighted, with
     /// T-vertices interpolated along the longest edge holding them.
     values: Vec<Rgb>,
@@ -118,11 +119,11 @@ impl VertexRadiosity {
         let group_of: Vec<u32> = (0..hierarchy.patches.len() as u32)
             .map(|p| groups.find(p))
             .collect();
+        drop(point_patches);
 
         // Pass 2: one vertex per (point, group); area-weighted average of the leaves touching it.
         let mut vertex_of: FastMap<(u32, u32), u32> = FastMap::default();
         let mut positions = Vec::new();
-        let mut normals = Vec::new();
         let mut sums: Vec<(Rgb, f64)> = Vec::new();
         let mut vertex_group: Vec<u32> = Vec::new();
         let mut leaf_slot = vec![NOT_A_LEAF; hierarchy.elements.len()];
@@ -134,7 +135,6 @@ impl VertexRadiosity {
             for k in 0..element.shape().vertex_count() {
                 let id = *vertex_of.entry((points[k], group)).or_insert_with(|| {
                     positions.push(welder.points[points[k] as usize]);
-                    normals.push(hierarchy.patches[group as usize].normal);
                     vertex_group.push(group);
                     sums.push((Rgb::BLACK, 0.0));
                     positions.len() as u32 - 1
@@ -153,6 +153,7 @@ impl VertexRadiosity {
                 boundary: None,
             });
         }
+        drop(corner_points);
         let average = |sums: &[(Rgb, f64)]| -> Vec<Rgb> {
             sums.iter()
                 .map(|&(v, a)| if a > 0.0 { v / a } else { Rgb::BLACK })
@@ -205,6 +206,10 @@ impl VertexRadiosity {
                 (boundary, anchors)
             })
             .collect();
+        // The welding structures are done with; what follows holds one entry per vertex.
+        drop(outline);
+        drop(vertex_of);
+        drop(welder);
 
         // Anchor each T-vertex on the longest edge containing it; resolve in dependency order so that an
         // edge's end points (themselves possibly T-vertices of larger edges) are final first.
@@ -235,7 +240,7 @@ impl VertexRadiosity {
 
         VertexRadiosity {
             positions,
-            normals,
+            vertex_group,
             values,
             outline_values: average(&outline_sums),
             leaf_slot,
@@ -376,7 +381,11 @@ impl VertexRadiosity {
     pub fn mesh(&self, hierarchy: &Hierarchy) -> ShadedMesh {
         let mut mesh = ShadedMesh {
             positions: self.positions.clone(),
-            normals: self.normals.clone(),
+            normals: self
+                .vertex_group
+                .iter()
+                .map(|&g| hierarchy.patches[g as usize].normal)
+                .collect(),
             radiance: self.values.clone(),
             triangles: Vec::new(),
         };
@@ -395,7 +404,8 @@ impl VertexRadiosity {
                     let value = corner_average(&c[..n], |v| self.values[v as usize]);
                     let centre_id = mesh.positions.len() as u32;
                     mesh.positions.push(centre);
-                    mesh.normals.push(self.normals[c[0] as usize]);
+                    let group = self.vertex_group[c[0] as usize];
+                    mesh.normals.push(hierarchy.patches[group as usize].normal);
                     mesh.radiance.push(value);
                     for i in 0..boundary.len() {
                         let next = boundary[(i + 1) % boundary.len()];
