@@ -201,8 +201,9 @@ pub struct SimulationSettings {
     pub multigrid: Option<MultigridSettings>,
 }
 
-/// The default accuracy of error control: 10% of the mean radiance (in max norm per element, which on
-/// the Cornell box means about 4% relative RMSE over the image; BENCHMARKS.md).
+/// The default accuracy of error control with the link error oracle: 10% of the mean radiance (in max
+/// norm per element, which on the Cornell box means about 4% relative RMSE over the image;
+/// BENCHMARKS.md). The command line's power oracle has its own, `cli::args::DEFAULT_POWER_ACCURACY`.
 pub const DEFAULT_RELATIVE_ACCURACY: f64 = 0.1;
 
 /// Half of the machine's memory (from /proc/meminfo), or 4 GiB where that cannot be read.
@@ -245,8 +246,8 @@ impl SimulationSettings {
 
 /// The library's default is the classic solver the oracle experiments start from (constant basis,
 /// power oracle, `eps`, visibility at fixed source nodes); the command line's defaults differ (linear
-/// basis, ε = 3e-5, one shadow level, clustering where needed, jittered source nodes: `radiosity render
-/// --help`).
+/// basis, ε = 3e-5, one shadow level, clustering where needed, jittered source nodes, error control to
+/// 40% of the mean radiance: `radiosity render --help`).
 impl Default for SimulationSettings {
     fn default() -> Self {
         SimulationSettings {

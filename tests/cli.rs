@@ -389,37 +389,10 @@ fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
 fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     let dir = temp_dir("accuracy");
     let (png, stats, errors) = (dir.join("c.png"), dir.join("c.json"), dir.join("e.png"));
-    // The stats of a render with `options`.
-    let stats_of = |options: &[&str]| {
-        let mut args = vec!["render", "-q", "--width", "32", "--height", "32"];
+    // The summary line and the stats of a render with `options`.
+    let run = |options: &[&str]| {
+        let mut args = vec!["render", "--width", "32", "--height", "32"];
         args.extend_from_slice(options);
-        args.extend([
-            "-o",
-            png.to_str().unwrap(),
-            "--stats",
-            stats.to_str().unwrap(),
-        ]);
-        let out = radiosity(&args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&stats).unwrap())
-            .unwrap()
-    };
-    // The summary line and the stats of a render controlled to 40% with `oracle` options.
-    let controlled = |oracle: &[&str]| {
-        let mut args = vec![
-            "render",
-            "--accuracy",
-            "40%",
-            "--width",
-            "32",
-            "--height",
-            "32",
-        ];
-        args.extend_from_slice(oracle);
         args.extend([
             "-o",
             png.to_str().unwrap(),
@@ -429,9 +402,15 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
         let out = radiosity(&args);
         let summary = String::from_utf8_lossy(&out.stderr).to_string();
         assert!(out.status.success(), "{summary}");
-        assert!(summary.contains("accuracy"), "{summary}");
         let json: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        (summary, json)
+    };
+    let stats_of = |options: &[&str]| run(options).1;
+    // A render controlled to 40% with `oracle` options says so.
+    let controlled = |oracle: &[&str]| {
+        let (summary, json) = run(&[&["--accuracy", "40%"], oracle].concat());
+        assert!(summary.contains("accuracy"), "{summary}");
         assert!(json["error"]["accuracy"].as_f64().unwrap() > 0.0);
         json
     };
