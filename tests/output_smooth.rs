@@ -326,6 +326,34 @@ fn refined_square(basis: radiosity::bases::BasisKind) -> Hierarchy {
     h
 }
 
+/// The basis' stored corner values give every leaf's expansion at its shape's corners (in the order of
+/// the shape's vertices), on quads and triangles of every basis: what continuous shading reads there
+/// instead of evaluating the basis at each vertex for each sample.
+#[test]
+fn corner_values_are_the_expansion_at_the_shape_corners() {
+    let triangle = Shape::Triangle([
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(3.5, 0.2, 0.0),
+        DVec3::new(2.3, 1.4, 0.0),
+    ]);
+    let s = scene(&[(unit_square(), 0), (triangle, 0)], vec![grey("floor")]);
+    for basis in radiosity::bases::BasisKind::ALL {
+        let mut h = Hierarchy::new(&s, basis);
+        for patch in 0..2 {
+            h.subdivide(h.patches[patch].root);
+        }
+        refine_at(&mut h, 1, DVec3::new(2.4, 0.4, 0.0), 3);
+        scramble_expansions(&mut h);
+        for leaf in h.leaves() {
+            let shape = *h.element(leaf).shape();
+            for (k, &corner) in shape.vertices().iter().enumerate() {
+                let d = rel_diff(h.radiance_at_corner(leaf, k), h.radiance_at(leaf, corner));
+                assert!(d < 1e-9, "{basis:?}, leaf {leaf}, corner {k}: {d:e}");
+            }
+        }
+    }
+}
+
 #[test]
 fn continuous_shading_leaves_no_step_between_linear_and_bilinear_leaves() {
     for basis in [

@@ -202,6 +202,9 @@ pub struct Basis {
     /// with `∫ φ_α φ_α' = δ`, the overlap matrix of a planar quad, whose Jacobian is affine in
     /// `(u, v)`, is their combination ([`Basis::overlap`]).
     square_moments: [Vec<f64>; 2],
+    /// Per domain, `φ_α` at each corner of [`Domain::corners`] (`corners × size` row-major): an
+    /// expansion's value at an element's corner without evaluating the basis there.
+    corner_values: [Vec<f64>; 2],
 }
 
 impl Basis {
@@ -218,6 +221,7 @@ impl Basis {
             coefficients,
             push: Default::default(),
             square_moments: Default::default(),
+            corner_values: Default::default(),
         };
         for domain in [Domain::Square, Domain::Triangle] {
             for child in 0..4 {
@@ -225,7 +229,19 @@ impl Basis {
             }
         }
         basis.square_moments = basis.compute_square_moments();
+        basis.corner_values = [Domain::Square, Domain::Triangle].map(|domain| {
+            let mut values = vec![0.0; domain.corners().len() * size];
+            for (k, &corner) in domain.corners().iter().enumerate() {
+                basis.eval(domain, corner, &mut values[k * size..(k + 1) * size]);
+            }
+            values
+        });
         basis
+    }
+
+    /// `φ_α` at corner `k` of `domain` ([`Domain::corners`]).
+    pub fn corner_values(&self, domain: Domain, k: usize) -> &[f64] {
+        &self.corner_values[domain_index(domain)][k * self.size..(k + 1) * self.size]
     }
 
     /// `∫ u φ_α φ_α'` and `∫ v φ_α φ_α'` on the unit square, by a rule exact for their degree 2 d + 1.

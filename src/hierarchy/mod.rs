@@ -1169,6 +1169,18 @@ impl Hierarchy {
             .sum()
     }
 
+    /// Exitant radiance of surface element `id` at its shape's corner `k` (the order of
+    /// [`Domain::corners`](crate::geometry::Domain::corners) and of the shape's vertices): the basis
+    /// expansion from the basis' stored corner values.
+    pub fn radiance_at_corner(&self, id: ElementId, k: usize) -> Rgb {
+        let domain = self.element(id).shape().domain();
+        self.radiance(id)
+            .iter()
+            .zip(self.basis.corner_values(domain, k))
+            .map(|(&c, &f)| c * f)
+            .sum()
+    }
+
     /// Sum of the patch areas: the total surface area A_T (a two-sided polygon counts twice).
     pub fn total_area(&self) -> f64 {
         self.patches.iter().map(|p| self.element(p.root).area).sum()

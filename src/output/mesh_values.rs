@@ -281,7 +281,8 @@ impl VertexRadiosity {
     /// bilinear on a quad, or barycentric in the fan triangle containing `p` when the leaf has T-vertices.
     /// Returns the leaf's own radiance for an element that was not a leaf when this was built.
     pub fn evaluate(&self, hierarchy: &Hierarchy, leaf: ElementId, p: DVec3) -> Rgb {
-        self.interpolate(hierarchy, leaf, p, |v| self.values[v as usize])
+        let uv = hierarchy.element(leaf).shape().parameters_of(p);
+        self.interpolate(hierarchy, leaf, p, uv, |v| self.values[v as usize])
             .unwrap_or_else(|| hierarchy.average_radiance(leaf))
     }
 
@@ -306,21 +307,52 @@ impl VertexRadiosity {
         p: DVec3,
         below: f64,
     ) -> Rgb {
-        let expansion = hierarchy.radiance_at(leaf, p);
+        let uv = hierarchy.element(leaf).shape().parameters_of(p);
+        self.evaluate_continuous_at(hierarchy, leaf, p, uv, below)
+    }
+
+    /// [`Self::evaluate_continuous`] where the caller knows `p`'s parameters `uv` in the leaf (a
+    /// renderer's point location gives them): the leaf's own values at its corners come from the
+    /// basis' corner values, so that a sample evaluates the basis once, not at every vertex too.
+    pub fn evaluate_continuous_at(
+        &self,
+        hierarchy: &Hierarchy,
+        leaf: ElementId,
+        p: DVec3,
+        uv: DVec2,
+        below: f64,
+    ) -> Rgb {
+        let expansion = hierarchy.radiance_at_parameters(leaf, uv);
+        let corners = self.record(leaf).map(|record| record.corners);
+        let n = hierarchy.element(leaf).shape().vertex_count();
         let correction = |v: u32| {
-            let own = hierarchy.radiance_at(leaf, self.positions[v as usize]);
+            let corner = corners.and_then(|c| c[..n].iter().position(|&id| id == v));
+            let own = match corner {
+                Some(k) => hierarchy.radiance_at_corner(leaf, k),
+                None => hierarchy.radiance_at(leaf, self.positions[v as usize]),
+            };
             let shared = self.outline_values[v as usize];
             let (a, b) = (own.luminance(), shared.luminance());
             let step = (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
             (shared - own) * (2.0 - step / below).clamp(0.0, 1.0)
         };
-        self.interpolate(hierarchy, leaf, p, correction)
+        self.interpolate(hierarchy, leaf, p, uv, correction)
             .map_or(expansion, |c| expansion + c)
             .map(|c| c.max(0.0))
     }
 
-    /// Interpolation at point `p` of leaf `leaf` of the values `value` gives its vertices (by welded
-    /// vertex id): barycentric on a triangle, bilinear on a quad, or barycentric in the fan triangle
+    /// The vertices of leaf `leaf`; `None` for an element that was not a leaf when this was built.
+    fn record(&self, leaf: ElementId) -> Option<&LeafVertices> {
+        let slot = self
+            .leaf_slot
+            .get(leaf as usize)
+            .copied()
+            .filter(|&slot| slot != NOT_A_LEAF)?;
+        Some(&self.leaves[slot as usize])
+    }
+
+    /// Interpolation at point `p` (parameters `uv`) of leaf `leaf` of the values `value` gives its
+    /// vertices (by welded vertex id): barycentric on a triangle, bilinear on a quad, or barycentric in the fan triangle
     /// containing `p` when the leaf has T-vertices. `None` for an element that was not a leaf when
     /// this was built.
     fn interpolate(
@@ -328,25 +360,18 @@ impl VertexRadiosity {
         hierarchy: &Hierarchy,
         leaf: ElementId,
         p: DVec3,
+        uv: DVec2,
         value: impl Fn(u32) -> Rgb,
     ) -> Option<Rgb> {
         let element = hierarchy.element(leaf);
-        let slot = self
-            .leaf_slot
-            .get(leaf as usize)
-            .copied()
-            .filter(|&slot| slot != NOT_A_LEAF)?;
-        let record = &self.leaves[slot as usize];
+        let record = self.record(leaf)?;
         let shape = element.shape();
         let c = |k: usize| value(record.corners[k]);
         Some(match &record.boundary {
             None => match shape {
-                Shape::Triangle(_) => {
-                    let uv = shape.parameters_of(p);
-                    c(0) * (1.0 - uv.x - uv.y) + c(1) * uv.x + c(2) * uv.y
-                }
+                Shape::Triangle(_) => c(0) * (1.0 - uv.x - uv.y) + c(1) * uv.x + c(2) * uv.y,
                 Shape::Quad(_) => {
-                    let uv = shape.parameters_of(p).clamp(DVec2::ZERO, DVec2::ONE);
+                    let uv = uv.clamp(DVec2::ZERO, DVec2::ONE);
                     bilinear([c(0), c(1), c(2), c(3)], uv)
                 }
             },

@@ -281,7 +281,7 @@ impl Tracer<'_> {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
             (Shading::Continuous | Shading::Seamless, Some(vertices)) => {
                 let below = self.options.shading.steps_removed_below();
-                vertices.evaluate_continuous(self.hierarchy, leaf, p, below.unwrap_or(0.0))
+                vertices.evaluate_continuous_at(self.hierarchy, leaf, p, uv, below.unwrap_or(0.0))
             }
             (Shading::Basis, _) => self.hierarchy.exitant_radiance_at_parameters(leaf, uv),
             _ => self.hierarchy.average_radiance(leaf),
