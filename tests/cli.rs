@@ -425,6 +425,19 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     // The paper's own link error oracle.
     let json = controlled(&["--oracle", "error"]);
     assert_eq!(json["settings"]["oracle"], "error");
+    // The link error oracle has no thresholds without control: off is refused, not ignored.
+    let out = radiosity(&[
+        "render",
+        "-q",
+        "--oracle",
+        "error",
+        "--accuracy",
+        "off",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--oracle error refines only under"));
     // Off, and off by default for the oracles of the Feixas et al. experiments.
     for options in [&["--accuracy", "off"][..], &["--oracle", "mi"]] {
         let json = stats_of(options);

@@ -354,7 +354,13 @@ impl SolveArgs {
         let oracle = self.oracle.unwrap_or(OracleKind::Power);
         let accuracy = match self.accuracy {
             Some(AccuracyArg::Target(accuracy)) => Some(accuracy),
-            Some(AccuracyArg::Off) => None,
+            Some(AccuracyArg::Off) => {
+                anyhow::ensure!(
+                    oracle != OracleKind::Error,
+                    "--oracle error refines only under error control: give it an --accuracy (default 10%)"
+                );
+                None
+            }
             None if oracle == OracleKind::Power && self.method == MethodKind::Deterministic => {
                 Some(Accuracy::Relative(DEFAULT_POWER_ACCURACY))
             }
