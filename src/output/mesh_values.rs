@@ -213,7 +213,8 @@ impl VertexRadiosity {
 
         // Anchor each T-vertex on the longest edge containing it; resolve in dependency order so that an
         // edge's end points (themselves possibly T-vertices of larger edges) are final first.
-        let mut anchor_of: Vec<Option<Anchor>> = vec![None; positions.len()];
+        // Only T-vertices have one (a few percent of the vertices).
+        let mut anchor_of: FastMap<u32, Anchor> = FastMap::default();
         // For continuous shading every leaf whose outline passes through a vertex counts there with
         // its own expansion, T-vertices included (not anchored): a polynomial the leaves share is
         // then every vertex's value.
@@ -230,9 +231,9 @@ impl VertexRadiosity {
             }
             record.boundary = boundary;
             for (v, anchor) in anchors {
-                let slot = &mut anchor_of[v as usize];
-                if slot.is_none_or(|old| anchor.edge_length > old.edge_length) {
-                    *slot = Some(anchor);
+                let slot = anchor_of.entry(v).or_insert(anchor);
+                if anchor.edge_length > slot.edge_length {
+                    *slot = anchor;
                 }
             }
         }
@@ -490,39 +491,40 @@ fn compatible(hierarchy: &Hierarchy, p: u32, q: u32) -> bool {
 
 /// Sets each T-vertex to the interpolation along its anchoring edge, end points first (an explicit-stack
 /// depth-first walk; a cycle, which planar meshes do not produce, falls back to the current value).
-fn resolve_anchors(anchor_of: &[Option<Anchor>], values: &mut [Rgb]) {
+fn resolve_anchors(anchor_of: &FastMap<u32, Anchor>, values: &mut [Rgb]) {
     #[derive(Clone, Copy, PartialEq)]
     enum State {
         Todo,
         Visiting,
         Done,
     }
-    let mut state = vec![State::Todo; anchor_of.len()];
+    // The T-vertices in vertex order (deterministic), each with its walk state.
+    let mut anchored: Vec<(u32, Anchor)> = anchor_of.iter().map(|(&v, &a)| (v, a)).collect();
+    anchored.sort_unstable_by_key(|&(v, _)| v);
+    let slot = |v: u32| anchored.binary_search_by_key(&v, |&(w, _)| w).ok();
+    let mut state = vec![State::Todo; anchored.len()];
     let mut stack = Vec::new();
-    for start in 0..anchor_of.len() {
-        if anchor_of[start].is_none() || state[start] == State::Done {
+    for start in 0..anchored.len() {
+        if state[start] == State::Done {
             continue;
         }
         stack.push(start);
-        while let Some(&v) = stack.last() {
-            let Some(anchor) = anchor_of[v] else {
-                state[v] = State::Done;
-                stack.pop();
-                continue;
-            };
-            if state[v] == State::Done {
+        while let Some(&i) = stack.last() {
+            if state[i] == State::Done {
                 stack.pop();
                 continue;
             }
-            state[v] = State::Visiting;
-            let pending: Vec<usize> = [anchor.a as usize, anchor.b as usize]
+            state[i] = State::Visiting;
+            let (v, anchor) = anchored[i];
+            let pending: Vec<usize> = [anchor.a, anchor.b]
                 .into_iter()
-                .filter(|&e| anchor_of[e].is_some() && state[e] == State::Todo)
+                .filter_map(slot)
+                .filter(|&e| state[e] == State::Todo)
                 .collect();
             if pending.is_empty() {
-                values[v] = values[anchor.a as usize] * (1.0 - anchor.s)
+                values[v as usize] = values[anchor.a as usize] * (1.0 - anchor.s)
                     + values[anchor.b as usize] * anchor.s;
-                state[v] = State::Done;
+                state[i] = State::Done;
                 stack.pop();
             } else {
                 stack.extend(pending);
