@@ -87,14 +87,14 @@ impl VertexRadiosity {
         // Pass 1: weld corner positions regardless of patch, and note which patches meet at each point.
         let mut welder = Welder::new(tolerance);
         let mut corner_points: Vec<[u32; 4]> = Vec::with_capacity(leaves.len());
-        let mut point_patches: Vec<Vec<u32>> = Vec::new();
+        let mut point_patches: Vec<Ids> = Vec::new();
         for &leaf in &leaves {
             let element = hierarchy.element(leaf);
             let mut ids = [0u32; 4];
             for (k, &p) in element.shape().vertices().iter().enumerate() {
                 let id = welder.insert(p);
                 if id as usize == point_patches.len() {
-                    point_patches.push(Vec::new());
+                    point_patches.push(Ids::new());
                 }
                 let list = &mut point_patches[id as usize];
                 if !list.contains(&element.patch()) {
@@ -612,7 +612,7 @@ struct OutlineVertices<'a> {
     vertex_group: &'a [u32],
     tolerance: f64,
     cell: f64,
-    grid: FastMap<[i64; 3], Vec<u32>>,
+    grid: FastMap<[i64; 3], Ids>,
 }
 
 impl<'a> OutlineVertices<'a> {
@@ -642,7 +642,7 @@ impl<'a> OutlineVertices<'a> {
         // About one vertex per cell along a surface.
         let cell =
             (bounds.diagonal() / (ids.len().max(1) as f64).sqrt()).max(CELL_SIZE * tolerance);
-        let mut grid: FastMap<[i64; 3], Vec<u32>> = FastMap::default();
+        let mut grid: FastMap<[i64; 3], Ids> = FastMap::default();
         for &id in &ids {
             grid.entry(cell_index(positions[id as usize], cell))
                 .or_default()
@@ -702,6 +702,10 @@ fn cell_index(p: DVec3, cell: f64) -> [i64; 3] {
     [c.x as i64, c.y as i64, c.z as i64]
 }
 
+/// A short list of ids kept inline: most welded points meet one patch and most grid cells hold one
+/// point, so a heap allocation each would cost more than the entries (the 100k hall: half a million).
+type Ids = smallvec::SmallVec<[u32; 2]>;
+
 /// Welding grid cells are this many tolerances wide: a query usually touches a single cell.
 const CELL_SIZE: f64 = 64.0;
 
@@ -709,7 +713,7 @@ const CELL_SIZE: f64 = 64.0;
 struct Welder {
     tolerance: f64,
     cell: f64,
-    grid: FastMap<[i64; 3], Vec<u32>>,
+    grid: FastMap<[i64; 3], Ids>,
     points: Vec<DVec3>,
 }
 
