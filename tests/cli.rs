@@ -425,39 +425,37 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     // The paper's own link error oracle.
     let json = controlled(&["--oracle", "error"]);
     assert_eq!(json["settings"]["oracle"], "error");
+    // A render with `options` is refused with a message containing `reason`.
+    let refused = |options: &[&str], reason: &str| {
+        let out = radiosity(&[&["render", "-q"], options, &["-o", png.to_str().unwrap()]].concat());
+        assert!(!out.status.success(), "{options:?}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains(reason),
+            "{options:?}"
+        );
+    };
     // The link error oracle has no thresholds without control: off is refused, not ignored.
-    let out = radiosity(&[
-        "render",
-        "-q",
-        "--oracle",
-        "error",
-        "--accuracy",
-        "off",
-        "-o",
-        png.to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--oracle error refines only under"));
+    refused(
+        &["--oracle", "error", "--accuracy", "off"],
+        "--oracle error refines only under",
+    );
     // Off, and off by default for the oracles of the Feixas et al. experiments.
     for options in [&["--accuracy", "off"][..], &["--oracle", "mi"]] {
         let json = stats_of(options);
         assert!(json["error"]["accuracy"].is_null(), "{options:?}: {json}");
     }
     // Monte Carlo radiosity has no error control: refused, not ignored.
-    let out = radiosity(&[
-        "render",
-        "-q",
-        "--method",
-        "stochastic-jacobi",
-        "--basis",
-        "constant",
-        "--accuracy",
-        "10%",
-        "-o",
-        png.to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("deterministic"));
+    refused(
+        &[
+            "--method",
+            "stochastic-jacobi",
+            "--basis",
+            "constant",
+            "--accuracy",
+            "10%",
+        ],
+        "deterministic",
+    );
     let out = radiosity(&[
         "render",
         "-q",
