@@ -45,6 +45,7 @@ fn triangle_cloud(n: usize, side: f64, seed: u64) -> Scene {
             material: 0,
             object: 0,
             two_sided: false,
+            under_contact: false,
         });
     }
     scene

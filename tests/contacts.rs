@@ -71,7 +71,8 @@ fn check_tiling(scene: &Scene, name: &str) -> usize {
             .iter()
             .map(|p| (*p - origin).dot(normal).abs())
             .fold(0.0, f64::max);
-        for piece in &pieces.shapes {
+        let shapes: Vec<Shape> = pieces.shapes.iter().map(|piece| piece.shape).collect();
+        for piece in &shapes {
             if let Shape::Quad([a, b, c, d]) = piece {
                 assert!(
                     (*a + *c - *b - *d).length() <= 1e-5 * size,
@@ -79,15 +80,14 @@ fn check_tiling(scene: &Scene, name: &str) -> usize {
                 );
             }
         }
-        let sum: f64 = pieces.shapes.iter().map(Shape::area).sum();
+        let sum: f64 = shapes.iter().map(Shape::area).sum();
         // Exact for a planar polygon; a quad warped by w (planar to polygonize's 1e-3 only) is not one
         // surface, and its pieces' areas may differ from its Newell area by O(w / size).
         assert!(
             (sum - area).abs() <= (1e-12 + warp / size) * area,
             "{name}: pieces cover {sum} of area {area} (warp {warp})"
         );
-        let corners: Vec<Vec<DVec2>> = pieces
-            .shapes
+        let corners: Vec<Vec<DVec2>> = shapes
             .iter()
             .map(|piece| {
                 assert!(
@@ -234,6 +234,11 @@ fn no_piece_straddles_the_cube_lamp_or_a_cornell_block() {
                 "{mode:?}: ceiling piece {:?} straddles the lamp",
                 p.shape
             );
+            // Exactly the pieces over the lamp are under a contact (continuous shading keeps the
+            // step along the lamp's outline).
+            let c = p.shape.centroid();
+            let over_lamp = (4.4..5.4).contains(&c.x) && (4.4..5.4).contains(&c.y);
+            assert_eq!(p.under_contact, over_lamp, "{mode:?}: {:?}", p.shape);
         }
         // Every piece keeps its polygon's place in the file.
         assert!(cube.origins.get(cube.polygons.len() - 1).1 > 0);
@@ -317,6 +322,7 @@ fn ceiling_and_strip(
                 material: 0,
                 object: 0,
                 two_sided: true,
+                under_contact: false,
             },
             Polygon {
                 shape: rectangle(
@@ -328,6 +334,7 @@ fn ceiling_and_strip(
                 material: 1,
                 object: 1,
                 two_sided,
+                under_contact: false,
             },
         ],
         materials: vec![ceiling, panel],
@@ -887,12 +894,14 @@ fn ceiling_and_lamp(lamp: Vec<Shape>) -> Scene {
         material: 0,
         object: 0,
         two_sided: true,
+        under_contact: false,
     }];
     polygons.extend(lamp.into_iter().map(|shape| Polygon {
         shape,
         material: 1,
         object: 1,
         two_sided: true,
+        under_contact: false,
     }));
     Scene {
         polygons,

@@ -266,6 +266,7 @@ fn shadowed_plate() -> Scene {
         material,
         object: 0,
         two_sided: false,
+        under_contact: false,
     });
     scene
 }
@@ -590,12 +591,14 @@ fn push_pull_on_trapezoids_keeps_constants_constant_and_power_unchanged() {
                 material: 0,
                 object: 0,
                 two_sided: false,
+                under_contact: false,
             },
             Polygon {
                 shape: trapezoid(1.0, false),
                 material: 1,
                 object: 0,
                 two_sided: false,
+                under_contact: false,
             },
         ],
         materials: vec![
@@ -803,6 +806,7 @@ fn jittered_source_nodes_keep_the_normalised_coupling_unbiased_where_kernel_and_
         material,
         object: 0,
         two_sided: true,
+        under_contact: false,
     });
     let vis = brute_force(&scene);
     let (receiver, emitter) = (scene.polygons[0].shape, emitter_shape(&scene));

@@ -34,6 +34,7 @@ fn squares(faces: &[([f64; 4], f64, bool, Material)]) -> Scene {
             material: k,
             object: k,
             two_sided: false,
+            under_contact: false,
         });
     }
     scene

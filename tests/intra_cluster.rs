@@ -53,6 +53,7 @@ fn plate_stack(above: Material, plate: impl Fn(usize) -> Material) -> Scene {
             material: k + 1,
             object: 0,
             two_sided: false,
+            under_contact: false,
         });
     }
     scene

@@ -268,6 +268,7 @@ fn twelve_squares(z: f64, up: bool, material: usize) -> Vec<Polygon> {
                 material,
                 object: 0,
                 two_sided: false,
+                under_contact: false,
             }
         })
         .collect()
@@ -338,6 +339,7 @@ fn the_audit_of_links_from_clusters_matches_the_exact_transfer_of_their_contents
         material: 0,
         object: 0,
         two_sided: false,
+        under_contact: false,
     }];
     polygons.extend(twelve_squares(3.0, false, 1));
     let solution = clustered(polygons);
@@ -393,6 +395,7 @@ fn the_audit_of_what_clusters_push_down_matches_the_exact_transfer() {
         material: 1,
         object: 0,
         two_sided: false,
+        under_contact: false,
     });
     let solution = clustered(polygons);
     let h = &solution.hierarchy;

@@ -436,6 +436,7 @@ fn floor_scene(half: f64, rho: f64, luminaire: Luminaire) -> Scene {
         material: 0,
         object: 0,
         two_sided: false,
+        under_contact: false,
     }];
     let mut scene = Scene {
         polygons,
@@ -915,6 +916,7 @@ fn path_tracer_and_solver_agree_on_an_image_with_the_luminaire() {
         material: 1,
         object: 0,
         two_sided: true,
+        under_contact: false,
     });
     let settings = SimulationSettings {
         basis: radiosity::bases::BasisKind::Linear,
@@ -1008,6 +1010,7 @@ fn stochastic_jacobi_shoots_the_luminaires_light() {
                 material: 0,
                 object: 0,
                 two_sided: false,
+                under_contact: false,
             })
             .collect(),
         materials: vec![Material::diffuse("wall", Rgb::splat(rho))],

@@ -228,6 +228,7 @@ fn clear_shafts_are_exact_under_multires_at_every_feature_size() {
             material: black,
             object: scene.objects.len() - 1,
             two_sided: true,
+            under_contact: false,
         });
     }
     let exact = parallel_rectangles(1.0, 1.0, 1.0);

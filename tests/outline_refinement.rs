@@ -74,6 +74,7 @@ fn gap_scene() -> Scene {
             material,
             object: k,
             two_sided,
+            under_contact: false,
         });
     }
     scene

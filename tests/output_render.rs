@@ -25,6 +25,7 @@ fn scene(polygons: Vec<(Shape, usize, bool)>, materials: Vec<Material>) -> Scene
                 material,
                 object: 0,
                 two_sided,
+                under_contact: false,
             })
             .collect(),
         materials,

@@ -16,6 +16,7 @@ fn scene(shapes: &[(Shape, usize)], materials: Vec<Material>) -> Scene {
                 material,
                 object: 0,
                 two_sided: false,
+                under_contact: false,
             })
             .collect(),
         materials,
@@ -302,15 +303,22 @@ fn vertex_values_are_area_weighted_and_t_vertices_interpolated() {
 
 /// Gives every leaf arbitrary coefficients of its basis expansion (all of them, not only the mean).
 fn scramble_expansions(h: &mut Hierarchy) {
+    scramble_expansions_by(h, |k, value| {
+        if k == 0 {
+            value * 4.0
+        } else {
+            value - Rgb::splat(1.5)
+        }
+    });
+}
+
+/// Sets coefficient `k` of every leaf to `coefficient(k, v)`, `v` an arbitrary value in [1, 2] ×
+/// (1, 2, 3) drawn from the leaf's centroid and `k`.
+fn scramble_expansions_by(h: &mut Hierarchy, coefficient: impl Fn(usize, Rgb) -> Rgb) {
     for leaf in h.leaves() {
         let c = h.element(leaf).shape().centroid();
-        for (k, coefficient) in h.radiance_mut(leaf).iter_mut().enumerate() {
-            let value = scrambled(c + DVec3::splat(k as f64));
-            *coefficient = if k == 0 {
-                value * 4.0
-            } else {
-                value - Rgb::splat(1.5)
-            };
+        for (k, value) in h.radiance_mut(leaf).iter_mut().enumerate() {
+            *value = coefficient(k, scrambled(c + DVec3::splat(k as f64)));
         }
     }
 }
@@ -475,4 +483,130 @@ fn seamless_shading_removes_small_steps_and_keeps_large_ones() {
         smoothed < 1e-9,
         "continuous shading keeps a step: {smoothed:e}"
     );
+}
+
+/// The area mean of `value` over leaf `leaf`: the centroid rule on `n` × `n` cells of its parameter
+/// domain weighted by the Jacobian (on a triangle, its `n²` congruent sub-triangles). Second order,
+/// also for a field with kinks (a fanned leaf's interpolation).
+fn leaf_mean(h: &Hierarchy, leaf: ElementId, n: usize, value: impl Fn(DVec3) -> Rgb) -> Rgb {
+    let shape = *h.element(leaf).shape();
+    let cell = |a: f64, b: f64| radiosity::geometry::DVec2::new(a / n as f64, b / n as f64);
+    let mut centroids = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (x, y) = (i as f64, j as f64);
+            match shape {
+                Shape::Quad(_) => centroids.push(cell(x + 0.5, y + 0.5)),
+                Shape::Triangle(_) if i + j < n => {
+                    centroids.push(cell(x + 1.0 / 3.0, y + 1.0 / 3.0));
+                    if i + j + 1 < n {
+                        centroids.push(cell(x + 2.0 / 3.0, y + 2.0 / 3.0));
+                    }
+                }
+                Shape::Triangle(_) => {}
+            }
+        }
+    }
+    let (mut sum, mut weight) = (Rgb::BLACK, 0.0);
+    for uv in centroids {
+        let w = shape.jacobian(uv);
+        sum += value(shape.point_at(uv)) * w;
+        weight += w;
+    }
+    sum / weight
+}
+
+/// Continuous and seamless shading keep every leaf's mean radiance, the solution's power on it: the
+/// interpolated step corrections move a leaf's mean, and a bubble (zero on the leaf's edges, so still
+/// continuous) gives it back. Quads with and without T-vertices, a refined triangle, linear and
+/// quadratic expansions with steps of tens of percent between neighbours.
+#[test]
+fn continuous_shading_keeps_each_leaf_mean() {
+    let triangle = Shape::Triangle([
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(3.5, 0.2, 0.0),
+        DVec3::new(2.3, 1.4, 0.0),
+    ]);
+    let s = scene(&[(unit_square(), 0), (triangle, 0)], vec![grey("floor")]);
+    for basis in [
+        radiosity::bases::BasisKind::Linear,
+        radiosity::bases::BasisKind::Quadratic,
+    ] {
+        let mut h = Hierarchy::new(&s, basis);
+        h.subdivide(h.patches[0].root);
+        refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
+        refine_at(&mut h, 0, DVec3::new(0.7, 0.2, 0.0), 2);
+        refine_at(&mut h, 1, DVec3::new(2.4, 0.4, 0.0), 2);
+        // Means 11 to 16 and gradients of a few tenths: positive everywhere, steps of up to ~20%.
+        scramble_expansions_by(&mut h, |k, value| {
+            if k == 0 {
+                Rgb::splat(10.0) + value
+            } else {
+                (value - Rgb::splat(1.5)) * 0.3
+            }
+        });
+        let vr = VertexRadiosity::new(&h);
+        assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+        let mut moved = 0.0f64;
+        for leaf in h.leaves() {
+            let own = leaf_mean(&h, leaf, 200, |p| h.radiance_at(leaf, p));
+            for below in [f64::INFINITY, 0.05] {
+                let shaded = leaf_mean(&h, leaf, 200, |p| {
+                    vr.evaluate_continuous(&h, leaf, p, below)
+                });
+                let d = rel_diff(shaded, own);
+                assert!(d < 2e-4, "{basis:?} leaf {leaf}, below {below}: {d:e}");
+            }
+            // What the corrections alone do to the mean (the smooth vertex interpolation differs
+            // from the expansion by them): the test must see it.
+            let smooth = leaf_mean(&h, leaf, 50, |p| vr.evaluate(&h, leaf, p));
+            moved = moved.max(rel_diff(smooth, own));
+        }
+        assert!(
+            moved > 1e-2,
+            "{basis:?}: the corrections hardly move a mean ({moved:e})"
+        );
+    }
+}
+
+/// A surface cut along a contact outline (`Polygon::under_contact`: the piece under an object lying
+/// on it) keeps its step there under continuous shading, where the radiance really jumps; the same two
+/// pieces without the flag are one smooth surface.
+#[test]
+fn continuous_shading_keeps_the_step_at_a_contact_outline() {
+    let right = Shape::Quad([
+        DVec3::X,
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(2.0, 1.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.0),
+    ]);
+    for under in [false, true] {
+        let mut s = scene(&[(unit_square(), 0), (right, 0)], vec![grey("floor")]);
+        s.polygons[1].under_contact = under;
+        let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Linear);
+        for patch in 0..2 {
+            h.subdivide(h.patches[patch].root);
+        }
+        for leaf in h.leaves() {
+            let value = if h.element(leaf).shape().centroid().x < 1.0 {
+                1.0
+            } else {
+                3.0
+            };
+            let coefficients = h.radiance_mut(leaf);
+            coefficients.fill(Rgb::BLACK);
+            coefficients[0] = Rgb::splat(value);
+        }
+        let vr = VertexRadiosity::new(&h);
+        let (compared, step) = edge_differences(&h, &[0, 1], |leaf, p| {
+            vr.evaluate_continuous(&h, leaf, p, f64::INFINITY)
+        });
+        assert!(compared > 50);
+        if under {
+            // Each side keeps its own value along the outline: 1 against 3.
+            assert!((step - 2.0 / 3.0).abs() < 1e-9, "step {step}");
+        } else {
+            assert!(step < 1e-6, "step {step:e}");
+        }
+    }
 }

@@ -233,6 +233,7 @@ fn a_probe_on_coplanar_overlapping_polygons_takes_the_first_objects() {
                 material: 0,
                 object,
                 two_sided: false,
+                under_contact: false,
             });
         }
         let shapes: Vec<_> = scene.polygons.iter().map(|p| p.shape).collect();

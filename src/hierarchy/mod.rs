@@ -39,6 +39,8 @@ pub struct Patch {
     pub reflectance: Rgb,
     pub emission: Rgb,
     pub root: ElementId,
+    /// Its polygon's [`crate::scene::Polygon::under_contact`].
+    pub under_contact: bool,
 }
 
 /// An interaction from `source` to the element holding the link (the receiver).
@@ -729,6 +731,7 @@ impl Hierarchy {
                     reflectance: material.reflectance,
                     emission: material.emission,
                     root,
+                    under_contact: polygon.under_contact,
                 });
                 h.polygon_patches[index][usize::from(!front)] = Some(patch);
             }

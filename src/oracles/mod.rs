@@ -207,6 +207,7 @@ pub(crate) mod tests {
                 material,
                 object: 0,
                 two_sided: false,
+                under_contact: false,
             });
         }
         scene

@@ -17,6 +17,7 @@ use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
 use rayon::prelude::*;
+use smallvec::SmallVec;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
@@ -41,8 +42,12 @@ pub struct VertexRadiosity {
     /// T-vertices interpolated along the longest edge holding them.
     values: Vec<Rgb>,
     /// Continuous shading's vertex values ([`VertexRadiosity::evaluate_continuous`]): the own
-    /// values, area-weighted, of every leaf whose outline passes through the vertex.
+    /// values, area-weighted, of every leaf whose outline passes through the vertex, leaves of
+    /// patches cut out under a contact ([`crate::hierarchy::Patch::under_contact`]) apart.
     outline_values: Vec<Rgb>,
+    /// The same for the leaves under a contact, at the vertices they touch: across a contact
+    /// outline each side averages its own leaves, so that the step there stays.
+    under_outline_values: FastMap<u32, Rgb>,
     /// Per element of the hierarchy: index into `leaves`, or [`NOT_A_LEAF`].
     leaf_slot: Vec<u32>,
     leaves: Vec<LeafVertices>,
@@ -125,6 +130,9 @@ impl VertexRadiosity {
         let mut vertex_of: FastMap<(u32, u32), u32> = FastMap::default();
         let mut positions = Vec::new();
         let mut sums: Vec<(Rgb, f64)> = Vec::new();
+        // Leaves under a contact count apart (see `under_outline_values`).
+        let under = |leaf: ElementId| hierarchy.patch_of(leaf).under_contact;
+        let mut under_sums: FastMap<u32, (Rgb, f64)> = FastMap::default();
         let mut vertex_group: Vec<u32> = Vec::new();
         let mut leaf_slot = vec![NOT_A_LEAF; hierarchy.elements.len()];
         let mut records = Vec::with_capacity(leaves.len());
@@ -139,7 +147,11 @@ impl VertexRadiosity {
                     sums.push((Rgb::BLACK, 0.0));
                     positions.len() as u32 - 1
                 });
-                let (value, area) = &mut sums[id as usize];
+                let (value, area) = if under(leaf) {
+                    under_sums.entry(id).or_default()
+                } else {
+                    &mut sums[id as usize]
+                };
                 // The leaf's own value at this corner (its average with the constant basis).
                 let corner = hierarchy.exitant_radiance_at(leaf, element.shape().vertices()[k]);
                 *value += corner * element.area;
@@ -160,6 +172,11 @@ impl VertexRadiosity {
                 .collect()
         };
         let mut values = average(&sums);
+        // Smooth shading averages both sides of a contact outline (RenderPark's look).
+        for (&v, &(value, area)) in &under_sums {
+            let (open, open_area) = sums[v as usize];
+            values[v as usize] = (open + value) / (open_area + area);
+        }
 
         // T-vertices: dyadic points of each leaf edge that are vertices of the same group.
         let lookup = VertexLookup {
@@ -223,7 +240,11 @@ impl VertexRadiosity {
             if let Some(boundary) = &boundary {
                 let element = hierarchy.element(record.element);
                 for &v in boundary.iter().filter(|v| !record.corners.contains(v)) {
-                    let (value, area) = &mut outline_sums[v as usize];
+                    let (value, area) = if under(record.element) {
+                        under_sums.entry(v).or_default()
+                    } else {
+                        &mut outline_sums[v as usize]
+                    };
                     let at = hierarchy.exitant_radiance_at(record.element, positions[v as usize]);
                     *value += at * element.area;
                     *area += element.area;
@@ -244,6 +265,10 @@ impl VertexRadiosity {
             vertex_group,
             values,
             outline_values: average(&outline_sums),
+            under_outline_values: under_sums
+                .into_iter()
+                .map(|(v, (value, area))| (v, value / area))
+                .collect(),
             leaf_slot,
             leaves: records,
         }
@@ -293,7 +318,12 @@ impl VertexRadiosity {
     /// bilinear expansion equals the interpolation of its own values at the edge's vertices (corners
     /// and T-vertices), so there the value is the smooth one, which both sides share: continuous across
     /// every edge of a smoothing group; inside the leaf it keeps the expansion's shape (with quadratic
-    /// and cubic bases the jumps shrink to the expansion's curvature along the edge). Returns the
+    /// and cubic bases the jumps shrink to the expansion's curvature along the edge). The added
+    /// interpolation moves the leaf's mean, the solution's power on it; a bubble, zero on the leaf's
+    /// edges, gives it back ([`unit_bubble`]), which on cube.mgf's ceiling around its lamp brings the
+    /// error from 203% to 12% (BENCHMARKS.md, "Continuous shading that keeps each element's mean").
+    /// A surface cut along a contact outline keeps its step there: leaves of pieces under the contact
+    /// average among themselves at the outline's vertices (`Patch::under_contact`). Returns the
     /// leaf's expansion for an element that was not a leaf when this was built.
     ///
     /// `below`: the relative luminance step between the leaf's own value at a vertex and the vertex's
@@ -326,20 +356,82 @@ impl VertexRadiosity {
         let expansion = hierarchy.radiance_at_parameters(leaf, uv);
         let corners = self.record(leaf).map(|record| record.corners);
         let n = hierarchy.element(leaf).shape().vertex_count();
+        let under = hierarchy.patch_of(leaf).under_contact;
         let correction = |v: u32| {
             let corner = corners.and_then(|c| c[..n].iter().position(|&id| id == v));
             let own = match corner {
                 Some(k) => hierarchy.radiance_at_corner(leaf, k),
                 None => hierarchy.radiance_at(leaf, self.positions[v as usize]),
             };
-            let shared = self.outline_values[v as usize];
+            let under_side = if under {
+                self.under_outline_values.get(&v).copied()
+            } else {
+                None
+            };
+            let shared = under_side.unwrap_or(self.outline_values[v as usize]);
             let (a, b) = (own.luminance(), shared.luminance());
             let step = (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
             (shared - own) * (2.0 - step / below).clamp(0.0, 1.0)
         };
-        self.interpolate(hierarchy, leaf, p, uv, correction)
-            .map_or(expansion, |c| expansion + c)
+        let Some(record) = self.record(leaf) else {
+            return expansion.map(|c| c.max(0.0));
+        };
+        // Each vertex's correction once (a fanned leaf's are read twice: at `p` and for the mean).
+        let vertices = record.boundary.as_deref().unwrap_or(&record.corners[..n]);
+        let corrections: SmallVec<[(u32, Rgb); 8]> =
+            vertices.iter().map(|&v| (v, correction(v))).collect();
+        let corrected = |v: u32| {
+            corrections
+                .iter()
+                .find(|&&(w, _)| w == v)
+                .map_or(Rgb::BLACK, |&(_, c)| c)
+        };
+        let shape = hierarchy.element(leaf).shape();
+        let nodes = area_nodes(shape);
+        let at = self.interpolate(hierarchy, leaf, p, uv, corrected);
+        let mean = self.interpolation_mean(record, shape, &nodes, corrected);
+        (expansion + at.unwrap_or(Rgb::BLACK) - mean * unit_bubble(shape, &nodes, uv))
             .map(|c| c.max(0.0))
+    }
+
+    /// The mean over leaf `record`'s area (its shape `shape`, area nodes `nodes`: [`area_nodes`])
+    /// of [`Self::interpolate`]'s field for `value`: exact for triangles, fans (linear on each fan
+    /// triangle) and quads (bilinear in the parameters times a Jacobian linear in them).
+    fn interpolation_mean(
+        &self,
+        record: &LeafVertices,
+        shape: &Shape,
+        nodes: &AreaNodes,
+        value: impl Fn(u32) -> Rgb,
+    ) -> Rgb {
+        let n = shape.vertex_count();
+        let c = |k: usize| value(record.corners[k]);
+        match (&record.boundary, shape) {
+            (None, Shape::Triangle(_)) => (c(0) + c(1) + c(2)) / 3.0,
+            (None, Shape::Quad(_)) => {
+                let corners = [c(0), c(1), c(2), c(3)];
+                nodes
+                    .iter()
+                    .fold(Rgb::BLACK, |sum, &(uv, w)| sum + bilinear(corners, uv) * w)
+            }
+            (Some(boundary), _) => {
+                let centre = fan_centre(shape);
+                let centre_value = corner_average(&record.corners[..n], &value);
+                let (mut sum, mut area) = (Rgb::BLACK, 0.0);
+                for i in 0..boundary.len() {
+                    let (a, b) = (boundary[i], boundary[(i + 1) % boundary.len()]);
+                    let (pa, pb) = (self.positions[a as usize], self.positions[b as usize]);
+                    let piece = (pa - centre).cross(pb - centre).length();
+                    sum += (centre_value + value(a) + value(b)) * (piece / 3.0);
+                    area += piece;
+                }
+                if area > 0.0 {
+                    sum / area
+                } else {
+                    centre_value
+                }
+            }
+        }
     }
 
     /// The vertices of leaf `leaf`; `None` for an element that was not a leaf when this was built.
@@ -455,6 +547,48 @@ fn fan_centre(shape: &Shape) -> DVec3 {
     match shape {
         Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
         Shape::Quad(_) => shape.point_at(DVec2::splat(0.5)),
+    }
+}
+
+/// A quad's 2 × 2 Gauss–Legendre nodes in its parameters with their area weights (the Jacobian
+/// there, normalised to sum to 1): the exact area mean of a function of degree at most 3 in each
+/// parameter over a planar quad, whose Jacobian is linear in each. Unused (empty) on a triangle.
+type AreaNodes = SmallVec<[(DVec2, f64); 4]>;
+
+/// [`AreaNodes`] of `shape`.
+fn area_nodes(shape: &Shape) -> AreaNodes {
+    const GAUSS: [f64; 2] = [0.211_324_865_405_187_1, 0.788_675_134_594_812_9];
+    let mut nodes = AreaNodes::new();
+    if let Shape::Quad(_) = shape {
+        for u in GAUSS {
+            for v in GAUSS {
+                let uv = DVec2::new(u, v);
+                nodes.push((uv, shape.jacobian(uv)));
+            }
+        }
+        let total: f64 = nodes.iter().map(|&(_, w)| w).sum();
+        for (_, w) in &mut nodes {
+            *w /= total.max(f64::MIN_POSITIVE);
+        }
+    }
+    nodes
+}
+
+/// A bubble over the shape's parameter domain, zero on its boundary and of mean 1 over its area
+/// (`60 λ₀λ₁λ₂` on a triangle; `u(1 − u) v(1 − v)` over its area mean on a quad, `nodes` its
+/// [`area_nodes`]): adding a multiple of it to a field continuous across a leaf's edges keeps it
+/// continuous and moves its mean over the leaf by that multiple.
+fn unit_bubble(shape: &Shape, nodes: &AreaNodes, uv: DVec2) -> f64 {
+    let quad_bubble = |uv: DVec2| uv.x * (1.0 - uv.x) * uv.y * (1.0 - uv.y);
+    match shape {
+        Shape::Triangle(_) => {
+            let (u, v) = (uv.x.max(0.0), uv.y.max(0.0));
+            60.0 * (1.0 - u - v).max(0.0) * u * v
+        }
+        Shape::Quad(_) => {
+            let mean: f64 = nodes.iter().map(|&(uv, w)| quad_bubble(uv) * w).sum();
+            quad_bubble(uv.clamp(DVec2::ZERO, DVec2::ONE)) / mean.max(f64::MIN_POSITIVE)
+        }
     }
 }
 
@@ -704,7 +838,7 @@ fn cell_index(p: DVec3, cell: f64) -> [i64; 3] {
 
 /// A short list of ids kept inline: most welded points meet one patch and most grid cells hold one
 /// point, so a heap allocation each would cost more than the entries (the 100k hall: half a million).
-type Ids = smallvec::SmallVec<[u32; 2]>;
+type Ids = SmallVec<[u32; 2]>;
 
 /// Welding grid cells are this many tolerances wide: a query usually touches a single cell.
 const CELL_SIZE: f64 = 64.0;

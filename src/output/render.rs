@@ -26,9 +26,9 @@ pub enum Shading {
     /// The leaf's basis expansion evaluated at the point (Bekaert–Willems §2): exactly the computed
     /// solution, smooth within elements for non-constant bases.
     Basis,
-    /// The basis expansion with its jumps at element edges removed
+    /// The basis expansion with its jumps at element edges removed and each element's mean kept
     /// ([`VertexRadiosity::evaluate_continuous`]): continuous across edges for linear and bilinear
-    /// bases, no steps between leaves of different sizes.
+    /// bases, no steps between leaves of different sizes, except along contact outlines.
     Continuous,
     /// The basis expansion with its small jumps at element edges removed, the large ones kept
     /// ([`SEAMLESS_STEP`]): no banding where the light is smooth, no smearing of a steep change the
@@ -41,8 +41,9 @@ pub enum Shading {
 /// few percent between flat-looking elements are what the eye sees as banding (Mach bands enhance
 /// them), and are within the solution's typical error; on the Cornell box and cube.mgf removing the
 /// steps under 5–10% changes the image error by less than 0.01 point, while removing every step (as
-/// [`Shading::Continuous`] does) smears the steep light at cube.mgf's lamp (1.36% → 1.89%; the
-/// Cornell box 1.94% → 2.02%; BENCHMARKS.md, "Seamless shading").
+/// [`Shading::Continuous`] does) spreads the steep light at cube.mgf's lamp over its neighbours
+/// (around the lamp 6.3% against 12%; BENCHMARKS.md, "Seamless shading" and "Continuous shading
+/// that keeps each element's mean").
 pub const SEAMLESS_STEP: f64 = 0.05;
 
 impl Shading {

@@ -164,12 +164,11 @@ pub fn split_contacts(scene: &mut Scene, mode: SplitContacts, gap: f64) -> Conta
                 report.polygons_split += 1;
                 report.pieces += pieces.shapes.len();
                 counts.push(pieces.shapes.len());
-                polygons.extend(
-                    pieces
-                        .shapes
-                        .iter()
-                        .map(|&shape| Polygon { shape, ..polygon }),
-                );
+                polygons.extend(pieces.shapes.iter().map(|piece| Polygon {
+                    shape: piece.shape,
+                    under_contact: polygon.under_contact || piece.under_contact,
+                    ..polygon
+                }));
                 if let Some(message) = pieces.warning {
                     warn(scene, i, message);
                 }
@@ -243,11 +242,19 @@ fn warn(scene: &mut Scene, polygon: usize, message: String) {
 /// The cut of one polygon: convex triangles and quads with its front side, tiling it.
 #[derive(Clone, Debug)]
 pub struct Pieces {
-    pub shapes: Vec<Shape>,
+    pub shapes: Vec<Piece>,
     /// Outlines that crossed it.
     pub outlines: usize,
     /// Why it was cut along fewer outlines than touch it (a budget), if it was.
     pub warning: Option<String>,
+}
+
+/// One piece of a cut polygon.
+#[derive(Clone, Copy, Debug)]
+pub struct Piece {
+    pub shape: Shape,
+    /// Inside one of the outlines it was cut along ([`Polygon::under_contact`]).
+    pub under_contact: bool,
 }
 
 /// The outlines (cutting planes through their edges, in P's projection) of the polygons in contact with
@@ -502,8 +509,8 @@ fn cut_polygon(polygon: &Polygon, face: &Face, outlines: Vec<Vec<Plane>>) -> Opt
     })
 }
 
-/// One convex piece cut by one outline's planes ([`split_by_outline`], [`split_pinwheel`]); `None`
-/// when the outline does not cross it.
+/// One convex piece cut by one outline's planes ([`split_by_outline`], [`split_pinwheel`]), the part
+/// inside the outline last; `None` when the outline does not cross it.
 ///
 /// [`split_pinwheel`]: crate::geometry::clip::split_pinwheel
 type OutlineSplit<'a> = dyn Fn(&[DVec3], &[Plane]) -> Option<Vec<Vec<DVec3>>> + 'a;
@@ -518,7 +525,8 @@ fn cut_polygon_by(
     split: &OutlineSplit<'_>,
 ) -> Option<Pieces> {
     let snap = SNAP * face.diameter;
-    let mut pieces = vec![polygon.shape.vertices().to_vec()];
+    // Each piece with whether it lies inside an outline already cut along.
+    let mut pieces = vec![(polygon.shape.vertices().to_vec(), false)];
     let mut used = 0;
     let mut warning = None;
     if outlines.len() > MAX_OUTLINES {
@@ -530,13 +538,19 @@ fn cut_polygon_by(
     for planes in outlines.iter().take(MAX_OUTLINES) {
         let mut next = Vec::with_capacity(pieces.len() + planes.len());
         let mut crossed = false;
-        for piece in &pieces {
+        for (piece, inside) in &pieces {
             match split(piece, planes) {
                 Some(parts) => {
                     crossed = true;
-                    next.extend(parts);
+                    let last = parts.len() - 1;
+                    next.extend(
+                        parts
+                            .into_iter()
+                            .enumerate()
+                            .map(|(k, part)| (part, *inside || k == last)),
+                    );
                 }
-                None => next.push(piece.clone()),
+                None => next.push((piece.clone(), *inside)),
             }
         }
         if next.len() > MAX_PIECES {
@@ -556,13 +570,17 @@ fn cut_polygon_by(
         return None;
     }
     let mut shapes = Vec::new();
-    for piece in &pieces {
+    for (piece, inside) in &pieces {
         match polygonize(piece) {
             Ok(convex) => shapes.extend(
                 convex
                     .shapes
                     .into_iter()
-                    .flat_map(|shape| affine_pieces(shape, snap)),
+                    .flat_map(|shape| affine_pieces(shape, snap))
+                    .map(|shape| Piece {
+                        shape,
+                        under_contact: *inside,
+                    }),
             ),
             // A piece with no area left after polygonize's tolerances: keep the polygon whole rather
             // than lose area.

@@ -144,6 +144,7 @@ pub fn cornell_box() -> Scene {
                     material,
                     object,
                     two_sided: false,
+                    under_contact: false,
                 }));
         }
     }

@@ -25,6 +25,7 @@ fn scene_of(faces: Vec<(Shape, usize, &str)>, materials: Vec<Material>) -> Scene
             material,
             object,
             two_sided: false,
+            under_contact: false,
         });
     }
     scene
@@ -386,6 +387,7 @@ impl ShadowGroups {
                 material,
                 object,
                 two_sided: false,
+                under_contact: false,
             });
         }
         scene
@@ -495,6 +497,7 @@ impl BoxHall {
                 material,
                 object: material,
                 two_sided: false,
+                under_contact: false,
             })
             .collect();
         scene.camera = Some(CameraSpec {

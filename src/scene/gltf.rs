@@ -537,6 +537,7 @@ impl Reader<'_> {
                             material,
                             object,
                             two_sided,
+                            under_contact: false,
                         })),
                     Err(_) => self.degenerate += 1,
                 }

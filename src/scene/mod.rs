@@ -62,6 +62,12 @@ pub struct Polygon {
     pub object: usize,
     /// Both sides are surfaces: the radiosity mesh of a two-sided polygon is two meshes.
     pub two_sided: bool,
+    /// A piece of a larger surface cut out inside the outline of an object that touches or nearly
+    /// touches it ([`contacts::split_contacts`]: the ceiling over a lamp hung under it, the floor
+    /// under a block). Radiance jumps across such an outline and nowhere else on a flat surface of
+    /// one material, so continuous shading keeps the step there
+    /// ([`crate::output::VertexRadiosity::evaluate_continuous`]).
+    pub under_contact: bool,
 }
 
 /// A named group of polygons (MGF `o`, OBJ object or group).
@@ -291,6 +297,7 @@ impl Scene {
                     material,
                     object,
                     two_sided: true,
+                    under_contact: false,
                 }));
             luminaire.object = Some(object);
         }

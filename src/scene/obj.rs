@@ -195,6 +195,7 @@ pub fn parse_bytes(
                             material,
                             object,
                             two_sided: false,
+                            under_contact: false,
                         }));
                     let count = scene.polygons.len();
                     scene.origins.record(path, line, count);

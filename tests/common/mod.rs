@@ -41,6 +41,7 @@ pub fn furnace_with_cubes(per_axis: usize, rho: f64, e: f64) -> Scene {
                         material: 0,
                         object: 0,
                         two_sided: false,
+                        under_contact: false,
                     });
                 }
             }
@@ -93,6 +94,7 @@ pub fn one_polygon_per_material(
             material,
             object: material,
             two_sided: two_sided(material),
+            under_contact: false,
         });
     }
     scene
@@ -136,6 +138,7 @@ pub fn emitter_hidden_by_a_near_strip(reflectance: f64, emission: f64) -> Scene 
         material,
         object: 0,
         two_sided: true,
+        under_contact: false,
     });
     scene
 }

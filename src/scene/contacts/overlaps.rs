@@ -267,7 +267,7 @@ fn uncover(polygon: &Polygon, face: &Face, covers: &[Cover]) -> Option<Uncovered
     let snap = SNAP * face.diameter;
     let pinwheel = |piece: &[DVec3], planes: &[Plane]| split_pinwheel(piece, planes, snap);
     let shapes = match cut_polygon_by(polygon, face, &outlines, &pinwheel) {
-        Some(pieces) => pieces.shapes,
+        Some(pieces) => pieces.shapes.iter().map(|piece| piece.shape).collect(),
         None => vec![polygon.shape],
     };
     let own = Sides::of(polygon, true);

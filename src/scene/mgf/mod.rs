@@ -1075,6 +1075,7 @@ impl<'a> Reader<'a> {
                             material,
                             object,
                             two_sided,
+                            under_contact: false,
                         }));
                     let count = self.scene.polygons.len();
                     self.scene.origins.record(&self.place, line, count);
