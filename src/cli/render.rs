@@ -34,9 +34,9 @@ pub struct RenderCommand {
     #[arg(short, long, default_value = "radiosity.png")]
     pub output: PathBuf,
     /// Seamless (the default): each element's basis expansion with its small steps at element edges
-    /// (under 5–10% of the luminance) removed, larger ones kept. Basis: the expansion itself (the
-    /// computed solution). Continuous: every step removed (vertex averages of the expansions; smears
-    /// steep light). Flat: element averages. Smooth: values averaged to vertices and interpolated
+    /// removed (neighbours within a factor 1.33 joined, a factor 2 apart kept), each element's mean
+    /// kept. Basis: the expansion itself (the computed solution). Continuous: every step removed but
+    /// along contact outlines (vertex averages of the expansions; spreads steep light). Flat: element averages. Smooth: values averaged to vertices and interpolated
     /// (Gouraud, crack free).
     #[arg(long, value_enum, default_value_t = Shading::Seamless)]
     pub shading: Shading,

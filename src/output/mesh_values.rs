@@ -42,12 +42,13 @@ pub struct VertexRadiosity {
     /// T-vertices interpolated along the longest edge holding them.
     values: Vec<Rgb>,
     /// Continuous shading's vertex values ([`VertexRadiosity::evaluate_continuous`]): the own
-    /// values, area-weighted, of every leaf whose outline passes through the vertex, leaves of
-    /// patches cut out under a contact ([`crate::hierarchy::Patch::under_contact`]) apart.
-    outline_values: Vec<Rgb>,
+    /// values, area-weighted, of every leaf whose outline passes through the vertex, with the range
+    /// of their luminances, leaves of patches cut out under a contact
+    /// ([`crate::hierarchy::Patch::under_contact`]) apart.
+    outline_values: Vec<SharedValue>,
     /// The same for the leaves under a contact, at the vertices they touch: across a contact
     /// outline each side averages its own leaves, so that the step there stays.
-    under_outline_values: FastMap<u32, Rgb>,
+    under_outline_values: FastMap<u32, SharedValue>,
     /// Per element of the hierarchy: index into `leaves`, or [`NOT_A_LEAF`].
     leaf_slot: Vec<u32>,
     leaves: Vec<LeafVertices>,
@@ -129,10 +130,10 @@ impl VertexRadiosity {
         // Pass 2: one vertex per (point, group); area-weighted average of the leaves touching it.
         let mut vertex_of: FastMap<(u32, u32), u32> = FastMap::default();
         let mut positions = Vec::new();
-        let mut sums: Vec<(Rgb, f64)> = Vec::new();
+        let mut sums: Vec<VertexSum> = Vec::new();
         // Leaves under a contact count apart (see `under_outline_values`).
         let under = |leaf: ElementId| hierarchy.patch_of(leaf).under_contact;
-        let mut under_sums: FastMap<u32, (Rgb, f64)> = FastMap::default();
+        let mut under_sums: FastMap<u32, VertexSum> = FastMap::default();
         let mut vertex_group: Vec<u32> = Vec::new();
         let mut leaf_slot = vec![NOT_A_LEAF; hierarchy.elements.len()];
         let mut records = Vec::with_capacity(leaves.len());
@@ -144,18 +145,17 @@ impl VertexRadiosity {
                 let id = *vertex_of.entry((points[k], group)).or_insert_with(|| {
                     positions.push(welder.points[points[k] as usize]);
                     vertex_group.push(group);
-                    sums.push((Rgb::BLACK, 0.0));
+                    sums.push(VertexSum::default());
                     positions.len() as u32 - 1
                 });
-                let (value, area) = if under(leaf) {
+                let sum = if under(leaf) {
                     under_sums.entry(id).or_default()
                 } else {
                     &mut sums[id as usize]
                 };
                 // The leaf's own value at this corner (its average with the constant basis).
                 let corner = hierarchy.exitant_radiance_at(leaf, element.shape().vertices()[k]);
-                *value += corner * element.area;
-                *area += element.area;
+                sum.add(corner, element.area);
                 corners[k] = id;
             }
             leaf_slot[leaf as usize] = slot as u32;
@@ -166,16 +166,11 @@ impl VertexRadiosity {
             });
         }
         drop(corner_points);
-        let average = |sums: &[(Rgb, f64)]| -> Vec<Rgb> {
-            sums.iter()
-                .map(|&(v, a)| if a > 0.0 { v / a } else { Rgb::BLACK })
-                .collect()
-        };
-        let mut values = average(&sums);
+        let mut values: Vec<Rgb> = sums.iter().map(VertexSum::average).collect();
         // Smooth shading averages both sides of a contact outline (RenderPark's look).
-        for (&v, &(value, area)) in &under_sums {
-            let (open, open_area) = sums[v as usize];
-            values[v as usize] = (open + value) / (open_area + area);
+        for (&v, under) in &under_sums {
+            let open = &sums[v as usize];
+            values[v as usize] = (open.value + under.value) / (open.area + under.area);
         }
 
         // T-vertices: dyadic points of each leaf edge that are vertices of the same group.
@@ -240,14 +235,13 @@ impl VertexRadiosity {
             if let Some(boundary) = &boundary {
                 let element = hierarchy.element(record.element);
                 for &v in boundary.iter().filter(|v| !record.corners.contains(v)) {
-                    let (value, area) = if under(record.element) {
+                    let sum = if under(record.element) {
                         under_sums.entry(v).or_default()
                     } else {
                         &mut outline_sums[v as usize]
                     };
                     let at = hierarchy.exitant_radiance_at(record.element, positions[v as usize]);
-                    *value += at * element.area;
-                    *area += element.area;
+                    sum.add(at, element.area);
                 }
             }
             record.boundary = boundary;
@@ -264,10 +258,10 @@ impl VertexRadiosity {
             positions,
             vertex_group,
             values,
-            outline_values: average(&outline_sums),
+            outline_values: outline_sums.iter().map(VertexSum::shared).collect(),
             under_outline_values: under_sums
                 .into_iter()
-                .map(|(v, (value, area))| (v, value / area))
+                .map(|(v, sum)| (v, sum.shared()))
                 .collect(),
             leaf_slot,
             leaves: records,
@@ -326,9 +320,10 @@ impl VertexRadiosity {
     /// average among themselves at the outline's vertices (`Patch::under_contact`). Returns the
     /// leaf's expansion for an element that was not a leaf when this was built.
     ///
-    /// `below`: the relative luminance step between the leaf's own value at a vertex and the vertex's
-    /// averaged value below which the step is removed wholly (`f64::INFINITY`: every step); steps of
-    /// twice that or more are kept, those in between removed in part ([`Shading::Seamless`]).
+    /// `below`: the relative luminance step between the leaf's own value at a vertex and the farthest
+    /// of the other leaves' values there below which the leaf's step is removed wholly
+    /// (`f64::INFINITY`: every step); steps of twice that or more are kept, those in between removed
+    /// in part ([`Shading::Seamless`]).
     ///
     /// [`Shading::Seamless`]: super::render::Shading::Seamless
     pub fn evaluate_continuous(
@@ -369,9 +364,13 @@ impl VertexRadiosity {
                 None
             };
             let shared = under_side.unwrap_or(self.outline_values[v as usize]);
-            let (a, b) = (own.luminance(), shared.luminance());
+            // The step to the leaf farthest from this one there, relative to the larger: two
+            // neighbours a factor r apart both see (r - 1) / r.
+            let a = own.luminance();
+            let (low, high) = (f64::from(shared.low), f64::from(shared.high));
+            let b = if a - low > high - a { low } else { high };
             let step = (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
-            (shared - own) * (2.0 - step / below).clamp(0.0, 1.0)
+            (shared.value - own) * (2.0 - step / below).clamp(0.0, 1.0)
         };
         let Some(record) = self.record(leaf) else {
             return expansion.map(|c| c.max(0.0));
@@ -548,6 +547,62 @@ fn fan_centre(shape: &Shape) -> DVec3 {
         Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
         Shape::Quad(_) => shape.point_at(DVec2::splat(0.5)),
     }
+}
+
+/// What the leaves through a vertex give it, summed: area-weighted values and the range of their
+/// luminances.
+#[derive(Clone, Copy, Debug)]
+struct VertexSum {
+    value: Rgb,
+    area: f64,
+    low: f64,
+    high: f64,
+}
+
+impl Default for VertexSum {
+    fn default() -> Self {
+        VertexSum {
+            value: Rgb::BLACK,
+            area: 0.0,
+            low: f64::INFINITY,
+            high: f64::NEG_INFINITY,
+        }
+    }
+}
+
+impl VertexSum {
+    fn add(&mut self, value: Rgb, area: f64) {
+        self.value += value * area;
+        self.area += area;
+        let luminance = value.luminance();
+        self.low = self.low.min(luminance);
+        self.high = self.high.max(luminance);
+    }
+
+    fn average(&self) -> Rgb {
+        if self.area > 0.0 {
+            self.value / self.area
+        } else {
+            Rgb::BLACK
+        }
+    }
+
+    fn shared(&self) -> SharedValue {
+        SharedValue {
+            value: self.average(),
+            low: self.low as f32,
+            high: self.high as f32,
+        }
+    }
+}
+
+/// A vertex's value for continuous shading: the area-weighted average of the leaves through it and
+/// the range of their luminances (which tells a leaf how far it is from the farthest of them).
+#[derive(Clone, Copy, Debug)]
+struct SharedValue {
+    value: Rgb,
+    low: f32,
+    high: f32,
 }
 
 /// A quad's 2 × 2 Gauss–Legendre nodes in its parameters with their area weights (the Jacobian

@@ -36,15 +36,17 @@ pub enum Shading {
     Seamless,
 }
 
-/// The relative luminance step at an element edge below which [`Shading::Seamless`] removes it
-/// wholly; it keeps steps of twice this or more, and removes a share in between. Why 5%: steps of a
-/// few percent between flat-looking elements are what the eye sees as banding (Mach bands enhance
-/// them), and are within the solution's typical error; on the Cornell box and cube.mgf removing the
-/// steps under 5–10% changes the image error by less than 0.01 point, while removing every step (as
-/// [`Shading::Continuous`] does) spreads the steep light at cube.mgf's lamp over its neighbours
-/// (around the lamp 6.3% against 12%; BENCHMARKS.md, "Seamless shading" and "Continuous shading
-/// that keeps each element's mean").
-pub const SEAMLESS_STEP: f64 = 0.05;
+/// The relative luminance step between a leaf's value at a vertex and the farthest of the other
+/// leaves' values there (relative to the larger) below which [`Shading::Seamless`] removes the leaf's
+/// step wholly; it keeps steps of twice this or more, and removes a share in between: neighbours
+/// within a factor 1.33 of each other are joined, a factor 2 or more apart kept. Why 25%: the
+/// elements of a dim face lit in its near field (the Cornell box's short block) read as blocks when
+/// only steps under 5% or 10% go; a lamp's outline steps by far more. With each element's mean kept,
+/// the image error is that of 5% or better (Cornell box 1.88%, cube.mgf 3.42%, around cube.mgf's
+/// lamp 6.22%, the corridor 2.01%, office3 0.27%; at 5%: 1.89, 3.38, 6.33, 2.10, 0.27%), while
+/// removing every step (as [`Shading::Continuous`] does) spreads the steep light at cube.mgf's lamp
+/// over its neighbours (12% there; BENCHMARKS.md, "Seamless shading at 25%").
+pub const SEAMLESS_STEP: f64 = 0.25;
 
 impl Shading {
     /// Whether this shading reads radiance averaged to the leaves' vertices ([`VertexRadiosity`]).
