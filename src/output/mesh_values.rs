@@ -555,8 +555,8 @@ fn fan_centre(shape: &Shape) -> DVec3 {
 struct VertexSum {
     value: Rgb,
     area: f64,
-    low: f64,
-    high: f64,
+    low: f32,
+    high: f32,
 }
 
 impl Default for VertexSum {
@@ -564,8 +564,8 @@ impl Default for VertexSum {
         VertexSum {
             value: Rgb::BLACK,
             area: 0.0,
-            low: f64::INFINITY,
-            high: f64::NEG_INFINITY,
+            low: f32::INFINITY,
+            high: f32::NEG_INFINITY,
         }
     }
 }
@@ -574,7 +574,7 @@ impl VertexSum {
     fn add(&mut self, value: Rgb, area: f64) {
         self.value += value * area;
         self.area += area;
-        let luminance = value.luminance();
+        let luminance = value.luminance() as f32;
         self.low = self.low.min(luminance);
         self.high = self.high.max(luminance);
     }
@@ -590,8 +590,8 @@ impl VertexSum {
     fn shared(&self) -> SharedValue {
         SharedValue {
             value: self.average(),
-            low: self.low as f32,
-            high: self.high as f32,
+            low: self.low,
+            high: self.high,
         }
     }
 }
