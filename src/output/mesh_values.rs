@@ -349,12 +349,14 @@ impl VertexRadiosity {
         below: f64,
     ) -> Rgb {
         let expansion = hierarchy.radiance_at_parameters(leaf, uv);
-        let corners = self.record(leaf).map(|record| record.corners);
-        let n = hierarchy.element(leaf).shape().vertex_count();
+        let Some(record) = self.record(leaf) else {
+            return expansion.map(|c| c.max(0.0));
+        };
+        let shape = hierarchy.element(leaf).shape();
+        let corners = &record.corners[..shape.vertex_count()];
         let under = hierarchy.patch_of(leaf).under_contact;
         let correction = |v: u32| {
-            let corner = corners.and_then(|c| c[..n].iter().position(|&id| id == v));
-            let own = match corner {
+            let own = match corners.iter().position(|&id| id == v) {
                 Some(k) => hierarchy.radiance_at_corner(leaf, k),
                 None => hierarchy.radiance_at(leaf, self.positions[v as usize]),
             };
@@ -372,11 +374,8 @@ impl VertexRadiosity {
             let step = (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
             (shared.value - own) * (2.0 - step / below).clamp(0.0, 1.0)
         };
-        let Some(record) = self.record(leaf) else {
-            return expansion.map(|c| c.max(0.0));
-        };
         // Each vertex's correction once (a fanned leaf's are read twice: at `p` and for the mean).
-        let vertices = record.boundary.as_deref().unwrap_or(&record.corners[..n]);
+        let vertices = record.boundary.as_deref().unwrap_or(corners);
         let corrections: SmallVec<[(u32, Rgb); 8]> =
             vertices.iter().map(|&v| (v, correction(v))).collect();
         let corrected = |v: u32| {
@@ -385,7 +384,6 @@ impl VertexRadiosity {
                 .find(|&&(w, _)| w == v)
                 .map_or(Rgb::BLACK, |&(_, c)| c)
         };
-        let shape = hierarchy.element(leaf).shape();
         let nodes = area_nodes(shape);
         let at = self.interpolate(hierarchy, leaf, p, uv, corrected);
         let mean = self.interpolation_mean(record, shape, &nodes, corrected);
