@@ -28,6 +28,26 @@ pub const ITEM_BUFFER_SHARE: usize = 8;
 /// links per element).
 pub const ELEMENT_SHARE: usize = 8;
 
+/// Hands the allocator's free pages back to the system. glibc keeps what a phase frees (a refinement
+/// pass's candidate lists, a solve's links) in its arenas, split among the smaller blocks still in
+/// use, and the next phase's large blocks then take fresh pages: office3's resident peak was the
+/// solve's plus the render's, 20 MB above its heap's. A no-op elsewhere (other allocators return
+/// pages themselves).
+pub fn return_free_pages() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            /// glibc's `malloc_trim(3)`: releases free memory at the top of the heap and, since glibc
+            /// 2.8, every whole free page inside the arenas.
+            fn malloc_trim(pad: usize) -> std::ffi::c_int;
+        }
+        // SAFETY: malloc_trim takes no pointers and only releases memory no allocation holds.
+        unsafe {
+            malloc_trim(0);
+        }
+    }
+}
+
 /// How `--max-memory` is divided.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MemoryBudget {

@@ -117,3 +117,66 @@ fn links_stay_in_the_hierarchy_when_the_pass_limit_ends_the_solve() {
         );
     }
 }
+
+/// `render` and `view` drop the links and the item buffers' cache once the solve is done, so that the
+/// image reuses their memory: what they show must not read them. Clustered (cluster links, item
+/// buffers cached), every shading and the error estimate, rendered before and after the release.
+#[test]
+fn images_do_not_change_when_the_solvers_state_is_released() {
+    use radiosity::hierarchy::clusters::ClusteringKind;
+    use radiosity::output::render::Quantity;
+    let scene = cornell_box();
+    let settings = SimulationSettings {
+        eps: 5e-4,
+        clustering: ClusteringKind::Oriented,
+        ..Default::default()
+    };
+    let camera = Camera::new(&scene.camera.expect("Cornell camera"), 48, 48);
+    let mut solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+    assert!(solution.hierarchy.root_cluster.is_some());
+    assert!(solution.hierarchy.item_buffers.is_some());
+    assert!(solution.hierarchy.link_count() > 0);
+    let images =
+        |solution: &radiosity::pipeline::Solution| -> Vec<radiosity::output::image::Image> {
+            let shadings = [
+                Shading::Flat,
+                Shading::Smooth,
+                Shading::Basis,
+                Shading::Continuous,
+                Shading::Seamless,
+            ];
+            let looks = shadings
+                .iter()
+                .map(|&shading| (shading, Quantity::Radiance))
+                .chain([(Shading::Flat, Quantity::ErrorEstimate)]);
+            looks
+                .map(|(shading, quantity)| {
+                    let options = RenderOptions {
+                        shading,
+                        quantity,
+                        ..Default::default()
+                    };
+                    render(
+                        &solution.hierarchy,
+                        solution.visibility.as_ref(),
+                        &camera,
+                        &options,
+                    )
+                })
+                .collect()
+        };
+    let before = images(&solution);
+    solution.hierarchy.release_solver_state();
+    assert_eq!(solution.hierarchy.link_count(), 0);
+    assert!(solution.hierarchy.item_buffers.is_none());
+    // Bit for bit: the error estimate's background is NaN (no estimate), which `==` never equals.
+    let bits = |images: &[radiosity::output::image::Image]| -> Vec<u64> {
+        images
+            .iter()
+            .flat_map(|image| &image.pixels)
+            .flat_map(|c| [c.r, c.g, c.b])
+            .map(f64::to_bits)
+            .collect()
+    };
+    assert_eq!(bits(&images(&solution)), bits(&before));
+}

@@ -149,7 +149,11 @@ impl RenderCommand {
             }
             Ok(())
         };
-        let solution = simulate_observed(&scene, &settings, progress, &mut on_step)?;
+        let mut solution = simulate_observed(&scene, &settings, progress, &mut on_step)?;
+        let mut stats = RunStats::new(&name, scene.polygons.len(), &solution, &settings);
+        stats.seconds.load = load_seconds;
+        // From here on only the radiance is read: the links' memory goes to the image.
+        solution.hierarchy.release_solver_state();
 
         let start = Instant::now();
         let vertices = (self.shading.needs_vertices() || !self.export.is_empty())
@@ -204,8 +208,6 @@ impl RenderCommand {
                 }
             }
         }
-        let mut stats = RunStats::new(&name, scene.polygons.len(), &solution, &settings);
-        stats.seconds.load = load_seconds;
         stats.seconds.render = render_seconds;
         if let Some(path) = &self.stats {
             let json = serde_json::to_string_pretty(&stats)? + "\n";

@@ -56,7 +56,8 @@ impl ViewCommand {
         }
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene, 512)?;
-        let solution = simulate(&scene, &settings, progress)?;
+        let mut solution = simulate(&scene, &settings, progress)?;
+        solution.hierarchy.release_solver_state();
         let mesh = ViewerMesh::new(&solution.hierarchy, self.shading, None, self.max_triangles)?;
         // The exposure `render` would choose for this view (pixel centres: one sample per pixel).
         let image = render_with(

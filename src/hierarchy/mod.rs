@@ -1225,6 +1225,19 @@ impl Hierarchy {
         self.elements.iter().map(|e| e.links.len()).sum()
     }
 
+    /// Drops what only refinement and the sweeps read: every element's links with their couplings,
+    /// and the item buffers' cache. For a solution that is final and will only be looked at (an
+    /// image, an export): office3 holds about 50 MB of them, which the image and the vertex values
+    /// then reuse instead of adding to the peak (BENCHMARKS.md, "The solver's state released before
+    /// the render"). Counts of links ([`Hierarchy::link_count`]) are 0 afterwards.
+    pub fn release_solver_state(&mut self) {
+        for element in &mut self.elements {
+            element.links = Vec::new();
+        }
+        self.item_buffers = None;
+        crate::memory::return_free_pages();
+    }
+
     /// Bytes held by elements, coefficients and links, as the allocator hands them out (the part of
     /// `--max-memory` that refinement fills, [`crate::memory`]).
     pub fn memory_bytes(&self) -> usize {

@@ -355,6 +355,7 @@ fn refine_pass(
         schedule,
     );
     hierarchy.shrink_link_lists();
+    crate::memory::return_free_pages();
     clustering::expose(hierarchy, visibility);
     let direct = first_gather.refine_and_gather(
         hierarchy,
