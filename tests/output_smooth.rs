@@ -2,7 +2,7 @@
 //! edges with T-vertices, within a patch and across coplanar patches.
 
 use radiosity::color::Rgb;
-use radiosity::geometry::{DVec3, Shape};
+use radiosity::geometry::{DVec2, DVec3, Shape};
 use radiosity::hierarchy::{ElementId, Hierarchy};
 use radiosity::output::VertexRadiosity;
 use radiosity::scene::{Material, Object, Polygon, Scene};
@@ -610,5 +610,54 @@ fn continuous_shading_keeps_the_step_at_a_contact_outline() {
         } else {
             assert!(step < 1e-6, "step {step:e}");
         }
+    }
+}
+
+/// A render keeps one [`LeafCorrections`] for a run of samples: whatever leaves and step gates it saw
+/// before, the value at a point is the one a fresh memo gives, bit for bit (samples over leaves
+/// with T-vertices and without, triangles and quads, alternating and repeating leaves and gates).
+#[test]
+fn continuous_shading_reuses_a_leafs_corrections_exactly() {
+    use radiosity::output::mesh_values::LeafCorrections;
+    let triangle = Shape::Triangle([
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(3.5, 0.2, 0.0),
+        DVec3::new(2.3, 1.4, 0.0),
+    ]);
+    let s = scene(&[(unit_square(), 0), (triangle, 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Linear);
+    h.subdivide(h.patches[0].root);
+    refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
+    refine_at(&mut h, 1, DVec3::new(2.4, 0.4, 0.0), 2);
+    scramble_expansions_by(&mut h, |k, value| {
+        if k == 0 {
+            Rgb::splat(10.0) + value
+        } else {
+            (value - Rgb::splat(1.5)) * 0.3
+        }
+    });
+    let vr = VertexRadiosity::new(&h);
+    assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+    let leaves = h.leaves();
+    let mut memo = LeafCorrections::default();
+    for k in 0..4000usize {
+        // Runs of a few samples on one leaf, then a jump; the gate changes now and then.
+        let leaf = leaves[(k / 3 * 7919) % leaves.len()];
+        let below = [0.25, f64::INFINITY, 0.05][k / 50 % 3];
+        let shape = h.element(leaf).shape();
+        let r = |i: usize| ((k * 2654435761 + i * 40503) % 1000) as f64 / 1000.0;
+        let uv = match shape {
+            Shape::Triangle(_) => DVec2::new(r(1) * (1.0 - r(2)), r(2) * (1.0 - r(1))),
+            Shape::Quad(_) => DVec2::new(r(1), r(2)),
+        };
+        let p = shape.point_at(uv);
+        let kept = vr.evaluate_continuous_at(&h, leaf, p, uv, below, &mut memo);
+        let fresh =
+            vr.evaluate_continuous_at(&h, leaf, p, uv, below, &mut LeafCorrections::default());
+        assert_eq!(
+            kept.to_array().map(f64::to_bits),
+            fresh.to_array().map(f64::to_bits),
+            "sample {k}, leaf {leaf}, below {below}"
+        );
     }
 }

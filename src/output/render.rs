@@ -5,7 +5,7 @@
 
 use super::camera::Camera;
 use super::image::Image;
-use super::mesh_values::VertexRadiosity;
+use super::mesh_values::{LeafCorrections, VertexRadiosity};
 use crate::color::Rgb;
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::Hierarchy;
@@ -181,11 +181,11 @@ pub fn render_with(
     let samples = options.samples_per_pixel.max(1);
     let cells = strata(samples);
     let width = camera.width;
-    let stratified_pixel = |x: usize, y: usize| {
+    let stratified_pixel = |x: usize, y: usize, memo: &mut LeafCorrections| {
         let mut rng = Pcg64Mcg::seed_from_u64(mix(options.seed, (y * width + x) as u64));
         let mut sum = Rgb::BLACK;
         for (sx, sy) in stratified(&cells, &mut rng) {
-            sum += tracer.radiance(x as f64 + sx, y as f64 + sy);
+            sum += tracer.radiance(x as f64 + sx, y as f64 + sy, memo);
         }
         sum / samples as f64
     };
@@ -196,11 +196,12 @@ pub fn render_with(
             .par_chunks_mut(width)
             .enumerate()
             .for_each(|(y, row)| {
+                let mut memo = LeafCorrections::default();
                 for (x, pixel) in row.iter_mut().enumerate() {
                     *pixel = if samples == 1 {
-                        tracer.radiance(x as f64 + 0.5, y as f64 + 0.5)
+                        tracer.radiance(x as f64 + 0.5, y as f64 + 0.5, &mut memo)
                     } else {
-                        stratified_pixel(x, y)
+                        stratified_pixel(x, y, &mut memo)
                     };
                 }
             });
@@ -224,21 +225,23 @@ pub fn render_with(
             .enumerate()
             .for_each(|(dy, row)| {
                 let y = y0 + first_new + dy;
+                let mut memo = LeafCorrections::default();
                 for (x, corner) in row.iter_mut().enumerate() {
-                    *corner = tracer.radiance(x as f64, y as f64);
+                    *corner = tracer.radiance(x as f64, y as f64, &mut memo);
                 }
             });
         let corners = &corners;
         rows.par_chunks_mut(width)
             .enumerate()
             .for_each(|(dy, row)| {
+                let mut memo = LeafCorrections::default();
                 for (x, pixel) in row.iter_mut().enumerate() {
                     let at = |dx: usize, cy: usize| corners[(dy + cy) * (width + 1) + x + dx];
                     let four = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
                     *pixel = if corners_agree(&four) {
                         four.iter().fold(Rgb::BLACK, |sum, &c| sum + c) / 4.0
                     } else {
-                        stratified_pixel(x, y0 + dy)
+                        stratified_pixel(x, y0 + dy, &mut memo)
                     };
                 }
             });
@@ -268,8 +271,9 @@ struct Tracer<'a> {
 }
 
 impl Tracer<'_> {
-    /// Radiance seen through image position (x, y) in pixels.
-    fn radiance(&self, x: f64, y: f64) -> Rgb {
+    /// Radiance seen through image position (x, y) in pixels; `memo` keeps the corrections of the
+    /// last leaf continuous shading saw ([`LeafCorrections`]).
+    fn radiance(&self, x: f64, y: f64, memo: &mut LeafCorrections) -> Rgb {
         let ray = self.camera.ray(x, y);
         let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
             return self.nothing();
@@ -306,7 +310,8 @@ impl Tracer<'_> {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
             (Shading::Continuous | Shading::Seamless, Some(vertices)) => {
                 let below = self.options.shading.steps_removed_below();
-                vertices.evaluate_continuous_at(self.hierarchy, leaf, p, uv, below.unwrap_or(0.0))
+                let below = below.unwrap_or(0.0);
+                vertices.evaluate_continuous_at(self.hierarchy, leaf, p, uv, below, memo)
             }
             (Shading::Basis, _) => self.hierarchy.exitant_radiance_at_parameters(leaf, uv),
             _ => self.hierarchy.average_radiance(leaf),
