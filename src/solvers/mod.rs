@@ -344,6 +344,9 @@ fn refine_pass(
     schedule: Option<&mut dyn RefinementSchedule>,
 ) -> (RefineOutcome, direct::DirectOutcome) {
     let start = Instant::now();
+    if let Some(buffers) = &hierarchy.item_buffers {
+        buffers.forget_unused();
+    }
     let spinner = progress.spinner("refine");
     let outcome = refine_scheduled(
         hierarchy,

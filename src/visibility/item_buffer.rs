@@ -25,6 +25,7 @@ use crate::hierarchy::clusters::VisibleAreas;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::RwLock;
 
 /// Pixels across the smallest object of a buffer.
@@ -375,19 +376,50 @@ struct Cache {
     exposure_bytes: usize,
 }
 
-/// One cluster's cached buffers, sorted by direction bucket (two lists rather than one of pairs,
-/// which padding would make 24 bytes an entry instead of 18).
+/// One cluster's cached buffers, sorted by direction bucket (parallel lists rather than one of
+/// tuples, which padding would make 24 bytes an entry instead of 19), each with whether it was asked
+/// for since the last [`ItemBuffers::forget_unused`].
 #[derive(Debug, Default)]
 struct ClusterBuffers {
     buckets: Vec<u16>,
     visible: Vec<VisibleAreas>,
+    used: Vec<AtomicBool>,
 }
 
 impl ClusterBuffers {
+    /// The buffer of `bucket`, marked used, or where it would go in the sorted list.
     fn get(&self, bucket: u16) -> Result<&VisibleAreas, usize> {
+        self.buckets.binary_search(&bucket).map(|at| {
+            self.used[at].store(true, Ordering::Relaxed);
+            &self.visible[at]
+        })
+    }
+
+    /// Drops the buffers not used since the last call and clears the marks of the others; returns
+    /// the bytes dropped (as [`ItemBuffers::visible_areas`] counted them).
+    fn forget_unused(&mut self) -> usize {
+        let keep: Vec<bool> = self
+            .used
+            .iter()
+            .map(|used| used.swap(false, Ordering::Relaxed))
+            .collect();
+        let mut dropped = 0;
+        let mut kept = keep.iter();
+        self.visible.retain(|visible| {
+            let keep = *kept.next().expect("one mark per buffer");
+            if !keep {
+                dropped += ENTRY_OVERHEAD + visible.bytes();
+            }
+            keep
+        });
+        let mut kept = keep.iter();
         self.buckets
-            .binary_search(&bucket)
-            .map(|at| &self.visible[at])
+            .retain(|_| *kept.next().expect("one mark per buffer"));
+        self.used.truncate(self.buckets.len());
+        self.buckets.shrink_to_fit();
+        self.visible.shrink_to_fit();
+        self.used.shrink_to_fit();
+        dropped
     }
 }
 
@@ -506,6 +538,22 @@ impl ItemBuffers {
         }
     }
 
+    /// Drops the buffers that no one asked for since the last call (the first call: since the
+    /// cache was made); called as each refinement pass starts, so that the cache holds what the
+    /// present links use rather than every (cluster, direction) that earlier, since refined, links
+    /// asked for. office3's peak: 107 → 101 MB, for 1–5% more time (BENCHMARKS.md, "The item-buffer
+    /// cache holds what the links use"). Answers are unchanged: a dropped buffer is drawn again, the
+    /// same.
+    pub fn forget_unused(&self) {
+        let mut cache = self.cache.write().expect("item buffer cache");
+        let mut dropped = 0;
+        cache.clusters.retain(|_, buffers| {
+            dropped += buffers.forget_unused();
+            !buffers.buckets.is_empty()
+        });
+        cache.bytes -= dropped;
+    }
+
     /// An empty cache that holds at most `max_bytes`.
     pub fn new(max_bytes: usize) -> Self {
         ItemBuffers {
@@ -541,6 +589,7 @@ impl ItemBuffers {
             if let Err(at) = buffers.get(bucket) {
                 buffers.buckets.insert(at, bucket);
                 buffers.visible.insert(at, visible.clone());
+                buffers.used.insert(at, AtomicBool::new(true));
                 cache.bytes += bytes;
             }
         }
@@ -551,6 +600,58 @@ impl ItemBuffers {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cache keeps what was asked for since the last `forget_unused` (drawn or found) and drops
+    /// the rest, bytes included, and a dropped buffer comes back the same when asked for again.
+    #[test]
+    fn the_cache_forgets_buffers_unused_since_the_last_pass() {
+        use crate::hierarchy::clusters::{Facing, Orientation};
+        let facing = |z: f64| Facing {
+            normal: DVec3::new(0.0, 0.0, z),
+            area: 1.0,
+            centroid: DVec3::ZERO,
+        };
+        let orientation = Orientation::new(&[facing(1.0), facing(-1.0), facing(1.0)]);
+        let areas = [1.0, 1.0, 1.0];
+        let buffers = ItemBuffers::new(1 << 20);
+        let draws = std::cell::Cell::new(0);
+        let ask = |cluster: u32, bucket: u16| {
+            buffers.visible_areas(cluster, bucket, |_| {
+                draws.set(draws.get() + 1);
+                let seen = f32::from(bucket % 3) / 2.0;
+                VisibleAreas::new(&orientation, &areas, &[seen, 1.0 - seen, 0.25])
+            })
+        };
+        let first: Vec<VisibleAreas> = [(1, 0), (1, 5), (2, 4)]
+            .iter()
+            .map(|&(c, b)| ask(c, b))
+            .collect();
+        assert_eq!(draws.get(), 3);
+        let bytes = |buffers: &ItemBuffers| buffers.cache.read().unwrap().bytes;
+        let full = bytes(&buffers);
+        // Drawn since the cache was made: all kept, their marks cleared.
+        buffers.forget_unused();
+        assert_eq!(bytes(&buffers), full);
+        assert_eq!(ask(1, 5), first[1]);
+        assert_eq!(draws.get(), 3, "a kept buffer is not drawn again");
+        // Only (1, 5) was asked for since: the other two go, and their bytes with them.
+        buffers.forget_unused();
+        assert_eq!(
+            bytes(&buffers),
+            ENTRY_OVERHEAD + first[1].bytes(),
+            "only the used buffer's bytes stay"
+        );
+        assert_eq!(buffers.cache.read().unwrap().clusters.len(), 1);
+        assert_eq!(ask(1, 5), first[1]);
+        assert_eq!(draws.get(), 3);
+        assert_eq!(ask(1, 0), first[0]);
+        assert_eq!(ask(2, 4), first[2]);
+        assert_eq!(
+            draws.get(),
+            5,
+            "forgotten buffers are drawn again, the same"
+        );
+    }
 
     /// The scanline keeps exactly the pixels whose centres pass every edge test, for random convex
     /// triangles and quads of either winding (some reaching past the buffer, some thinner than a pixel,
