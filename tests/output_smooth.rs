@@ -522,33 +522,39 @@ fn leaf_mean(h: &Hierarchy, leaf: ElementId, n: usize, value: impl Fn(DVec3) -> 
 /// interpolated step corrections move a leaf's mean, and a bubble (zero on the leaf's edges, so still
 /// continuous) gives it back. Quads with and without T-vertices, a refined triangle, linear and
 /// quadratic expansions with steps of tens of percent between neighbours.
-#[test]
-fn continuous_shading_keeps_each_leaf_mean() {
+/// A unit square refined unevenly (T-vertices) beside a refined triangle, with scrambled expansions
+/// of means 11 to 16 and gradients of a few tenths: positive everywhere, steps of up to ~20%.
+fn uneven_square_and_triangle(basis: radiosity::bases::BasisKind) -> (Hierarchy, VertexRadiosity) {
     let triangle = Shape::Triangle([
         DVec3::new(2.0, 0.0, 0.0),
         DVec3::new(3.5, 0.2, 0.0),
         DVec3::new(2.3, 1.4, 0.0),
     ]);
     let s = scene(&[(unit_square(), 0), (triangle, 0)], vec![grey("floor")]);
+    let mut h = Hierarchy::new(&s, basis);
+    h.subdivide(h.patches[0].root);
+    refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
+    refine_at(&mut h, 0, DVec3::new(0.7, 0.2, 0.0), 2);
+    refine_at(&mut h, 1, DVec3::new(2.4, 0.4, 0.0), 2);
+    scramble_expansions_by(&mut h, |k, value| {
+        if k == 0 {
+            Rgb::splat(10.0) + value
+        } else {
+            (value - Rgb::splat(1.5)) * 0.3
+        }
+    });
+    let vr = VertexRadiosity::new(&h);
+    assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+    (h, vr)
+}
+
+#[test]
+fn continuous_shading_keeps_each_leaf_mean() {
     for basis in [
         radiosity::bases::BasisKind::Linear,
         radiosity::bases::BasisKind::Quadratic,
     ] {
-        let mut h = Hierarchy::new(&s, basis);
-        h.subdivide(h.patches[0].root);
-        refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
-        refine_at(&mut h, 0, DVec3::new(0.7, 0.2, 0.0), 2);
-        refine_at(&mut h, 1, DVec3::new(2.4, 0.4, 0.0), 2);
-        // Means 11 to 16 and gradients of a few tenths: positive everywhere, steps of up to ~20%.
-        scramble_expansions_by(&mut h, |k, value| {
-            if k == 0 {
-                Rgb::splat(10.0) + value
-            } else {
-                (value - Rgb::splat(1.5)) * 0.3
-            }
-        });
-        let vr = VertexRadiosity::new(&h);
-        assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+        let (h, vr) = uneven_square_and_triangle(basis);
         let mut moved = 0.0f64;
         for leaf in h.leaves() {
             let own = leaf_mean(&h, leaf, 200, |p| h.radiance_at(leaf, p));
@@ -619,25 +625,7 @@ fn continuous_shading_keeps_the_step_at_a_contact_outline() {
 #[test]
 fn continuous_shading_reuses_a_leafs_corrections_exactly() {
     use radiosity::output::mesh_values::LeafCorrections;
-    let triangle = Shape::Triangle([
-        DVec3::new(2.0, 0.0, 0.0),
-        DVec3::new(3.5, 0.2, 0.0),
-        DVec3::new(2.3, 1.4, 0.0),
-    ]);
-    let s = scene(&[(unit_square(), 0), (triangle, 0)], vec![grey("floor")]);
-    let mut h = Hierarchy::new(&s, radiosity::bases::BasisKind::Linear);
-    h.subdivide(h.patches[0].root);
-    refine_at(&mut h, 0, DVec3::new(0.3, 0.3, 0.0), 3);
-    refine_at(&mut h, 1, DVec3::new(2.4, 0.4, 0.0), 2);
-    scramble_expansions_by(&mut h, |k, value| {
-        if k == 0 {
-            Rgb::splat(10.0) + value
-        } else {
-            (value - Rgb::splat(1.5)) * 0.3
-        }
-    });
-    let vr = VertexRadiosity::new(&h);
-    assert!(vr.fanned_leaf_count() >= 2, "the test needs T-vertices");
+    let (h, vr) = uneven_square_and_triangle(radiosity::bases::BasisKind::Linear);
     let leaves = h.leaves();
     let mut memo = LeafCorrections::default();
     for k in 0..4000usize {
