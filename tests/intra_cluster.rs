@@ -483,7 +483,11 @@ fn exposure_scale(h: &Hierarchy, id: ElementId, source: ElementId, v: f64) -> f6
     let toward = h.center_of(source);
     let bucket = direction_bucket(toward - h.center_of(id));
     let along = bucket_direction(bucket);
-    let Some(exposure) = h.item_buffers.as_ref().and_then(|b| b.exposure(id, bucket)) else {
+    let exposure = h
+        .item_buffers
+        .as_ref()
+        .and_then(|b| b.exposure(id, bucket, <[u64]>::to_vec));
+    let Some(exposure) = exposure else {
         return 1.0;
     };
     let contents = h.contents(h.cluster(id).expect("cluster"));

@@ -849,8 +849,10 @@ impl ClusterSweep {
                             let total: Rgb = run.iter().map(|&(_, _, g, _)| g).sum();
                             let geometry = self.contents.of(h, id);
                             let split = buffers
-                                .exposure(id, run[0].0)
-                                .and_then(|exposure| ExposureSplit::new(&areas, &exposure));
+                                .exposure(id, run[0].0, |exposure| {
+                                    ExposureSplit::new(&areas, exposure)
+                                })
+                                .flatten();
                             let Some(split) = split else {
                                 if sharing == Sharing::Pushed {
                                     share_by_areas(geometry, e.area, total, &areas, &mut share);
@@ -1187,8 +1189,10 @@ fn sent_along(
     };
     let visible = average(&areas, total);
     let Some(split) = buffers
-        .exposure(id, sending_key(bucket))
-        .and_then(|exposure| ExposureSplit::new(&areas, &exposure))
+        .exposure(id, sending_key(bucket), |exposure| {
+            ExposureSplit::new(&areas, exposure)
+        })
+        .flatten()
     else {
         return Sent::even(visible);
     };

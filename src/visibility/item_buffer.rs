@@ -512,14 +512,20 @@ impl ItemBuffers {
     /// The exposure of `cluster` along `bucket`, when stored: which of its patches a ray from their
     /// centroid reaches the bucket's nearest link source by (or, for a sending key, its nearest
     /// receiver), past the cluster's own contents (the item buffer answers for those). See
-    /// `solvers::clustering::expose`.
-    pub fn exposure(&self, cluster: u32, bucket: u16) -> Option<Exposure> {
+    /// `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read lock: sweeps ask for exposures
+    /// hundreds of thousands of times, and a copy each was an allocation each.
+    pub fn exposure<T>(
+        &self,
+        cluster: u32,
+        bucket: u16,
+        read: impl FnOnce(&[u64]) -> T,
+    ) -> Option<T> {
         self.cache
             .read()
             .expect("item buffer cache")
             .exposures
             .get(&(cluster, bucket))
-            .cloned()
+            .map(|bits| read(bits))
     }
 
     /// Stores exposures, in order, while they fit in their share of the cache's bytes
