@@ -309,8 +309,7 @@ impl Tracer<'_> {
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
             (Shading::Continuous | Shading::Seamless, Some(vertices)) => {
-                let below = self.options.shading.steps_removed_below();
-                let below = below.unwrap_or(0.0);
+                let below = self.options.shading.steps_removed_below().unwrap_or(0.0);
                 vertices.evaluate_continuous_at(self.hierarchy, leaf, p, uv, below, memo)
             }
             (Shading::Basis, _) => self.hierarchy.exitant_radiance_at_parameters(leaf, uv),
