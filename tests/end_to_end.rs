@@ -58,6 +58,20 @@ fn cornell_wall_radiance_converges_as_eps_halves() {
     }
 }
 
+/// `solution` rendered through `camera`.
+fn image_of(
+    solution: &radiosity::pipeline::Solution,
+    camera: &Camera,
+    options: &RenderOptions,
+) -> radiosity::output::image::Image {
+    render(
+        &solution.hierarchy,
+        solution.visibility.as_ref(),
+        camera,
+        options,
+    )
+}
+
 #[test]
 fn stats_and_images_do_not_depend_on_thread_count() {
     let scene = cornell_box();
@@ -82,12 +96,7 @@ fn stats_and_images_do_not_depend_on_thread_count() {
                         mesh: true,
                         ..Default::default()
                     };
-                    render(
-                        &solution.hierarchy,
-                        solution.visibility.as_ref(),
-                        &camera,
-                        &options,
-                    )
+                    image_of(&solution, &camera, &options)
                 })
                 .collect();
             (stats.deterministic_part(), images)
@@ -156,12 +165,7 @@ fn images_do_not_change_when_the_solvers_state_is_released() {
                         quantity,
                         ..Default::default()
                     };
-                    render(
-                        &solution.hierarchy,
-                        solution.visibility.as_ref(),
-                        &camera,
-                        &options,
-                    )
+                    image_of(solution, &camera, &options)
                 })
                 .collect()
         };
