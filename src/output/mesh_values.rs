@@ -14,6 +14,7 @@
 //! found by looking up the edge midpoint among the welded vertices, recursively.
 
 use crate::color::Rgb;
+use crate::geometry::cubature::gauss_nodes;
 use crate::geometry::{Aabb, DVec2, DVec3, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
 use rayon::prelude::*;
@@ -68,6 +69,16 @@ pub struct LeafCorrections {
     corrections: SmallVec<[(u32, Rgb); 8]>,
     mean: Rgb,
     bubble_mean: f64,
+}
+
+impl LeafCorrections {
+    /// The correction at vertex `v` (0 for a vertex that is not the leaf's).
+    fn at(&self, v: u32) -> Rgb {
+        self.corrections
+            .iter()
+            .find(|&&(w, _)| w == v)
+            .map_or(Rgb::BLACK, |&(_, c)| c)
+    }
 }
 
 impl Default for LeafCorrections {
@@ -395,13 +406,7 @@ impl VertexRadiosity {
         if memo.leaf != leaf || memo.below.to_bits() != below.to_bits() {
             *memo = self.leaf_corrections(hierarchy, leaf, record, shape, below);
         }
-        let corrected = |v: u32| {
-            memo.corrections
-                .iter()
-                .find(|&&(w, _)| w == v)
-                .map_or(Rgb::BLACK, |&(_, c)| c)
-        };
-        let at = self.interpolate(hierarchy, leaf, p, uv, corrected);
+        let at = self.interpolate(hierarchy, leaf, p, uv, |v| memo.at(v));
         (expansion + at.unwrap_or(Rgb::BLACK)
             - memo.mean * unit_bubble(shape, memo.bubble_mean, uv))
         .map(|c| c.max(0.0))
@@ -439,23 +444,16 @@ impl VertexRadiosity {
             (shared.value - own) * (2.0 - step / below).clamp(0.0, 1.0)
         };
         let vertices = record.boundary.as_deref().unwrap_or(corners);
-        let corrections: SmallVec<[(u32, Rgb); 8]> =
-            vertices.iter().map(|&v| (v, correction(v))).collect();
-        let corrected = |v: u32| {
-            corrections
-                .iter()
-                .find(|&&(w, _)| w == v)
-                .map_or(Rgb::BLACK, |&(_, c)| c)
-        };
         let nodes = area_nodes(shape);
-        let mean = self.interpolation_mean(record, shape, &nodes, corrected);
-        LeafCorrections {
+        let mut memo = LeafCorrections {
             leaf,
             below,
-            corrections,
-            mean,
+            corrections: vertices.iter().map(|&v| (v, correction(v))).collect(),
+            mean: Rgb::BLACK,
             bubble_mean: bubble_mean(shape, &nodes),
-        }
+        };
+        memo.mean = self.interpolation_mean(record, shape, &nodes, |v| memo.at(v));
+        memo
     }
 
     /// The mean over leaf `record`'s area (its shape `shape`, area nodes `nodes`: [`area_nodes`])
@@ -675,17 +673,11 @@ struct SharedValue {
 /// parameter over a planar quad, whose Jacobian is linear in each. Unused (empty) on a triangle.
 type AreaNodes = SmallVec<[(DVec2, f64); 4]>;
 
-/// [`AreaNodes`] of `shape`.
+/// [`AreaNodes`] of `shape`: [`gauss_nodes`]' 2 × 2 rule, its weights normalised.
 fn area_nodes(shape: &Shape) -> AreaNodes {
-    const GAUSS: [f64; 2] = [0.211_324_865_405_187_1, 0.788_675_134_594_812_9];
     let mut nodes = AreaNodes::new();
     if let Shape::Quad(_) = shape {
-        for u in GAUSS {
-            for v in GAUSS {
-                let uv = DVec2::new(u, v);
-                nodes.push((uv, shape.jacobian(uv)));
-            }
-        }
+        nodes.extend(gauss_nodes(shape, 2).iter().map(|n| (n.uv, n.weight)));
         let total: f64 = nodes.iter().map(|&(_, w)| w).sum();
         for (_, w) in &mut nodes {
             *w /= total.max(f64::MIN_POSITIVE);

@@ -415,6 +415,7 @@ impl ClusterBuffers {
         let mut kept = keep.iter();
         self.buckets
             .retain(|_| *kept.next().expect("one mark per buffer"));
+        // Every mark is clear now, so the first ones serve the buffers kept.
         self.used.truncate(self.buckets.len());
         self.buckets.shrink_to_fit();
         self.visible.shrink_to_fit();
@@ -512,8 +513,9 @@ impl ItemBuffers {
     /// The exposure of `cluster` along `bucket`, when stored: which of its patches a ray from their
     /// centroid reaches the bucket's nearest link source by (or, for a sending key, its nearest
     /// receiver), past the cluster's own contents (the item buffer answers for those). See
-    /// `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read lock: sweeps ask for exposures
-    /// hundreds of thousands of times, and a copy each was an allocation each.
+    /// `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read
+    /// lock: sweeps ask for exposures hundreds of thousands of times, and a copy each was an
+    /// allocation each.
     pub fn exposure<T>(
         &self,
         cluster: u32,
