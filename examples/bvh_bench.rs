@@ -1,10 +1,10 @@
 //! Ray-casting benchmark on synthetic scenes: build time and occlusion rays/s of our BVH (and Embree with
 //! `--features embree`) on the segments radiosity casts.
 //!
-//! `cargo run --release --example bvh_bench [-- small|large|both|SCENE_FILE] [rays]`: `small` is a room
+//! `cargo run --release --example bvh_bench [-- small|large|both|SCENE_FILE] [rays] [rounds]`: `small` is a room
 //! of ~12k quads (walls tessellated, random boxes inside), `large` ~2.6M triangles (a tessellated room
 //! with many small tessellated boxes); any other argument is a scene file (.mgf / .obj). Occlusion
-//! ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, back ends interleaved per run.
+//! ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, back ends interleaved per run, `rounds` times over.
 
 use radiosity::geometry::{DVec3, Shape};
 use radiosity::scene::{self, LoadOptions};
@@ -76,7 +76,7 @@ fn room(wall_n: usize, objects: usize, object_n: usize, triangles: bool, seed: u
     shapes
 }
 
-fn report(name: &str, shapes: &[Shape], rays: usize) {
+fn report(name: &str, shapes: &[Shape], rays: usize, rounds: usize) {
     let quads = shapes.iter().filter(|s| s.vertex_count() == 4).count();
     println!(
         "== {name}: {} polygons ({quads} quads, {} triangles)",
@@ -99,7 +99,7 @@ fn report(name: &str, shapes: &[Shape], rays: usize) {
         usize,
     ) -> Result<BenchResult, rayon::ThreadPoolBuildError>;
     let modes: [(&str, Rate); 2] = [("occluded", occlusion_rate), ("closest", closest_hit_rate)];
-    for (mode, rate) in modes {
+    for (mode, rate) in (0..rounds).flat_map(|_| modes) {
         for threads in [1, 2] {
             for vis in &backends {
                 match rate(vis.as_ref(), &segments, threads) {
@@ -146,19 +146,32 @@ fn main() {
         .get(2)
         .and_then(|s| s.parse().ok())
         .unwrap_or(2_000_000);
+    // Rounds of every measurement (this machine's rates drift between runs: ratios of back ends
+    // measured back to back within one run are what compare).
+    let rounds = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
     if which == "small" || which == "both" {
         // 6·10² wall quads + 493 boxes · 6·2² quads ≈ 12k quads.
-        report("room, ~12k quads", &room(10, 493, 2, false, 7), rays);
+        report(
+            "room, ~12k quads",
+            &room(10, 493, 2, false, 7),
+            rays,
+            rounds,
+        );
     }
     if which == "large" || which == "both" {
         // 6·100²·2 wall triangles + 26k boxes · 6·8²·2 triangles ≈ 2.6M triangles.
-        report("room, ~2.6M triangles", &room(100, 3370, 8, true, 8), rays);
+        report(
+            "room, ~2.6M triangles",
+            &room(100, 3370, 8, true, 8),
+            rays,
+            rounds,
+        );
     }
     if !["small", "large", "both"].contains(&which) {
         match scene::load(std::path::Path::new(which), &LoadOptions::default()) {
             Ok(scene) => {
                 let shapes: Vec<Shape> = scene.polygons.iter().map(|p| p.shape).collect();
-                report(which, &shapes, rays);
+                report(which, &shapes, rays, rounds);
             }
             Err(e) => println!("{which}: {e}"),
         }

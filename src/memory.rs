@@ -48,6 +48,76 @@ pub fn return_free_pages() {
     }
 }
 
+/// Keeps large blocks (128 KiB and up: link lists, candidate lists, coupling scratch) in pages of
+/// their own for the whole run. glibc starts so, but each time such a block is freed it raises the
+/// threshold to that block's size (up to 32 MiB), and later large blocks then come from the arenas,
+/// where growing one copies it and what is freed stays resident among the small blocks around it.
+/// Fixing the threshold keeps growth to `mremap` and frees to the system: office3's default render
+/// peaked 1.1 MB lower, the classroom's 6 MB, at the same CPU time (BENCHMARKS.md, "Large blocks kept
+/// mapped"). Call once, before the threads start. A no-op elsewhere.
+pub fn keep_large_blocks_mapped() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        /// `M_MMAP_THRESHOLD` of glibc's `<malloc.h>`.
+        const M_MMAP_THRESHOLD: std::ffi::c_int = -3;
+        unsafe extern "C" {
+            /// glibc's `mallopt(3)`; setting the threshold turns its dynamic adjustment off.
+            fn mallopt(param: std::ffi::c_int, value: std::ffi::c_int) -> std::ffi::c_int;
+        }
+        // SAFETY: mallopt takes no pointers; it only changes the allocator's policy for later calls.
+        unsafe {
+            mallopt(M_MMAP_THRESHOLD, 128 << 10);
+        }
+    }
+}
+
+/// Smallest array [`vec_on_huge_pages`] advises: below a few huge pages the rounding to 2 MiB costs
+/// more than the TLB saves (office3's whole BVH is 2.6 MB).
+const HUGE_PAGE_MIN_BYTES: usize = 8 << 20;
+
+/// Size of a transparent huge page on x86-64 and most aarch64 Linux systems.
+const HUGE_PAGE: usize = 2 << 20;
+
+/// An empty vector with room for `capacity` elements, whose memory the kernel is asked to back with
+/// transparent huge pages (`madvise(MADV_HUGEPAGE)` before any page is touched) when it is large;
+/// fill it without growing past `capacity`. Ray casting on a big scene reads its BVH at random: with
+/// 4 KiB pages nearly every node fetch of a 400 MB tree also misses the TLB, and Embree, which we
+/// measure against, advises huge pages for its own nodes (BENCHMARKS.md, "Huge pages for large
+/// BVHs"). Where the system grants them only on request (the common `madvise` setting) this is what
+/// gets them; elsewhere, or for small arrays, it is a plain `Vec::with_capacity`.
+pub fn vec_on_huge_pages<T>(capacity: usize) -> Vec<T> {
+    let mut fresh: Vec<T> = Vec::with_capacity(capacity);
+    let bytes = capacity.saturating_mul(std::mem::size_of::<T>());
+    #[cfg(target_os = "linux")]
+    if bytes >= HUGE_PAGE_MIN_BYTES {
+        /// `MADV_HUGEPAGE` of Linux's `<sys/mman.h>`.
+        const MADV_HUGEPAGE: std::ffi::c_int = 14;
+        unsafe extern "C" {
+            /// `madvise(2)`: advice only; a refusal (huge pages off) changes nothing.
+            fn madvise(
+                addr: *mut std::ffi::c_void,
+                length: usize,
+                advice: std::ffi::c_int,
+            ) -> std::ffi::c_int;
+        }
+        // The huge pages that fit wholly inside the buffer (an allocation this large is a mapping
+        // of its own, not yet touched).
+        let at = fresh.as_mut_ptr() as usize;
+        let (start, end) = (
+            at.next_multiple_of(HUGE_PAGE),
+            (at + bytes) / HUGE_PAGE * HUGE_PAGE,
+        );
+        if end > start {
+            // SAFETY: the range lies inside `fresh`'s allocation, which this function owns; the
+            // advice changes how pages are backed, never their contents.
+            unsafe {
+                madvise(start as *mut std::ffi::c_void, end - start, MADV_HUGEPAGE);
+            }
+        }
+    }
+    fresh
+}
+
 /// How `--max-memory` is divided.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MemoryBudget {
@@ -179,6 +249,20 @@ mod tests {
     use super::*;
     use crate::scene::generators::BoxHall;
     use crate::visibility::bvh::Bvh;
+
+    /// Vectors advised onto huge pages (and the small ones, which are not) hold what is written
+    /// into them, in the room asked for, without moving while they fill.
+    #[test]
+    fn vectors_on_huge_pages_hold_what_is_written() {
+        for len in [0, 1000, 3 << 20, (3 << 20) + 12_345] {
+            let mut v: Vec<u32> = vec_on_huge_pages(len);
+            assert!(v.is_empty() && v.capacity() >= len);
+            let at = v.as_ptr();
+            v.extend((0..len as u32).map(|k| k.wrapping_mul(2_654_435_761)));
+            assert_eq!(v.as_ptr(), at, "filling within the capacity does not move it");
+            assert!((0..len).all(|k| v[k] == (k as u32).wrapping_mul(2_654_435_761)));
+        }
+    }
 
     #[test]
     fn a_link_costs_less_than_the_three_allocation_layout() {

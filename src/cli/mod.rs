@@ -91,6 +91,7 @@ pub enum Command {
 
 /// Runs the command line and returns the process exit code.
 pub fn main() -> i32 {
+    crate::memory::keep_large_blocks_mapped();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => 0,

@@ -26,6 +26,7 @@
 use super::brute_force::{ray_triangle as triangle, IN_PLANE};
 use super::{Hit, Visibility};
 use crate::geometry::{DVec3, Ray, Shape};
+use crate::memory::vec_on_huge_pages;
 use glam::{Vec3A, Vec4};
 use std::mem::MaybeUninit;
 
@@ -480,7 +481,16 @@ impl Bvh {
             }
         } else {
             let binary = build(&mut prims, 0, 0);
-            nodes.reserve(binary.len() / 2 + 1);
+            // The wide tree's leaves are the binary tree's, each of its polygons' vertices stored
+            // once: room for all of it, on huge pages when large, before the collapse writes it.
+            let leaf_count = (binary.iter().flat_map(|n| n.child))
+                .filter(|c| c & LEAF_FLAG != 0)
+                .count();
+            let vertex_count = shapes.iter().map(Shape::vertex_count).sum();
+            leaves.blocks = vec_on_huge_pages(leaf_count);
+            leaves.lanes = vec_on_huge_pages(leaf_count);
+            leaves.vertices = vec_on_huge_pages(vertex_count);
+            nodes = vec_on_huge_pages(binary.len() / 2 + 1);
             let cuts = Cuts::new(&binary);
             collapse(&binary, &cuts, 0, &prims, &mut nodes, &mut leaves);
         }
