@@ -390,7 +390,11 @@ impl ClusterBuffers {
     /// The buffer of `bucket`, marked used, or where it would go in the sorted list.
     fn get(&self, bucket: u16) -> Result<&VisibleAreas, usize> {
         self.buckets.binary_search(&bucket).map(|at| {
-            self.used[at].store(true, Ordering::Relaxed);
+            // Written only when clear: a store on every hit would take the mark's cache line from
+            // the other threads each time (sweeps look buffers up over a million times).
+            if !self.used[at].load(Ordering::Relaxed) {
+                self.used[at].store(true, Ordering::Relaxed);
+            }
             &self.visible[at]
         })
     }
