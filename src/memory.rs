@@ -259,7 +259,11 @@ mod tests {
             assert!(v.is_empty() && v.capacity() >= len);
             let at = v.as_ptr();
             v.extend((0..len as u32).map(|k| k.wrapping_mul(2_654_435_761)));
-            assert_eq!(v.as_ptr(), at, "filling within the capacity does not move it");
+            assert_eq!(
+                v.as_ptr(),
+                at,
+                "filling within the capacity does not move it"
+            );
             assert!((0..len).all(|k| v[k] == (k as u32).wrapping_mul(2_654_435_761)));
         }
     }
