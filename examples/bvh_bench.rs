@@ -1,10 +1,11 @@
 //! Ray-casting benchmark on synthetic scenes: build time and occlusion rays/s of our BVH (and Embree with
 //! `--features embree`) on the segments radiosity casts.
 //!
-//! `cargo run --release --example bvh_bench [-- small|large|both|SCENE_FILE] [rays] [rounds]`: `small` is a room
-//! of ~12k quads (walls tessellated, random boxes inside), `large` ~2.6M triangles (a tessellated room
-//! with many small tessellated boxes); any other argument is a scene file (.mgf / .obj). Occlusion
-//! ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, back ends interleaved per run, `rounds` times over.
+//! `cargo run --release --example bvh_bench [-- small|large|both|SCENE_FILE] [rays] [rounds]`: `small`
+//! is a room of ~12k quads (walls tessellated, random boxes inside), `large` ~2.6M triangles (a
+//! tessellated room with many small tessellated boxes); any other argument is a scene file (.mgf /
+//! .obj). Occlusion ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, back ends
+//! interleaved per run, all of it `rounds` times over (default 1).
 
 use radiosity::geometry::{DVec3, Shape};
 use radiosity::scene::{self, LoadOptions};

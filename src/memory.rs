@@ -100,8 +100,9 @@ pub fn vec_on_huge_pages<T>(capacity: usize) -> Vec<T> {
                 advice: std::ffi::c_int,
             ) -> std::ffi::c_int;
         }
-        // The huge pages that fit wholly inside the buffer (an allocation this large is a mapping
-        // of its own, not yet touched).
+        // The huge pages that fit wholly inside the buffer. An allocation this large is a fresh
+        // mapping, not yet touched, under `keep_large_blocks_mapped` (and at any threshold from 32
+        // MiB); one glibc reuses from its heap keeps whatever pages it already has.
         let at = fresh.as_mut_ptr() as usize;
         let (start, end) = (
             at.next_multiple_of(HUGE_PAGE),
