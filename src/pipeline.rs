@@ -175,6 +175,9 @@ pub struct SimulationSettings {
     /// control, except with the link error oracle, which always controls
     /// ([`SimulationSettings::controlled_accuracy`]).
     pub accuracy: Option<Accuracy>,
+    /// Error control also to this fraction of each leaf's own radiance
+    /// ([`crate::solvers::ErrorControl::allowed`]); needs error control.
+    pub local_accuracy: Option<f64>,
     /// Algorithm 6.1's threshold factor.
     pub threshold_factor: f64,
     /// Which a-posteriori estimate to compute (and control).
@@ -272,6 +275,7 @@ impl Default for SimulationSettings {
             cubature_degree: None,
             error_storage: ErrorStorage::Full,
             accuracy: None,
+            local_accuracy: None,
             threshold_factor: 1.4,
             estimate: EstimateKind::Realistic,
             max_elements: 2_000_000,
@@ -479,6 +483,7 @@ pub fn deterministic_settings(
         estimate: settings.estimate,
         error_control: settings.controlled_accuracy().map(|accuracy| ErrorControl {
             accuracy: accuracy.absolute(hierarchy),
+            local: settings.local_accuracy,
             threshold_factor: settings.threshold_factor,
         }),
     }

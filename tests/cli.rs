@@ -444,6 +444,21 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
         let json = stats_of(options);
         assert!(json["error"]["accuracy"].is_null(), "{options:?}: {json}");
     }
+    // A local accuracy is reported in the summary line and the stats, and it refines at least as far.
+    let (summary, json) = run(&["--local-accuracy", "20%"]);
+    assert!(
+        summary.contains("20% of each element's own radiance"),
+        "{summary}"
+    );
+    assert_eq!(json["error"]["local_accuracy"].as_f64(), Some(0.2));
+    assert!(json["leaf_elements"].as_u64() >= default["leaf_elements"].as_u64());
+    // It needs error control, and a percentage.
+    refused(
+        &["--accuracy", "off", "--local-accuracy", "20%"],
+        "--local-accuracy refines under error control",
+    );
+    refused(&["--local-accuracy", "0.2"], "not a percentage");
+    refused(&["--local-accuracy", "0%"], "above 0");
     // Monte Carlo radiosity has no error control: refused, not ignored.
     refused(
         &[

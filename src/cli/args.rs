@@ -185,6 +185,12 @@ pub struct SolveArgs {
     /// oracles alone. Given with no --oracle, it keeps the power oracle.
     #[arg(long, value_parser = parse_accuracy, value_name = "EPS|P%|off")]
     pub accuracy: Option<AccuracyArg>,
+    /// Error control also to this percentage of each element's own radiance (e.g. 20%), down to a
+    /// tenth of --accuracy: a relative error bar on dim surfaces too (the ceiling above a lamp
+    /// housing, a corner), where --accuracy alone, absolute, allows errors of half their radiance.
+    /// Needs error control; off by default (BENCHMARKS.md, "Local accuracy").
+    #[arg(long, value_parser = parse_percentage, value_name = "P%")]
+    pub local_accuracy: Option<f64>,
     /// Factor by which error control lowers a failing element's link error threshold per pass.
     #[arg(long, default_value_t = 1.4, value_name = "F")]
     pub threshold_factor: f64,
@@ -366,6 +372,10 @@ impl SolveArgs {
             }
             None => None,
         };
+        anyhow::ensure!(
+            self.local_accuracy.is_none() || accuracy.is_some() || oracle == OracleKind::Error,
+            "--local-accuracy refines under error control: give an --accuracy too (not off)"
+        );
         let eps = self.eps.unwrap_or(match oracle {
             OracleKind::Smoothness => DEFAULT_SMOOTHNESS_EPS,
             _ => DEFAULT_EPS,
@@ -399,6 +409,7 @@ impl SolveArgs {
                 _ => ErrorStorage::Reduced,
             }),
             accuracy,
+            local_accuracy: self.local_accuracy,
             threshold_factor: self.threshold_factor,
             estimate: self.error_estimate,
             max_elements: self.max_elements,
@@ -606,6 +617,23 @@ pub fn parse_accuracy(text: &str) -> Result<AccuracyArg> {
     } else {
         Accuracy::Absolute(value)
     }))
+}
+
+/// Parses `--local-accuracy`: a percentage above 0 and at most 100 ("20%").
+pub fn parse_percentage(text: &str) -> Result<f64> {
+    let text = text.trim();
+    let number = text
+        .strip_suffix('%')
+        .with_context(|| format!("'{text}' is not a percentage (e.g. 20%)"))?;
+    let value: f64 = number
+        .trim()
+        .parse()
+        .with_context(|| format!("'{text}' is not a percentage (e.g. 20%)"))?;
+    anyhow::ensure!(
+        value > 0.0 && value <= 100.0,
+        "the percentage must be above 0 and at most 100"
+    );
+    Ok(value / 100.0)
 }
 
 /// Parses a byte count with an optional K, M, G or T suffix (powers of 1024).

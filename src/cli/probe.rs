@@ -12,6 +12,7 @@ use crate::reference::probe::{
     attach_stored_reference, probe_points, random_points, read_points, read_stored_points,
     seen_points, ProbeReference,
 };
+use crate::solvers::{allowed_error, LOCAL_ACCURACY_FLOOR};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -233,16 +234,30 @@ impl ProbeCommand {
             outln!()?;
         }
         if let (true, Some(accuracy)) = (compared, solution.report.error.accuracy) {
+            let local = solution.report.error.local_accuracy;
             let within = results
                 .iter()
                 .filter(|r| {
-                    r.reference
-                        .is_some_and(|e| within_accuracy(r.radiosity, e, accuracy))
+                    r.reference.is_some_and(|e| {
+                        within_accuracy(
+                            r.radiosity,
+                            e,
+                            allowed_error(accuracy, local, e.mean.max_channel()),
+                        )
+                    })
                 })
                 .count();
+            let and_local = local.map_or(String::new(), |p| {
+                format!(
+                    " and {:.0}% of the reference's radiance (down to {:.0}% of it)",
+                    100.0 * p,
+                    100.0 * LOCAL_ACCURACY_FLOOR
+                )
+            });
             outln!(
-                "# {within} of {} points within the accuracy {accuracy:.4} W/m²sr (largest channel, \
-                 allowing two standard errors of the reference); Bekaert–Willems promise at least 95%",
+                "# {within} of {} points within the accuracy {accuracy:.4} W/m²sr{and_local} \
+                 (largest channel, allowing two standard errors of the reference); Bekaert–Willems \
+                 promise at least 95%",
                 results.len()
             )?;
         }

@@ -258,12 +258,21 @@ pub fn error_summary(
     let s = &error.summary;
     let (k, unit) = (units.scale(), units.radiance());
     // The accuracy as a share of the mean radiance, as `--accuracy P%` gives it.
-    let share = |accuracy: f64| match mean_radiance > 0.0 {
-        true => format!(
-            " ({:.0}% of the mean radiance)",
+    // With a local accuracy, that too (`ErrorControl::allowed`).
+    let local = error.local_accuracy.map_or(String::new(), |p| {
+        format!(
+            "{}{:.0}% of each element's own radiance",
+            if mean_radiance > 0.0 { ", and " } else { " (" },
+            100.0 * p
+        )
+    });
+    let share = |accuracy: f64| match (mean_radiance > 0.0, local.is_empty()) {
+        (true, _) => format!(
+            " ({:.0}% of the mean radiance{local})",
             100.0 * accuracy / mean_radiance
         ),
-        false => String::new(),
+        (false, false) => format!("{local})"),
+        (false, true) => String::new(),
     };
     match error.accuracy {
         Some(accuracy) if s.leaves_above == 0 => format!(

@@ -372,9 +372,10 @@ pub struct ErrorSummary {
     pub area_fraction_above_splittable: f64,
 }
 
-/// Summary of `Element::error` over the leaves, against `accuracy` (radiance); surface leaves of at most
-/// `min_area` cannot be split further.
-pub fn summarize(h: &Hierarchy, accuracy: f64, min_area: f64) -> ErrorSummary {
+/// Summary of `Element::error` over the leaves, against `allowed` (radiance per leaf,
+/// [`crate::solvers::ErrorControl::allowed`]); surface leaves of at most `min_area` cannot be split
+/// further.
+pub fn summarize(h: &Hierarchy, allowed: impl Fn(ElementId) -> f64, min_area: f64) -> ErrorSummary {
     let mut s = ErrorSummary::default();
     let (mut area, mut area_above, mut area_splittable, mut weighted) = (0.0, 0.0, 0.0, 0.0);
     for id in h.leaves() {
@@ -383,7 +384,7 @@ pub fn summarize(h: &Hierarchy, accuracy: f64, min_area: f64) -> ErrorSummary {
         area += e.area;
         weighted += e.area * e.error;
         s.max_estimate = s.max_estimate.max(e.error);
-        if e.error > accuracy {
+        if e.error > allowed(id) {
             s.leaves_above += 1;
             area_above += e.area;
             if !h.is_cluster(id) && e.area <= min_area {

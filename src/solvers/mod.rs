@@ -60,9 +60,38 @@ pub struct SolveSettings {
 pub struct ErrorControl {
     /// Largest acceptable absolute radiance error ε, W/(m² sr).
     pub accuracy: f64,
+    /// Also at most this fraction of each leaf's own radiance (`--local-accuracy`), never below
+    /// [`LOCAL_ACCURACY_FLOOR`] of ε; `None`: ε alone, as algorithm 6.1.
+    pub local: Option<f64>,
     /// Factor by which a leaf's link error threshold falls after a pass that left its estimate above
     /// ε (the paper uses 1.4).
     pub threshold_factor: f64,
+}
+
+/// The lowest a local accuracy takes a leaf's target, as a fraction of the absolute accuracy ε: a leaf
+/// in near darkness would otherwise be refined toward an error of nothing.
+pub const LOCAL_ACCURACY_FLOOR: f64 = 0.1;
+
+impl ErrorControl {
+    /// The largest estimate leaf `id` may keep: [`allowed_error`] at its average radiance.
+    pub fn allowed(&self, h: &Hierarchy, id: ElementId) -> f64 {
+        allowed_error(
+            self.accuracy,
+            self.local,
+            h.average_radiance(id).max_channel(),
+        )
+    }
+}
+
+/// The error error control accepts where the radiance is `radiance` (largest channel, the estimate's):
+/// the absolute accuracy ε, or with a local accuracy `p` `min(ε, max(p L, ε · LOCAL_ACCURACY_FLOOR))`.
+/// Algorithm 6.1 bounds the absolute error everywhere alike, which lets dim surfaces (the ceiling above
+/// a lamp housing, a corner) keep errors of half their radiance where the scene's mean radiance sets ε;
+/// a relative error bar per leaf asks for more there.
+pub fn allowed_error(accuracy: f64, local: Option<f64>, radiance: f64) -> f64 {
+    local.map_or(accuracy, |fraction| {
+        accuracy.min((fraction * radiance).max(accuracy * LOCAL_ACCURACY_FLOOR))
+    })
 }
 
 /// How a solve under error control ended.
@@ -70,6 +99,8 @@ pub struct ErrorControl {
 pub struct ErrorReport {
     /// The accuracy asked for (absolute radiance); `None` without error control.
     pub accuracy: Option<f64>,
+    /// The local accuracy asked for, a fraction of each leaf's radiance ([`ErrorControl::allowed`]).
+    pub local_accuracy: Option<f64>,
     pub estimate: Option<EstimateKind>,
     /// The estimate over the leaves after the last pass.
     pub summary: ErrorSummary,
@@ -216,7 +247,11 @@ pub fn solve(
         if let Some(control) = &settings.error_control {
             // The summary the user reads is the final radiance's; a pass judged at a part in a
             // thousand may have passed a leaf that the last sweeps move over the accuracy.
-            report.error.summary = summarize(hierarchy, control.accuracy, settings.refine.min_area);
+            report.error.summary = summarize(
+                hierarchy,
+                |id| control.allowed(hierarchy, id),
+                settings.refine.min_area,
+            );
             if let Some(last) = report.error.passes.last_mut() {
                 last.summary = report.error.summary;
                 last.solve_seconds = report.solve_seconds;
@@ -240,6 +275,7 @@ fn start_report(hierarchy: &mut Hierarchy, settings: &SolveSettings) -> SolveRep
     report.error.estimate = Some(settings.estimate);
     if let Some(control) = &settings.error_control {
         report.error.accuracy = Some(control.accuracy);
+        report.error.local_accuracy = control.local;
         initialise_thresholds(hierarchy, &settings.refine, control.accuracy);
     }
     report
@@ -248,7 +284,7 @@ fn start_report(hierarchy: &mut Hierarchy, settings: &SolveSettings) -> SolveRep
 /// Without error control, the estimate's summary over every leaf (error control summarises each pass).
 fn finish_report(hierarchy: &Hierarchy, settings: &SolveSettings, report: &mut SolveReport) {
     if settings.error_control.is_none() {
-        report.error.summary = summarize(hierarchy, f64::INFINITY, settings.refine.min_area);
+        report.error.summary = summarize(hierarchy, |_| f64::INFINITY, settings.refine.min_area);
     }
 }
 
@@ -265,10 +301,15 @@ fn end_pass(
     swept_to_tolerance: bool,
 ) -> bool {
     estimate_errors(hierarchy, settings.estimate);
-    let accuracy = settings
-        .error_control
-        .map_or(f64::INFINITY, |control| control.accuracy);
-    let summary = summarize(hierarchy, accuracy, settings.refine.min_area);
+    let summary = summarize(
+        hierarchy,
+        |id| {
+            settings
+                .error_control
+                .map_or(f64::INFINITY, |control| control.allowed(hierarchy, id))
+        },
+        settings.refine.min_area,
+    );
     report.error.passes.push(PassEstimate {
         pass: report.passes,
         links: hierarchy.link_count(),
@@ -498,16 +539,17 @@ fn initialise_thresholds(hierarchy: &mut Hierarchy, refine: &RefineSettings, acc
     }
 }
 
-/// Extended push-pull, steps 1c and 2f: leaves whose estimate exceeds ε get their threshold divided by
-/// the factor, and every inner element takes the smallest threshold below it. Leaves at the minimum
-/// area keep theirs: no refinement can help them (they are reported as failing), and lowering their
+/// Extended push-pull, steps 1c and 2f: leaves whose estimate exceeds ε ([`ErrorControl::allowed`])
+/// get their threshold divided by the factor, and every inner element takes the smallest threshold
+/// below it. Leaves at the minimum area keep theirs: no refinement can help them (they are reported as failing), and lowering their
 /// threshold would only drag the links of all their ancestors down.
 fn lower_thresholds(hierarchy: &mut Hierarchy, control: &ErrorControl, min_area: f64) {
     fn visit(h: &mut Hierarchy, id: ElementId, control: &ErrorControl, min_area: f64) -> f64 {
         let children = h.elements[id as usize].children.clone();
-        let e = &mut h.elements[id as usize];
         if children.is_empty() {
-            if e.error > control.accuracy && e.area > min_area {
+            let allowed = control.allowed(h, id);
+            let e = &mut h.elements[id as usize];
+            if e.error > allowed && e.area > min_area {
                 e.threshold /= control.threshold_factor;
             }
             return e.threshold;
