@@ -374,7 +374,8 @@ impl SolveArgs {
         };
         anyhow::ensure!(
             self.local_accuracy.is_none() || accuracy.is_some() || oracle == OracleKind::Error,
-            "--local-accuracy refines under error control: give an --accuracy too (not off)"
+            "--local-accuracy refines under error control: it needs an --accuracy (not off) and the \
+             deterministic method"
         );
         let eps = self.eps.unwrap_or(match oracle {
             OracleKind::Smoothness => DEFAULT_SMOOTHNESS_EPS,
