@@ -168,6 +168,45 @@ fn info_prints_counts_of_a_renderpark_scene() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("contact gap"));
 }
 
+/// `info --near X,Y,Z` names the polygon `probe` finds at a point first (on cube.mgf, split along its
+/// lamp's contact as both commands split it), and refuses a negative distance before loading.
+#[test]
+fn info_near_lists_the_polygon_probe_finds_at_a_point() {
+    let scene =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/renderpark/cube.mgf");
+    let scene = scene.to_str().unwrap();
+    let probed = succeeds(&[
+        "probe", scene, "--random", "4", "--seed", "5", "--eps", "1e-3",
+    ]);
+    let mut checked = 0;
+    for line in probed.lines().filter(|l| !l.starts_with('#')) {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        // A polygon's back side reads `Nb`.
+        let Some(polygon) = f
+            .get(4)
+            .and_then(|p| p.trim_end_matches('b').parse::<usize>().ok())
+        else {
+            continue;
+        };
+        let point = format!("{},{},{}", f[1], f[2], f[3]);
+        let listed = succeeds(&["info", scene, "--near", &point]);
+        let first = listed
+            .lines()
+            .find(|l| l.starts_with("polygon "))
+            .unwrap_or_else(|| panic!("no polygon at {point}: {listed}"));
+        assert_eq!(
+            first.split_whitespace().nth(1),
+            Some(polygon.to_string().as_str()),
+            "{point}: {listed}"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 4, "{probed}");
+    let out = radiosity(&["info", scene, "--near", "1,1,1", "--within=-1"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--within"));
+}
+
 #[test]
 fn every_subcommand_has_help() {
     for sub in ["render", "info", "bench", "compare", "audit"] {
