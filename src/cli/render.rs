@@ -257,22 +257,23 @@ pub fn error_summary(
 ) -> String {
     let s = &error.summary;
     let (k, unit) = (units.scale(), units.radiance());
-    // The accuracy as a share of the mean radiance, as `--accuracy P%` gives it.
-    // With a local accuracy, that too (`ErrorControl::allowed`).
-    let local = error.local_accuracy.map_or(String::new(), |p| {
-        format!(
-            "{}{:.0}% of each element's own radiance",
-            if mean_radiance > 0.0 { ", and " } else { " (" },
-            100.0 * p
-        )
-    });
-    let share = |accuracy: f64| match (mean_radiance > 0.0, local.is_empty()) {
-        (true, _) => format!(
-            " ({:.0}% of the mean radiance{local})",
-            100.0 * accuracy / mean_radiance
-        ),
-        (false, false) => format!("{local})"),
-        (false, true) => String::new(),
+    // The accuracy as a share of the mean radiance, as `--accuracy P%` gives it, and any local
+    // accuracy (`ErrorControl::allowed`).
+    let share = |accuracy: f64| {
+        let mut parts = Vec::new();
+        if mean_radiance > 0.0 {
+            parts.push(format!(
+                "{:.0}% of the mean radiance",
+                100.0 * accuracy / mean_radiance
+            ));
+        }
+        if let Some(p) = error.local_accuracy {
+            parts.push(format!("{:.0}% of each element's own radiance", 100.0 * p));
+        }
+        match parts.is_empty() {
+            true => String::new(),
+            false => format!(" ({})", parts.join(", and ")),
+        }
     };
     match error.accuracy {
         Some(accuracy) if s.leaves_above == 0 => format!(

@@ -301,13 +301,10 @@ fn end_pass(
     swept_to_tolerance: bool,
 ) -> bool {
     estimate_errors(hierarchy, settings.estimate);
+    let control = settings.error_control;
     let summary = summarize(
         hierarchy,
-        |id| {
-            settings
-                .error_control
-                .map_or(f64::INFINITY, |control| control.allowed(hierarchy, id))
-        },
+        |id| control.map_or(f64::INFINITY, |c| c.allowed(hierarchy, id)),
         settings.refine.min_area,
     );
     report.error.passes.push(PassEstimate {
