@@ -163,6 +163,9 @@ pub struct SimulationSettings {
     /// Whether a receiver that something lies over in part counts as crossed by a shadow boundary
     /// ([`OutlineRule`]).
     pub outlines: OutlineRule,
+    /// Quadtree levels that receivers under an outline ([`OutlineRule::Split`]) are refined beyond
+    /// what `shadow_levels` gives a shadow boundary, and may go below `min_area`; 0: as deep.
+    pub outline_levels: f64,
     /// Smallest splittable element area relative to the total patch area.
     pub min_area: f64,
     /// Radiance basis on every element (Bekaert–Willems §2).
@@ -270,6 +273,7 @@ impl Default for SimulationSettings {
             near_field: NearField::Adaptive,
             source_rule: SourceRule::Fixed,
             outlines: OutlineRule::Ignore,
+            outline_levels: 0.0,
             min_area: 1e-5,
             basis: BasisKind::Constant,
             cubature_degree: None,
@@ -473,6 +477,7 @@ pub fn deterministic_settings(
                 source_rule: settings.source_rule,
             },
             outlines: settings.outlines,
+            outline_gain: 4f64.powf(settings.outline_levels),
             receiver_thresholds: settings.oracle != OracleKind::Error
                 && settings.controlled_accuracy().is_some(),
             seed: settings.seed,

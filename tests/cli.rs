@@ -498,6 +498,22 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     );
     refused(&["--local-accuracy", "0.2"], "not a percentage");
     refused(&["--local-accuracy", "0%"], "above 0");
+    // Outline levels are in the stats and refine at least as far; they need the power oracle's
+    // visibility term and the outline rule, and a bounded number of levels.
+    let json = stats_of(&["--outline-levels", "2"]);
+    assert_eq!(json["settings"]["outline_levels"].as_f64(), Some(2.0));
+    assert!(json["leaf_elements"].as_u64() >= default["leaf_elements"].as_u64());
+    for options in [
+        &["--outlines", "ignore"][..],
+        &["--shadow-levels", "0"],
+        &["--oracle", "error"],
+    ] {
+        refused(
+            &[options, &["--outline-levels", "1"]].concat(),
+            "--outline-levels deepens",
+        );
+    }
+    refused(&["--outline-levels", "9"], "between 0 and 8");
     // Monte Carlo radiosity has no error control: refused, not ignored.
     refused(
         &[

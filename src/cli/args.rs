@@ -277,6 +277,12 @@ pub struct SolveArgs {
     /// element spreads the open side's light into the gap; ignore leaves them to their links' rays.
     #[arg(long, value_enum, default_value_t = OutlineRule::Split)]
     pub outlines: OutlineRule,
+    /// Receivers under an outline (--outlines split) are refined N quadtree levels deeper than
+    /// --shadow-levels takes shadow boundaries, down to N levels below --min-area: the penumbra of a
+    /// gap is as wide as the gap (2 cm under a lamp housing), finer than the elements the minimum
+    /// area allows on a ceiling. 0: as deep as shadow boundaries.
+    #[arg(long, value_name = "N", default_value_t = 0.0)]
+    pub outline_levels: f64,
     /// Smallest splittable element area, relative to the total surface area.
     #[arg(long, default_value_t = 1e-5)]
     pub min_area: f64,
@@ -328,6 +334,10 @@ impl SolveArgs {
             "--shadow-levels must be between 0 and {MAX_SHADOW_LEVELS}"
         );
         anyhow::ensure!(
+            (0.0..=MAX_SHADOW_LEVELS).contains(&self.outline_levels),
+            "--outline-levels must be between 0 and {MAX_SHADOW_LEVELS}"
+        );
+        anyhow::ensure!(
             self.min_area.is_finite() && self.min_area >= 0.0,
             "--min-area must be non-negative"
         );
@@ -377,6 +387,16 @@ impl SolveArgs {
             "--local-accuracy refines under error control: it needs an --accuracy (not off) and the \
              deterministic method"
         );
+        anyhow::ensure!(
+            self.outline_levels == 0.0
+                || (oracle == OracleKind::Power
+                    && self.method == MethodKind::Deterministic
+                    && self.shadow_levels > 0.0
+                    && self.outlines == OutlineRule::Split),
+            "--outline-levels deepens the power oracle's visibility term under outlines: it needs the \
+             deterministic method, --oracle power (the default), --shadow-levels above 0 and \
+             --outlines split (the defaults)"
+        );
         let eps = self.eps.unwrap_or(match oracle {
             OracleKind::Smoothness => DEFAULT_SMOOTHNESS_EPS,
             _ => DEFAULT_EPS,
@@ -402,6 +422,7 @@ impl SolveArgs {
             near_field: self.near_field,
             source_rule: self.source_rule,
             outlines: self.outlines,
+            outline_levels: self.outline_levels,
             min_area: self.min_area,
             basis: self.basis,
             cubature_degree: self.cubature_degree.map(usize::from),

@@ -165,6 +165,9 @@ pub struct RefineSettings {
     /// Whether receivers that straddle the outline of something lying over them count as crossed by
     /// a shadow boundary.
     pub outlines: OutlineRule,
+    /// `4^N` for `--outline-levels N`: how much more a receiver under an outline weighs than one a
+    /// shadow boundary crosses ([`OutlineRule::Split`]), and how far below `min_area` it may be split.
+    pub outline_gain: f64,
     pub seed: u64,
 }
 
@@ -1203,6 +1206,8 @@ fn decide(
         };
     }
     let mut verdict = Verdict::admissible(OracleFactor::NONE);
+    // A receiver under an outline may be split below the minimum area (`--outline-levels`).
+    let mut under_outline = false;
     let (error, threshold, split) = if oracle.judges_couplings() {
         if c.coupling.is_none() {
             let mut k = couple_for_verdict(context, settings, c, partial_tests, &mut verdict);
@@ -1256,7 +1261,8 @@ fn decide(
                 error,
                 &mut verdict,
             );
-            (seen, threshold, Some(Decision::SubdivideReceiver))
+            under_outline = seen.under_outline;
+            (seen.error, threshold, Some(Decision::SubdivideReceiver))
         }
     };
     verdict.error = error as f32;
@@ -1266,7 +1272,9 @@ fn decide(
     verdict.decision = match split {
         // The link error oracle names the element whose subdivision reduces the error (§5): splitting
         // the other one instead would only multiply links without helping.
-        Some(Decision::SubdivideReceiver) if !splittable(c.receiver) => Decision::Admissible,
+        Some(Decision::SubdivideReceiver) if !(splittable(c.receiver) || under_outline) => {
+            Decision::Admissible
+        }
         Some(Decision::SubdivideSource) if !splittable(c.source) => Decision::Admissible,
         Some(decision) => decision,
         None => match oracle.element_to_split(context, c.receiver, c.source) {
@@ -1315,13 +1323,24 @@ fn couple_for_verdict(
     k
 }
 
+/// What [`with_visibility`] makes of an admissible link's estimate.
+struct Seen {
+    /// The estimate with its visibility weighed.
+    error: f64,
+    /// Whether the receiver counted as under an outline ([`OutlineRule::Split`]), and so may be
+    /// split below the minimum area (`--outline-levels`).
+    under_outline: bool,
+}
+
 /// The estimate `error` of a link its oracle finds admissible, once the variation of its visibility
 /// over the receiver is weighed ([`RefinementOracle::with_partial_visibility`],
 /// [`visibility_spread`]). The visibility is the one its coupling sampled: the cached coupling, or one
 /// computed here and kept on `verdict` (the link's own if it stays); a Clear or Blocked shaft verdict
 /// says it is whole without rays. Links that no spread could refine are not looked at. With
 /// [`OutlineRule::Split`] a receiver that something lies over in part ([`straddles_outline`]) counts
-/// as crossed by a hard boundary, spread ½, whatever the link's rays saw.
+/// as crossed by a hard boundary, spread ½, whatever the link's rays saw, weighed
+/// [`RefineSettings::outline_gain`] more (`--outline-levels N`: N levels deeper) and splittable as far
+/// below the minimum area.
 fn with_visibility(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
@@ -1330,28 +1349,41 @@ fn with_visibility(
     partial_tests: &[ShaftTest],
     error: f64,
     verdict: &mut Verdict,
-) -> f64 {
-    let across_boundary = match oracle.with_partial_visibility(error, 0.5) {
-        Some(largest) if largest > settings.threshold_into(context.hierarchy, c.receiver) => {
-            largest
-        }
-        _ => return error,
+) -> Seen {
+    let plain = Seen {
+        error,
+        under_outline: false,
     };
     let h = context.hierarchy;
+    let threshold = settings.threshold_into(h, c.receiver);
+    let Some(across_boundary) = oracle.with_partial_visibility(error, 0.5) else {
+        return plain;
+    };
+    // The gain is at least 1: links that not even an outline would refine are not looked at.
+    let across_outline = across_boundary * settings.outline_gain;
+    if across_outline <= threshold {
+        return plain;
+    }
     let receiver = h.element(c.receiver);
     if settings.outlines == OutlineRule::Split
-        && receiver.area > settings.min_area
+        && receiver.area > settings.min_area / settings.outline_gain
         && receiver
             .straddles_outline
             .get_or(|| straddles_outline(h, context.visibility, c.receiver))
     {
         // Something lies over part of the receiver: a hard boundary through it (eq. (5) at v = ½),
         // whatever the link's rays saw.
-        return across_boundary;
+        return Seen {
+            error: across_outline,
+            under_outline: true,
+        };
+    }
+    if across_boundary <= threshold {
+        return plain;
     }
     if c.coupling.is_none() {
         if let Some(ShaftVerdict::Clear | ShaftVerdict::Blocked) = c.shaft {
-            return error;
+            return plain;
         }
         let k = couple_for_verdict(context, settings, c, partial_tests, verdict);
         verdict.coupling = Some(Box::new(k.coupling));
@@ -1362,18 +1394,21 @@ fn with_visibility(
         .or(c.coupling)
         .expect("a coupling, cached or just computed");
     if coupling.visibility <= 0.0 || coupling.visibility >= 1.0 {
-        return error;
+        return plain;
     }
     let spread = visibility_spread(
-        context.hierarchy,
+        h,
         c.receiver,
         c.source,
         coupling,
         settings.coupling.cubature_degree,
     );
-    oracle
-        .with_partial_visibility(error, spread)
-        .unwrap_or(error)
+    Seen {
+        error: oracle
+            .with_partial_visibility(error, spread)
+            .unwrap_or(error),
+        under_outline: false,
+    }
 }
 
 /// A link with a cluster at one end, judged by the power-type bound of [`transport_bound`]:
