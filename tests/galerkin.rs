@@ -309,6 +309,24 @@ fn shadowed_points(scene: &Scene, seed: u64) -> (Vec<DVec3>, Vec<f64>) {
     (points, truth)
 }
 
+/// How many of the plate's `points` (patch 0) the solution `h` gets within `tolerance(t)` of their
+/// exact radiance `t` (green channel).
+fn points_within(
+    h: &Hierarchy,
+    points: &[DVec3],
+    truth: &[f64],
+    tolerance: impl Fn(f64) -> f64,
+) -> usize {
+    points
+        .iter()
+        .zip(truth)
+        .filter(|(&x, &t)| {
+            let leaf = h.locate(0, x);
+            (h.radiance_at(leaf, x).g - t).abs() <= tolerance(t)
+        })
+        .count()
+}
+
 /// Error control (algorithm 6.1) meets its promise: at 95% of 400 random points the measured error is
 /// within the accuracy asked for (Bekaert–Willems §6.2), at two accuracies a factor of four apart, with
 /// a shadow: with the link error oracle, and with eq. (1)'s power oracle, whose thresholds algorithm 6.1
@@ -324,14 +342,7 @@ fn error_control_meets_the_accuracy_at_95_percent_of_points() {
     let within = |settings: &SimulationSettings, accuracy: f64| {
         let solution = simulate(&scene, settings, &quiet()).expect("solve");
         let h = &solution.hierarchy;
-        let within = points
-            .iter()
-            .zip(&truth)
-            .filter(|(&x, &t)| {
-                let leaf = h.locate(0, x);
-                (h.radiance_at(leaf, x).g - t).abs() <= accuracy
-            })
-            .count();
+        let within = points_within(h, &points, &truth, |_| accuracy);
         eprintln!(
             "{:?} {:?} {:?} accuracy {accuracy}: {within}/400 within, {} leaves, {}",
             settings.oracle,
@@ -863,14 +874,9 @@ fn local_accuracy_meets_its_relative_promise() {
         };
         let solution = simulate(&scene, &settings, &quiet()).expect("solve");
         let h = &solution.hierarchy;
-        let n = points
-            .iter()
-            .zip(&truth)
-            .filter(|(&x, &t)| {
-                let leaf = h.locate(0, x);
-                (h.radiance_at(leaf, x).g - t).abs() <= allowed_error(accuracy, Some(local), t)
-            })
-            .count();
+        let n = points_within(h, &points, &truth, |t| {
+            allowed_error(accuracy, Some(local), t)
+        });
         eprintln!(
             "{oracle:?} local {local_accuracy:?}: {n}/400 within, {} leaves, {}",
             h.leaf_count(),
