@@ -500,6 +500,10 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     refused(&["--local-accuracy", "0%"], "above 0");
     // Outline levels are in the stats and refine at least as far; they need the power oracle's
     // visibility term and the outline rule, and a bounded number of levels.
+    // One level by default where the rule applies, none where it does not (not refused).
+    assert_eq!(default["settings"]["outline_levels"].as_f64(), Some(1.0));
+    let json = stats_of(&["--outlines", "ignore"]);
+    assert_eq!(json["settings"]["outline_levels"].as_f64(), Some(0.0));
     let json = stats_of(&["--outline-levels", "2"]);
     assert_eq!(json["settings"]["outline_levels"].as_f64(), Some(2.0));
     assert!(json["leaf_elements"].as_u64() >= default["leaf_elements"].as_u64());

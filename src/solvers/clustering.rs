@@ -27,14 +27,17 @@
 //! Near links ([`SourceSphere`]): the estimate holds for ends far enough apart: seen from a receiver
 //! point outside the sphere of radius `R` about the source's centre that holds it, the source subtends
 //! at most the sphere's silhouette (a factor `(R/r)² < 1`, which the centre estimate approaches with
-//! the visibility samples discounting the source's own hidden parts); where that sphere reaches the receiver's bounding box some receiver
-//! point may lie inside it and nothing bounds the estimate, so such a *near* link carries nothing until
-//! refinement splits it (its refinement bound, [`transport_bound`], is then the largest there is;
-//! RenderPark's Galerkin radiosity does the same for overlapping bounding boxes). Centre estimates of
-//! near clusters made a receiver's links gather a total factor up to 2.9 on office2's coarse solution,
-//! where the exact factors of the disjoint sources they stand for sum to at most 1 (closure): the
-//! gathering iteration's spectral radius passed 1 and the sweeps diverged (with the rule: at most 1.05,
-//! the surface couplings' own cubature error).
+//! the visibility samples discounting the source's own hidden parts); where that sphere reaches the
+//! receiver's bounding box some receiver point may lie inside it and nothing bounds the estimate.
+//! Centre estimates of near clusters made a receiver's links gather a total factor up to 2.9 on
+//! office2's coarse solution, where the exact factors of the disjoint sources they stand for sum to at
+//! most 1 (closure): the gathering iteration's spectral radius passed 1 and the sweeps diverged. So a
+//! *near* link into a surface sums the exact factors of the source's patches at each node
+//! ([`near_coupling`]; refinement splits a source of more than [`NEAR_SOURCE_PATCHES`]), and one
+//! into a cluster, whose sharing cannot place light from beside it, is split at its receiver when
+//! that holds at most [`NEAR_RECEIVER_PATCHES`] and otherwise carries nothing
+//! ([`unplaced_near_coupling`]; its refinement bound, [`transport_bound`], is then the largest
+//! there is; RenderPark's Galerkin radiosity does the same for overlapping bounding boxes).
 //!
 //! Push-pull through clusters ([`ClusterSweep`], [`crate::hierarchy::Hierarchy::pull_clusters`]):
 //! radiance is pulled up area-weighted; irradiance gathered at a cluster is pushed to the patches it
@@ -80,6 +83,7 @@ use super::coupling::{basis_values, visible_fraction, Coupling, CouplingSettings
 use super::link_rng;
 use crate::color::Rgb;
 use crate::geometry::cubature::{nodes_on, rule};
+use crate::geometry::form_factor::point_to_polygon;
 use crate::geometry::Shape;
 use crate::geometry::{DVec2, DVec3};
 use crate::hierarchy::clusters::{ClusteringKind, Orientation, VisibleAreas};
@@ -409,7 +413,10 @@ pub fn couple_cluster(
     let (r, s) = (h.element(receiver), h.element(source));
     let (r_centre, s_centre) = (h.center_of(receiver), h.center_of(source));
     if SourceSphere::of(h, source).reaches(&h.bounds_of(receiver)) {
-        return near_coupling(h, receiver, source, settings);
+        return match &r.kind {
+            ElementKind::Cluster(_) => unplaced_near_coupling(h),
+            ElementKind::Surface(_) => near_coupling(h, visibility, receiver, source, settings),
+        };
     }
     let mut rng = link_rng(settings.seed, receiver, source, CLUSTER_STREAM);
     let mut rays = 0u64;
@@ -507,7 +514,6 @@ pub fn couple_cluster(
             let patch = &h.patches[surface.patch as usize];
             let (normal, polygon) = (patch.normal, patch.polygon);
             let nodes = nodes_on(shape, rule(shape.domain(), settings.cubature_degree));
-            let phi = basis_values(&h.basis, shape, &nodes);
             let mut inner = vec![0.0; nodes.len()];
             let mut unoccluded = 0.0;
             for (k, x) in nodes.iter().enumerate() {
@@ -525,27 +531,8 @@ pub fn couple_cluster(
                         CLUSTER_VISIBILITY_SAMPLES,
                         &mut rng,
                     );
-                let w = x.weight / r.area;
-                for alpha in 0..size {
-                    block[alpha * size] += w * phi[k * size + alpha] * inner[k];
-                }
             }
-            let transfer = block[0];
-            // Moments to coefficients on a trapezoid-like quad (Algorithm 4.1 step 4a).
-            if let Some(overlap) = h.basis.overlap(shape, r.area) {
-                overlap.solve_columns(&mut block, size);
-            }
-            // δ_{j,1}(x_k): the projection's value at the node minus the kernel there.
-            let errors = inner
-                .iter()
-                .enumerate()
-                .map(|(k, value)| {
-                    let projected: f64 = (0..size)
-                        .map(|alpha| block[alpha * size] * phi[k * size + alpha])
-                        .sum();
-                    (projected - value) as f32
-                })
-                .collect();
+            let (transfer, errors) = project_onto_receiver(h, shape, &nodes, &inner, &mut block);
             (
                 errors,
                 inner.iter().map(|&f| f as f32).collect(),
@@ -571,39 +558,212 @@ pub fn couple_cluster(
     }
 }
 
-/// The coupling of a near link (the source's sphere reaches the receiver's box): nothing is
-/// transferred (RenderPark's Galerkin radiosity does the same for overlapping bounding boxes), and each
-/// receiver node's error coefficient is the most the link could carry per unit source radiance,
-/// `min(1, A_j / A_i)` (`F_ij ≤ 1` and reciprocity), so that the a-posteriori estimate shows the
-/// missing transfer until refinement splits the link.
+/// A surface receiver's coupling block from the point factors `inner` (the constant source's
+/// `K_{j,1}(x_k)`, visibility included) at its cubature `nodes` (Bekaert–Willems Algorithm 4.1 steps
+/// 3–4): the moments `Σ_k w_k φ_α(x_k) K(x_k) / A_i` into the block's first column, solved for
+/// coefficients on a quad that is not a parallelogram; returns the receiver-averaged transfer (the
+/// constant moment) and `δ_{j,1}(x_k)`, the projection's value at each node minus the point factor.
+fn project_onto_receiver(
+    h: &Hierarchy,
+    shape: &Shape,
+    nodes: &[crate::geometry::cubature::Node],
+    inner: &[f64],
+    block: &mut [f64],
+) -> (f64, Vec<f32>) {
+    let size = h.basis_size();
+    let area = shape.area();
+    let phi = basis_values(&h.basis, shape, nodes);
+    for (k, (x, value)) in nodes.iter().zip(inner).enumerate() {
+        let w = x.weight / area;
+        for alpha in 0..size {
+            block[alpha * size] += w * phi[k * size + alpha] * value;
+        }
+    }
+    let transfer = block[0];
+    // Moments to coefficients on a trapezoid-like quad (Algorithm 4.1 step 4a).
+    if let Some(overlap) = h.basis.overlap(shape, area) {
+        overlap.solve_columns(block, size);
+    }
+    let errors = inner
+        .iter()
+        .enumerate()
+        .map(|(k, value)| {
+            let projected: f64 = (0..size)
+                .map(|alpha| block[alpha * size] * phi[k * size + alpha])
+                .sum();
+            (projected - value) as f32
+        })
+        .collect();
+    (transfer, errors)
+}
+
+/// The most patches a near link's cluster source may hold: refinement splits a larger one
+/// (`solvers::refine`), so that [`near_coupling`] sums every patch's exact factor at a bounded cost.
+pub const NEAR_SOURCE_PATCHES: usize = 64;
+
+/// The most patches a cluster receiver of a near link may hold to be split into them by refinement
+/// (`solvers::refine`), whatever the link's bound: what a cluster gathers is shared among its
+/// patches by their visible projected areas along one direction ([`ClusterSweep`]), which cannot
+/// place light from a source beside it (the patches that face it may not face the direction from
+/// centre to centre), so such a link carries nothing ([`unplaced_near_coupling`]) unless its
+/// receiver is split. Four is a plate's two polygons, both sides each, the thinnest object a scene
+/// holds: a lamp housing's end plate 10 cm from the next housing took 29% of its light that way.
+/// A larger receiver is left as it was (splitting every one costs office3 2.6× the memory and the
+/// classroom 1.9× the time for no gain in error; up to 8 patches, office3 +11 MB; BENCHMARKS.md,
+/// "Near links carry light").
+pub const NEAR_RECEIVER_PATCHES: usize = 4;
+
+/// A patch a near link's source stands for, with the weight its exact factor counts by.
+struct NearPatch<'a> {
+    shape: &'a Shape,
+    /// 1 when every patch is summed; `A / (n A_k)` for one of `n` draws by area.
+    weight: f64,
+}
+
+/// The patches of `source` for [`near_coupling`]: a surface itself; a cluster's patch roots, all of
+/// them up to [`NEAR_SOURCE_PATCHES`] (what refinement leaves). A larger cluster (a link admitted
+/// unsplit because a budget stopped refinement) has that many drawn with probability `A_k / A` (by
+/// normal group, then within it) and weighted `A / (n A_k)`: an unbiased estimate of the sum of
+/// factors at a bounded number of contour integrals.
+fn near_source_patches<'a>(
+    h: &'a Hierarchy,
+    source: ElementId,
+    rng: &mut Pcg64Mcg,
+) -> Vec<NearPatch<'a>> {
+    let Some(cluster) = h.cluster(source) else {
+        return vec![NearPatch {
+            shape: h.element(source).shape(),
+            weight: 1.0,
+        }];
+    };
+    let contents = h.contents(cluster);
+    if contents.len() <= NEAR_SOURCE_PATCHES {
+        return contents
+            .iter()
+            .map(|&p| NearPatch {
+                shape: h.element(p).shape(),
+                weight: 1.0,
+            })
+            .collect();
+    }
+    let o = &cluster.orientation;
+    let total: f64 = o.groups.iter().map(|g| g.area).sum();
+    if total <= 0.0 {
+        return Vec::new();
+    }
+    (0..NEAR_SOURCE_PATCHES)
+        .map(|_| {
+            let mut target = rng.random::<f64>() * total;
+            let group = o
+                .groups
+                .iter()
+                .position(|g| {
+                    target -= g.area;
+                    target < 0.0
+                })
+                .unwrap_or(o.groups.len() - 1);
+            let patch = contents[o.member_at(group, rng.random()) as usize];
+            NearPatch {
+                shape: h.element(patch).shape(),
+                weight: total / (NEAR_SOURCE_PATCHES as f64 * h.element(patch).area.max(1e-300)),
+            }
+        })
+        .collect()
+}
+
+/// The coupling of a near link into a surface (the source's sphere reaches the receiver's box,
+/// where the centre estimate is unbounded): at each receiver cubature node, the exact unoccluded
+/// factor of the source's patches (Lambert's contour integral per patch, [`point_to_polygon`],
+/// clipped to the node's horizon; [`near_source_patches`]) times the transmittance of
+/// [`CLUSTER_VISIBILITY_SAMPLES`] rays to points drawn on those patches in proportion to their
+/// factors, rays that see the source's own contents (their mutual hiding is what they measure here:
+/// no item buffer is read); projected onto the receiver's basis like any coupling
+/// ([`project_onto_receiver`]). The source sends what [`ClusterSweep`] says it sends toward the
+/// receiver.
+///
+/// Why not nothing, as RenderPark's Galerkin radiosity does for overlapping bounding boxes (and this
+/// solver until 2026-11-30): a near link's bound `ρ B min(A_i, A_j)` is small at a small end, so
+/// refinement leaves many of them in place, and between neighbouring objects they hold much of the
+/// light: 11% of what clusters should send to the classroom's receivers, half of it within two
+/// source radii (BENCHMARKS.md, "The end plate in the slot"). Exact per-patch factors cannot exceed
+/// what the patches subtend, so the factors a receiver gathers stay bounded (closure), as the centre
+/// estimate did not (module documentation); a node's factor is capped at 1 where overlapping patches'
+/// open factors add up past it.
 fn near_coupling(
     h: &Hierarchy,
+    visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
     settings: &CouplingSettings,
 ) -> Coupling {
     let size = h.basis_size();
-    let (r, s) = (h.element(receiver), h.element(source));
-    let missing = (s.area / r.area.max(1e-300)).min(1.0) as f32;
-    let nodes = match &r.kind {
-        ElementKind::Cluster(_) => 1,
-        ElementKind::Surface(surface) => rule(surface.shape.domain(), settings.cubature_degree)
-            .nodes
-            .len(),
-    };
-    let error = if h.is_cluster(receiver) {
-        0.0
-    } else {
-        -missing
-    };
+    let mut rng = link_rng(settings.seed, receiver, source, CLUSTER_STREAM);
+    let patches = near_source_patches(h, source, &mut rng);
+    let r = h.element(receiver);
+    let shape = r.shape();
+    let patch = h.patch_of(receiver);
+    let nodes = nodes_on(shape, rule(shape.domain(), settings.cubature_degree));
+    let (mut rays, mut unoccluded) = (0u64, 0.0);
+    let inner: Vec<f64> = nodes
+        .iter()
+        .map(|x| {
+            let running: Vec<f64> = patches
+                .iter()
+                .scan(0.0, |sum, p| {
+                    *sum += p.weight * point_to_polygon(x.point, patch.normal, p.shape);
+                    Some(*sum)
+                })
+                .collect();
+            let open = running.last().copied().unwrap_or(0.0);
+            if open <= 0.0 {
+                return 0.0;
+            }
+            let mut seen = 0.0;
+            for _ in 0..CLUSTER_VISIBILITY_SAMPLES {
+                let target = rng.random::<f64>() * open;
+                let k = running
+                    .partition_point(|&p| p <= target)
+                    .min(running.len() - 1);
+                let y = patches[k]
+                    .shape
+                    .sample_uniform(DVec2::new(rng.random(), rng.random()));
+                seen += visibility.transmittance_onto(x.point, y, patch.polygon);
+                rays += 1;
+            }
+            unoccluded += x.weight * open.min(1.0) / r.area;
+            (open * seen / CLUSTER_VISIBILITY_SAMPLES as f64).min(1.0)
+        })
+        .collect();
+    let mut block = vec![0.0; size * size];
+    let (transfer, errors) = project_onto_receiver(h, shape, &nodes, &inner, &mut block);
+    let node_factors: Vec<f32> = inner.iter().map(|&f| f as f32).collect();
+    let v = visible_fraction(transfer, unoccluded);
     Coupling {
         coupling: LinkCoupling::constant_source(
-            &vec![0.0; size * size],
-            &vec![error; nodes],
-            &vec![0.0f32; nodes],
-            1.0,
-            0.0,
+            &block,
+            &errors,
+            &node_factors,
+            v as f32,
+            (unoccluded * (v * (1.0 - v)).sqrt()) as f32,
         ),
+        unoccluded,
+        source_nodes: CLUSTER_VISIBILITY_SAMPLES,
+        rays,
+        shaft: None,
+        rays_saved: 0,
+    }
+}
+
+/// The coupling of a near link into a cluster (larger than [`NEAR_RECEIVER_PATCHES`], or left unsplit
+/// by a budget): nothing is transferred, since the cluster's sharing could not place it (RenderPark's Galerkin radiosity
+/// does the same for overlapping bounding boxes), and its error coefficient is 0: its bound is
+/// already below the refinement threshold, and counting it as error made office3's error control
+/// refine past its memory (95 → 106 MB) for the classroom 6.8 → 6.0% (BENCHMARKS.md, "The end
+/// plate in the slot").
+fn unplaced_near_coupling(h: &Hierarchy) -> Coupling {
+    let size = h.basis_size();
+    Coupling {
+        coupling: LinkCoupling::constant_source(&vec![0.0; size * size], &[0.0], &[0.0], 1.0, 0.0),
         unoccluded: 0.0,
         source_nodes: CLUSTER_VISIBILITY_SAMPLES,
         rays: 0,
@@ -784,7 +944,12 @@ impl ClusterSweep {
     ) -> Rgb {
         self.sent_toward(h, source, toward).map_or_else(
             || h.average_radiance(source),
-            |sent| sent.through(f64::from(visibility)),
+            |sent| {
+                sent.through(
+                    f64::from(visibility),
+                    (toward - h.center_of(source)).length(),
+                )
+            },
         )
     }
 
@@ -996,7 +1161,8 @@ pub fn moved_by_sending(h: &Hierarchy) -> Vec<f64> {
                 .filter(|l| carries_light(l) && l.coupling.visibility < 1.0)
                 .filter_map(|l| {
                     let sent = sweep.sent_toward(h, l.source, centre)?;
-                    let carried = sent.through(f64::from(l.coupling.visibility));
+                    let distance = (centre - h.center_of(l.source)).length();
+                    let carried = sent.through(f64::from(l.coupling.visibility), distance);
                     Some((carried - sent.visible()).map(f64::abs) * l.coupling.form_factor())
                 })
                 .sum();
@@ -1095,11 +1261,9 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let sending: Vec<((u32, u16), Exposure)> = toward
         .into_par_iter()
         .filter(|&((id, key), _, _)| !buffers.has_exposure(id, key))
-        .map(|((id, key), _, receiver)| {
-            (
-                (id, key),
-                exposure(h, visibility, buffers, id, key & !SENDING, receiver),
-            )
+        .map(|((id, key), distance_squared, receiver)| {
+            let bits = exposure(h, visibility, buffers, id, key & !SENDING, receiver);
+            ((id, key), with_reach(bits, distance_squared.sqrt()))
         })
         .collect();
     exposures.extend(sending);
@@ -1115,6 +1279,21 @@ const _: () =
 /// The exposure key of what a cluster sends along `bucket` ([`expose`]).
 fn sending_key(bucket: u16) -> u16 {
     bucket | SENDING
+}
+
+/// A sending exposure with the distance from the cluster's centre to the receiver it was taken toward
+/// appended as one more word ([`sending_reach`] reads it): the patch bits before it are unchanged.
+fn with_reach(bits: Exposure, reach: f64) -> Exposure {
+    let mut words = bits.into_vec();
+    words.push(reach.to_bits());
+    words.into_boxed_slice()
+}
+
+/// The reach [`with_reach`] appended to a sending exposure.
+fn sending_reach(exposure: &[u64]) -> f64 {
+    exposure
+        .last()
+        .map_or(f64::INFINITY, |&word| f64::from_bits(word))
 }
 
 /// [`expose`] for one (cluster, bucket) toward the link end `other` (a source, or a receiver).
@@ -1151,7 +1330,7 @@ fn exposure(
 /// their patches.
 const SHARE_RUN: usize = 1 << 15;
 
-/// Whether a link's coupling carries any light: a near cluster link ([`near_coupling`]) or a fully
+/// Whether a link's coupling carries any light: a near link into a cluster ([`unplaced_near_coupling`]) or a fully
 /// occluded one has a zero block (its constant entry is a mean of non-negative node values, zero only
 /// when all are), and asking what its source sends would draw item buffers for nothing.
 pub fn carries_light(link: &crate::hierarchy::Link) -> bool {
@@ -1188,9 +1367,9 @@ fn sent_along(
             .sum()
     };
     let visible = average(&areas, total);
-    let Some(split) = buffers
+    let Some((split, reach)) = buffers
         .exposure(id, sending_key(bucket), |exposure| {
-            ExposureSplit::new(&areas, exposure)
+            ExposureSplit::new(&areas, exposure).map(|split| (split, sending_reach(exposure)))
         })
         .flatten()
     else {
@@ -1200,6 +1379,7 @@ fn sent_along(
         visible,
         average(&split.exposed, split.exposed_total),
         split.exposed_share(),
+        reach,
     )
 }
 
@@ -1290,19 +1470,23 @@ struct Sent {
     /// Single precision (a relative rounding of 6·10⁻⁸, far below what the averages estimate) and
     /// no third average: the table holds one entry per (cluster, bucket) in use, 50k on office3.
     exposed_share: f32,
+    /// Distance from the cluster's centre to the receiver the exposure was taken toward (the bucket's
+    /// nearest, [`expose`]); infinite without an exposure.
+    reach: f32,
 }
 
 impl Sent {
-    fn new(visible: Rgb, exposed: Rgb, exposed_share: f64) -> Self {
+    fn new(visible: Rgb, exposed: Rgb, exposed_share: f64, reach: f64) -> Self {
         Sent {
             visible: visible.to_f32(),
             exposed: exposed.to_f32(),
             exposed_share: exposed_share as f32,
+            reach: reach as f32,
         }
     }
 
     fn even(radiance: Rgb) -> Self {
-        Sent::new(radiance, radiance, 0.0)
+        Sent::new(radiance, radiance, 0.0, f64::INFINITY)
     }
 
     /// Radiance averaged over the visible projected areas of the patches facing the bucket.
@@ -1328,7 +1512,7 @@ impl Sent {
     /// counts the whole visible area at the frame's radiance: links from the classroom's windows
     /// sent the ceiling 9 to 12 times the light of their contents (`radiosity audit`; BENCHMARKS.md,
     /// "What clusters send, by exposure").
-    fn through(self, v: f64) -> Rgb {
+    fn through(self, v: f64, distance: f64) -> Rgb {
         let e = f64::from(self.exposed_share);
         let visible = self.visible();
         if v >= 1.0 || e <= 0.0 {
@@ -1336,7 +1520,10 @@ impl Sent {
         }
         let exposed = Rgb::from_f32(self.exposed);
         let others = ((visible - exposed * e) / (1.0 - e)).map(|c| c.max(0.0));
-        let (to_exposed, to_others) = exposure_shares(e, v);
+        let (mut to_exposed, to_others) = exposure_shares(e, v);
+        if distance > f64::from(self.reach) * (1.0 + 1e-6) {
+            to_exposed = to_exposed.min(1.0);
+        }
         exposed * to_exposed + others * to_others
     }
 }

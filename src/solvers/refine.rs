@@ -6,7 +6,9 @@
 //! link sets therefore do not depend on the number of threads. A later pass judges the links where they
 //! are stored ([`Start::StoredLinks`]): only the links that refine leave their lists.
 
-use super::clustering::{cluster_can_interact, transport_bound};
+use super::clustering::{
+    cluster_can_interact, transport_bound, SourceSphere, NEAR_RECEIVER_PATCHES, NEAR_SOURCE_PATCHES,
+};
 use super::coupling::{
     couple_with_prior, shaft_test, visibility_error, visibility_spread, CouplingSettings,
 };
@@ -1411,6 +1413,23 @@ fn with_visibility(
     }
 }
 
+/// The end a near cluster link (the source's sphere reaches the receiver's box,
+/// `solvers::clustering::SourceSphere`) must be split at whatever its bound: a cluster receiver of at
+/// most [`NEAR_RECEIVER_PATCHES`] patches (a cluster's sharing cannot place light from beside it),
+/// a cluster source of more than [`NEAR_SOURCE_PATCHES`] (the near coupling sums every patch's exact
+/// factor). `None` for a link the bound judges.
+fn near_split(h: &Hierarchy, receiver: ElementId, source: ElementId) -> Option<Decision> {
+    let patches = |id: ElementId| h.cluster(id).map(|cluster| h.contents(cluster).len());
+    let decision = match (patches(receiver), patches(source)) {
+        (Some(n), _) if n <= NEAR_RECEIVER_PATCHES => Decision::SubdivideReceiver,
+        (_, Some(n)) if n > NEAR_SOURCE_PATCHES => Decision::SubdivideSource,
+        _ => return None,
+    };
+    SourceSphere::of(h, source)
+        .reaches(&h.bounds_of(receiver))
+        .then_some(decision)
+}
+
 /// A link with a cluster at one end, judged by the power-type bound of [`transport_bound`]:
 /// `ρ_max B_j · min(A_i, A_j, A_i A_j / (π d²))` (ρ_max the largest reflectance in a receiver cluster,
 /// B_j the source's average radiance; visibility bounded by 1, as Sillion–Drettakis §6.1 notes of
@@ -1426,6 +1445,13 @@ fn decide_cluster_link(
     splittable: &dyn Fn(ElementId) -> bool,
 ) -> Verdict {
     let h = context.hierarchy;
+    if let Some(decision) = near_split(h, c.receiver, c.source) {
+        return Verdict {
+            decision,
+            error: f32::INFINITY,
+            ..Verdict::admissible(OracleFactor::NONE)
+        };
+    }
     let bound = transport_bound(h, c.receiver, c.source);
     let weight = reflected_source_radiance(h, c.receiver, c.source);
     let (error, threshold) = if oracle.judges_couplings() {
