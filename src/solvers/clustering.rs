@@ -541,21 +541,7 @@ pub fn couple_cluster(
             )
         }
     };
-    let v = visible_fraction(transfer, unoccluded);
-    Coupling {
-        coupling: LinkCoupling::constant_source(
-            &block,
-            &errors,
-            &node_factors,
-            v as f32,
-            (unoccluded * (v * (1.0 - v)).sqrt()) as f32,
-        ),
-        unoccluded,
-        source_nodes: CLUSTER_VISIBILITY_SAMPLES,
-        rays,
-        shaft: None,
-        rays_saved: 0,
-    }
+    sampled_coupling(&block, &errors, &node_factors, transfer, unoccluded, rays)
 }
 
 /// A surface receiver's coupling block from the point factors `inner` (the constant source's
@@ -737,12 +723,27 @@ fn near_coupling(
     let mut block = vec![0.0; size * size];
     let (transfer, errors) = project_onto_receiver(h, shape, &nodes, &inner, &mut block);
     let node_factors: Vec<f32> = inner.iter().map(|&f| f as f32).collect();
+    sampled_coupling(&block, &errors, &node_factors, transfer, unoccluded, rays)
+}
+
+/// A cluster link's [`Coupling`] from its block, node errors and node factors, its receiver-averaged
+/// `transfer` with visibility and without (`unoccluded`), and the rays its
+/// [`CLUSTER_VISIBILITY_SAMPLES`] per node cast: `v` is their ratio, the visibility error
+/// `F_unoccluded √(v (1 − v))` (Sillion–Drettakis Appendix A, eq. (10)).
+fn sampled_coupling(
+    block: &[f64],
+    errors: &[f32],
+    node_factors: &[f32],
+    transfer: f64,
+    unoccluded: f64,
+    rays: u64,
+) -> Coupling {
     let v = visible_fraction(transfer, unoccluded);
     Coupling {
         coupling: LinkCoupling::constant_source(
-            &block,
-            &errors,
-            &node_factors,
+            block,
+            errors,
+            node_factors,
             v as f32,
             (unoccluded * (v * (1.0 - v)).sqrt()) as f32,
         ),
