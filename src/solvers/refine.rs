@@ -1437,6 +1437,7 @@ fn near_split(h: &Hierarchy, receiver: ElementId, source: ElementId) -> Option<D
 /// error the source's own estimate propagates through it (eq. (13) with the whole transfer as its
 /// error), with the receiver's threshold. Above the threshold the larger end (by bounding box) is
 /// split; a surface too small to split passes the split to the other end, a cluster always splits.
+/// Before the bound, a near link is split where [`near_split`] says it must be.
 fn decide_cluster_link(
     context: &OracleContext,
     oracle: &dyn RefinementOracle,
