@@ -690,16 +690,16 @@ fn near_coupling(
     let patch = h.patch_of(receiver);
     let nodes = nodes_on(shape, rule(shape.domain(), settings.cubature_degree));
     let (mut rays, mut unoccluded) = (0u64, 0.0);
+    // The running sum of the patches' factors at a node, one buffer for all nodes.
+    let mut running = Vec::with_capacity(patches.len());
     let inner: Vec<f64> = nodes
         .iter()
         .map(|x| {
-            let running: Vec<f64> = patches
-                .iter()
-                .scan(0.0, |sum, p| {
-                    *sum += p.weight * point_to_polygon(x.point, patch.normal, p.shape);
-                    Some(*sum)
-                })
-                .collect();
+            running.clear();
+            running.extend(patches.iter().scan(0.0, |sum, p| {
+                *sum += p.weight * point_to_polygon(x.point, patch.normal, p.shape);
+                Some(*sum)
+            }));
             let open = running.last().copied().unwrap_or(0.0);
             if open <= 0.0 {
                 return 0.0;

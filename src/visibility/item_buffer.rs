@@ -483,7 +483,8 @@ const EXPOSURE_SHARE: usize = 8;
 
 /// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
 /// reach from outside the cluster, or which reach its link receivers, one bit each
-/// ([`ItemBuffers::exposure`]).
+/// ([`ItemBuffers::exposure`]); an exposure toward a receiver holds one more word after the bits,
+/// the receiver's distance (`solvers::clustering::expose`).
 pub type Exposure = Box<[u64]>;
 
 /// Whether bit `k` of `exposure` is set.
