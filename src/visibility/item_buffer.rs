@@ -25,8 +25,8 @@ use crate::hierarchy::clusters::VisibleAreas;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::RwLock;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, RwLock};
 
 /// Pixels across the smallest object of a buffer.
 pub const PIXELS_ACROSS_SMALLEST: f64 = 4.0;
@@ -361,20 +361,26 @@ fn end_centre_to(v: f64, n: usize) -> usize {
     }
 }
 
-/// Visible areas by cluster and direction bucket, and the bytes they hold. Keyed by cluster, with
-/// each cluster's buckets in a short sorted list, rather than by (cluster, bucket): office3 caches 60k
-/// buffers of a few thousand clusters, and a table of 60k entries held 5 MB at its peak (while it
-/// doubled), the lists about 1.5 MB.
+/// Visible areas and exposures of the clusters whose index is `SHARDS`-congruent to the shard's.
+/// Keyed by cluster, with each cluster's buckets in a short sorted list, rather than by (cluster,
+/// bucket): office3 caches 60k buffers of a few thousand clusters, and a table of 60k entries held 5
+/// MB at its peak (while it doubled), the lists about 1.5 MB.
 #[derive(Debug, Default)]
-struct Cache {
+struct Shard {
     clusters: HashMap<u32, ClusterBuffers, BuildHasherDefault<KeyHasher>>,
     /// Exposure bits per (cluster, bucket) ([`ItemBuffers::exposure`]).
     exposures: HashMap<(u32, u16), Box<[u64]>, BuildHasherDefault<KeyHasher>>,
-    bytes: usize,
-    /// Bytes of `exposures`, counted apart: which buffers the threads happened to cache first must
-    /// not decide which exposures fit, since those change the answer.
-    exposure_bytes: usize,
 }
+
+/// Shards of the cache, each behind its own lock. Couplings and sweeps look buffers up millions of
+/// times on the classroom; behind one lock every lookup wrote the lock's word, which the other
+/// threads' lookups then had to fetch back (BENCHMARKS.md, "The item-buffer cache in shards").
+const SHARDS: usize = 64;
+
+/// A shard on cache lines of its own, so that threads using different shards write no common line.
+#[derive(Debug, Default)]
+#[repr(align(128))]
+struct PaddedShard(RwLock<Shard>);
 
 /// One cluster's cached buffers, sorted by direction bucket (parallel lists rather than one of
 /// tuples, which padding would make 24 bytes an entry instead of 19), each with whether it was asked
@@ -468,7 +474,13 @@ impl Hasher for KeyHasher {
 /// ones fit must not depend on which buffers the threads cached first.
 #[derive(Debug)]
 pub struct ItemBuffers {
-    cache: RwLock<Cache>,
+    shards: Box<[PaddedShard]>,
+    /// Bytes the cached buffers hold.
+    bytes: AtomicUsize,
+    /// Bytes of the exposures, counted apart: which buffers the threads happened to cache first must
+    /// not decide which exposures fit, since those change the answer. Held while exposures are
+    /// stored, so that they are stored in the order given.
+    exposure_bytes: Mutex<usize>,
     max_bytes: usize,
 }
 
@@ -506,9 +518,14 @@ pub fn pack_exposure(flags: impl ExactSizeIterator<Item = bool>) -> Exposure {
 }
 
 impl ItemBuffers {
+    /// The shard that holds `cluster`'s buffers and exposures.
+    fn shard(&self, cluster: u32) -> &RwLock<Shard> {
+        &self.shards[cluster as usize % SHARDS].0
+    }
+
     /// Whether the exposure of `cluster` along `bucket` is stored.
     pub fn has_exposure(&self, cluster: u32, bucket: u16) -> bool {
-        self.cache
+        self.shard(cluster)
             .read()
             .expect("item buffer cache")
             .exposures
@@ -527,7 +544,7 @@ impl ItemBuffers {
         bucket: u16,
         read: impl FnOnce(&[u64]) -> T,
     ) -> Option<T> {
-        self.cache
+        self.shard(cluster)
             .read()
             .expect("item buffer cache")
             .exposures
@@ -539,14 +556,15 @@ impl ItemBuffers {
     /// ([`EXPOSURE_SHARE`]), counted apart from the buffers (past that, sharing goes on without them,
     /// the same whatever the threads).
     pub fn store_exposures(&self, exposures: Vec<((u32, u16), Exposure)>) {
-        let mut cache = self.cache.write().expect("item buffer cache");
+        let mut stored = self.exposure_bytes.lock().expect("item buffer cache");
         for (key, bits) in exposures {
             let bytes = ENTRY_OVERHEAD + 8 * bits.len();
-            if cache.exposure_bytes + bytes > self.max_bytes / EXPOSURE_SHARE {
+            if *stored + bytes > self.max_bytes / EXPOSURE_SHARE {
                 break;
             }
-            if cache.exposures.insert(key, bits).is_none() {
-                cache.exposure_bytes += bytes;
+            let mut shard = self.shard(key.0).write().expect("item buffer cache");
+            if shard.exposures.insert(key, bits).is_none() {
+                *stored += bytes;
             }
         }
     }
@@ -558,19 +576,23 @@ impl ItemBuffers {
     /// cache holds what the links use"). Answers are unchanged: a dropped buffer is drawn again, the
     /// same.
     pub fn forget_unused(&self) {
-        let mut cache = self.cache.write().expect("item buffer cache");
-        let mut dropped = 0;
-        cache.clusters.retain(|_, buffers| {
-            dropped += buffers.forget_unused();
-            !buffers.buckets.is_empty()
-        });
-        cache.bytes -= dropped;
+        for shard in &self.shards {
+            let mut shard = shard.0.write().expect("item buffer cache");
+            let mut dropped = 0;
+            shard.clusters.retain(|_, buffers| {
+                dropped += buffers.forget_unused();
+                !buffers.buckets.is_empty()
+            });
+            self.bytes.fetch_sub(dropped, Ordering::Relaxed);
+        }
     }
 
     /// An empty cache that holds at most `max_bytes`.
     pub fn new(max_bytes: usize) -> Self {
         ItemBuffers {
-            cache: RwLock::default(),
+            shards: (0..SHARDS).map(|_| PaddedShard::default()).collect(),
+            bytes: AtomicUsize::new(0),
+            exposure_bytes: Mutex::new(0),
             max_bytes,
         }
     }
@@ -584,8 +606,8 @@ impl ItemBuffers {
         bucket: u16,
         draw: impl FnOnce(DVec3) -> VisibleAreas,
     ) -> VisibleAreas {
-        if let Some(Ok(hit)) = self
-            .cache
+        let shard = self.shard(cluster);
+        if let Some(Ok(hit)) = shard
             .read()
             .expect("item buffer cache")
             .clusters
@@ -595,15 +617,19 @@ impl ItemBuffers {
             return hit.clone();
         }
         let visible = draw(bucket_direction(bucket));
-        let mut cache = self.cache.write().expect("item buffer cache");
         let bytes = ENTRY_OVERHEAD + visible.bytes();
-        if cache.bytes + bytes <= self.max_bytes - self.max_bytes / EXPOSURE_SHARE {
-            let buffers = cache.clusters.entry(cluster).or_default();
+        // Threads adding at once may pass the bound by a buffer each; what is cached never changes
+        // an answer.
+        if self.bytes.load(Ordering::Relaxed) + bytes
+            <= self.max_bytes - self.max_bytes / EXPOSURE_SHARE
+        {
+            let mut shard = shard.write().expect("item buffer cache");
+            let buffers = shard.clusters.entry(cluster).or_default();
             if let Err(at) = buffers.get(bucket) {
                 buffers.buckets.insert(at, bucket);
                 buffers.visible.insert(at, visible.clone());
                 buffers.used.insert(at, AtomicBool::new(true));
-                cache.bytes += bytes;
+                self.bytes.fetch_add(bytes, Ordering::Relaxed);
             }
         }
         visible
@@ -640,7 +666,7 @@ mod tests {
             .map(|&(c, b)| ask(c, b))
             .collect();
         assert_eq!(draws.get(), 3);
-        let bytes = |buffers: &ItemBuffers| buffers.cache.read().unwrap().bytes;
+        let bytes = |buffers: &ItemBuffers| buffers.bytes.load(Ordering::Relaxed);
         let full = bytes(&buffers);
         // Drawn since the cache was made: all kept, their marks cleared.
         buffers.forget_unused();
@@ -654,7 +680,10 @@ mod tests {
             ENTRY_OVERHEAD + first[1].bytes(),
             "only the used buffer's bytes stay"
         );
-        assert_eq!(buffers.cache.read().unwrap().clusters.len(), 1);
+        let clusters: usize = (buffers.shards.iter())
+            .map(|shard| shard.0.read().unwrap().clusters.len())
+            .sum();
+        assert_eq!(clusters, 1);
         assert_eq!(ask(1, 5), first[1]);
         assert_eq!(draws.get(), 3);
         assert_eq!(ask(1, 0), first[0]);
