@@ -446,7 +446,7 @@ fn error_control_reports_its_accuracy_and_draws_its_estimate() {
         (summary, json)
     };
     let stats_of = |options: &[&str]| run(options).1;
-    // A render controlled to 30% (the default) with `oracle` options says so.
+    // A render controlled to 30% (the power oracle's default) with `oracle` options says so.
     let controlled = |oracle: &[&str]| {
         let (summary, json) = run(&[&["--accuracy", "30%"], oracle].concat());
         assert!(summary.contains("accuracy"), "{summary}");

@@ -180,9 +180,9 @@ pub struct SolveArgs {
     /// absolute radiance in W/(m² sr) (e.g. 0.05), a percentage of the scene's mean radiance (e.g.
     /// 10%), or off. With the power oracle (the default) algorithm 6.1 lowers eq. (1)'s threshold
     /// (from --eps) at the receivers whose estimate fails; default 30% (BENCHMARKS.md, "Error control
-    /// by default" and "The default accuracy at 30%"). With --oracle error it is the paper's own link error oracle, default 10%. With
-    /// --oracle mi or smoothness it is off unless given, so that the oracle experiments compare the
-    /// oracles alone. Given with no --oracle, it keeps the power oracle.
+    /// by default" and "The default accuracy at 30%"). With --oracle error it is the paper's own link
+    /// error oracle, default 10%. With --oracle mi or smoothness it is off unless given, so that the
+    /// oracle experiments compare the oracles alone. Given with no --oracle, it keeps the power oracle.
     #[arg(long, value_parser = parse_accuracy, value_name = "EPS|P%|off")]
     pub accuracy: Option<AccuracyArg>,
     /// Error control also to this percentage of each element's own radiance (e.g. 20%), down to a

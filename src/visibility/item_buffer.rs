@@ -361,7 +361,7 @@ fn end_centre_to(v: f64, n: usize) -> usize {
     }
 }
 
-/// Visible areas and exposures of the clusters whose index is `SHARDS`-congruent to the shard's.
+/// The visible areas and exposures of the clusters whose index is the shard's modulo [`SHARDS`].
 /// Keyed by cluster, with each cluster's buckets in a short sorted list, rather than by (cluster,
 /// bucket): office3 caches 60k buffers of a few thousand clusters, and a table of 60k entries held 5
 /// MB at its peak (while it doubled), the lists about 1.5 MB.
