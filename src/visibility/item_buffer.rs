@@ -640,6 +640,55 @@ impl ItemBuffers {
 mod tests {
     use super::*;
 
+    /// Threads asking for the same buffers at once, across many shards, each get the one answer
+    /// its draw gives, and every buffer is cached and counted once, whichever thread drew it first.
+    #[test]
+    fn threads_share_the_cache_and_count_each_buffer_once() {
+        use crate::hierarchy::clusters::{Facing, Orientation};
+        use rayon::prelude::*;
+        let facing = |z: f64| Facing {
+            normal: DVec3::new(0.0, 0.0, z),
+            area: 1.0,
+            centroid: DVec3::ZERO,
+        };
+        let orientation = Orientation::new(&[facing(1.0), facing(-1.0), facing(1.0)]);
+        let areas = [1.0, 1.0, 1.0];
+        let draw = |cluster: u32, bucket: u16| {
+            let seen = ((cluster * 7 + u32::from(bucket)) % 5) as f32 / 4.0;
+            VisibleAreas::new(&orientation, &areas, &[seen, 1.0 - seen, 0.5])
+        };
+        let keys: Vec<(u32, u16)> = (0..200u32)
+            .flat_map(|c| (0..3u16).map(move |b| (c, b * 11)))
+            .collect();
+        let buffers = ItemBuffers::new(1 << 24);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        // Every key asked for eight times over, in an order that keeps the threads on the same keys.
+        let asks: Vec<(u32, u16)> = (0..8).flat_map(|_| keys.iter().copied()).collect();
+        pool.install(|| {
+            asks.par_iter().for_each(|&(c, b)| {
+                assert_eq!(buffers.visible_areas(c, b, |_| draw(c, b)), draw(c, b));
+            });
+        });
+        let expected: usize = (keys.iter())
+            .map(|&(c, b)| ENTRY_OVERHEAD + draw(c, b).bytes())
+            .sum();
+        assert_eq!(buffers.bytes.load(Ordering::Relaxed), expected);
+        let cached: usize = (buffers.shards.iter())
+            .map(|shard| {
+                let shard = shard.0.read().unwrap();
+                shard
+                    .clusters
+                    .values()
+                    .map(|c| c.buckets.len())
+                    .sum::<usize>()
+            })
+            .sum();
+        assert_eq!(cached, keys.len());
+    }
+
     /// The cache keeps what was asked for since the last `forget_unused` (drawn or found) and drops
     /// the rest, bytes included, and a dropped buffer comes back the same when asked for again.
     #[test]
