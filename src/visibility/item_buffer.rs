@@ -639,23 +639,31 @@ impl ItemBuffers {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hierarchy::clusters::{Facing, Orientation};
 
-    /// Threads asking for the same buffers at once, across many shards, each get the one answer
-    /// its draw gives, and every buffer is cached and counted once, whichever thread drew it first.
-    #[test]
-    fn threads_share_the_cache_and_count_each_buffer_once() {
-        use crate::hierarchy::clusters::{Facing, Orientation};
-        use rayon::prelude::*;
+    /// The areas of [`three_unit_patches`].
+    const UNIT_AREAS: [f64; 3] = [1.0; 3];
+
+    /// The orientation of a cluster of three unit patches, two facing up and one down: the cache
+    /// tests' cluster.
+    fn three_unit_patches() -> Orientation {
         let facing = |z: f64| Facing {
             normal: DVec3::new(0.0, 0.0, z),
             area: 1.0,
             centroid: DVec3::ZERO,
         };
-        let orientation = Orientation::new(&[facing(1.0), facing(-1.0), facing(1.0)]);
-        let areas = [1.0, 1.0, 1.0];
+        Orientation::new(&[facing(1.0), facing(-1.0), facing(1.0)])
+    }
+
+    /// Threads asking for the same buffers at once, across many shards, each get the one answer
+    /// its draw gives, and every buffer is cached and counted once, whichever thread drew it first.
+    #[test]
+    fn threads_share_the_cache_and_count_each_buffer_once() {
+        use rayon::prelude::*;
+        let orientation = three_unit_patches();
         let draw = |cluster: u32, bucket: u16| {
             let seen = ((cluster * 7 + u32::from(bucket)) % 5) as f32 / 4.0;
-            VisibleAreas::new(&orientation, &areas, &[seen, 1.0 - seen, 0.5])
+            VisibleAreas::new(&orientation, &UNIT_AREAS, &[seen, 1.0 - seen, 0.5])
         };
         let keys: Vec<(u32, u16)> = (0..200u32)
             .flat_map(|c| (0..3u16).map(move |b| (c, b * 11)))
@@ -693,21 +701,14 @@ mod tests {
     /// the rest, bytes included, and a dropped buffer comes back the same when asked for again.
     #[test]
     fn the_cache_forgets_buffers_unused_since_the_last_pass() {
-        use crate::hierarchy::clusters::{Facing, Orientation};
-        let facing = |z: f64| Facing {
-            normal: DVec3::new(0.0, 0.0, z),
-            area: 1.0,
-            centroid: DVec3::ZERO,
-        };
-        let orientation = Orientation::new(&[facing(1.0), facing(-1.0), facing(1.0)]);
-        let areas = [1.0, 1.0, 1.0];
+        let orientation = three_unit_patches();
         let buffers = ItemBuffers::new(1 << 20);
         let draws = std::cell::Cell::new(0);
         let ask = |cluster: u32, bucket: u16| {
             buffers.visible_areas(cluster, bucket, |_| {
                 draws.set(draws.get() + 1);
                 let seen = f32::from(bucket % 3) / 2.0;
-                VisibleAreas::new(&orientation, &areas, &[seen, 1.0 - seen, 0.25])
+                VisibleAreas::new(&orientation, &UNIT_AREAS, &[seen, 1.0 - seen, 0.25])
             })
         };
         let first: Vec<VisibleAreas> = [(1, 0), (1, 5), (2, 4)]
