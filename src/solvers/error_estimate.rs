@@ -40,7 +40,7 @@ use crate::color::Rgb;
 use crate::geometry::cubature::{rule, MAX_POINTS};
 use crate::geometry::{DVec2, Domain};
 use crate::hierarchy::{ElementId, Hierarchy};
-use crate::solvers::clustering::{moved_by_exposure, moved_by_sending};
+use crate::solvers::clustering::{moved_by_exposure, moved_by_sending, ClusterSweep};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::OnceLock;
@@ -64,9 +64,12 @@ const CONSERVATIVE_ITERATIONS: usize = 100;
 /// Computes the estimate of `kind` and stores it in `Element::error`.
 pub fn estimate_errors(hierarchy: &mut Hierarchy, kind: EstimateKind) {
     let signed = kind == EstimateKind::Signed;
-    let moved = Moved {
-        receiving: moved_by_exposure(hierarchy),
-        sending: moved_by_sending(hierarchy),
+    let moved = {
+        let sweep = ClusterSweep::sent_only(hierarchy);
+        Moved {
+            receiving: moved_by_exposure(hierarchy, &sweep),
+            sending: moved_by_sending(hierarchy, &sweep),
+        }
     };
     let mut errors = estimate(hierarchy, None, signed, &moved);
     if kind == EstimateKind::Conservative {
