@@ -112,7 +112,7 @@ fn render_writes_png_exr_models_and_stats() {
     ] {
         assert!(stats.get(key).is_some(), "stats lack {key}");
     }
-    for phase in ["load", "bvh", "refine", "solve", "render"] {
+    for phase in ["load", "bvh", "refine", "solve", "estimate", "render"] {
         assert!(
             stats["seconds"][phase].is_number(),
             "stats lack seconds.{phase}"

@@ -220,7 +220,7 @@ impl RenderCommand {
             crate::progress::stderr_line(format_args!(
                 "{name}: {}; {} elements ({} leaves), {} links, {} rays ({} saved by shaft tests), \
                  {} passes, {} sweeps; \
-                 load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, render {:.2}s -> {}",
+                 load {:.2}s, bvh {:.2}s, refine {:.2}s, solve {:.2}s, estimate {:.2}s, render {:.2}s -> {}",
                 error_summary(
                     &solution.report.error,
                     self.units,
@@ -237,6 +237,7 @@ impl RenderCommand {
                 s.bvh,
                 s.refine,
                 s.solve,
+                s.estimate,
                 s.render,
                 self.output.display()
             ));

@@ -30,6 +30,8 @@ pub struct PhaseSeconds {
     pub bvh: f64,
     pub refine: f64,
     pub solve: f64,
+    /// The a-posteriori error estimates after the passes.
+    pub estimate: f64,
     pub render: f64,
 }
 
@@ -105,6 +107,7 @@ impl RunStats {
                 bvh: solution.visibility_seconds,
                 refine: r.refine_seconds,
                 solve: r.solve_seconds,
+                estimate: r.estimate_seconds,
                 ..Default::default()
             },
             emitted_power: r.emitted_power,
@@ -130,7 +133,7 @@ impl RunStats {
         remove_from_each(v.get_mut("steps"), &["seconds", "cpu_seconds"]);
         remove_from_each(
             v.get_mut("error").and_then(|e| e.get_mut("passes")),
-            &["refine_seconds", "solve_seconds"],
+            &["refine_seconds", "solve_seconds", "estimate_seconds"],
         );
         v
     }

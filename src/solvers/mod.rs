@@ -120,9 +120,10 @@ pub struct PassEstimate {
     pub links: usize,
     /// The estimate's summary against the accuracy (against ∞ without error control: no leaf above).
     pub summary: ErrorSummary,
-    /// Refinement and sweep seconds of the solve up to the end of this pass.
+    /// Refinement, sweep and estimate seconds of the solve up to the end of this pass.
     pub refine_seconds: f64,
     pub solve_seconds: f64,
+    pub estimate_seconds: f64,
 }
 
 /// What a solve did.
@@ -143,6 +144,8 @@ pub struct SolveReport {
     pub exitant_power: Rgb,
     pub refine_seconds: f64,
     pub solve_seconds: f64,
+    /// The a-posteriori estimates after the passes (Bekaert–Willems §4) and their summaries.
+    pub estimate_seconds: f64,
     /// Whether the last pass refined (almost) nothing, fewer than [`SETTLED_FRACTION`] of the links,
     /// and the sweeps met the tolerance (under error control: whether every leaf's estimate is within
     /// the accuracy).
@@ -243,6 +246,7 @@ pub fn solve(
             progress,
             last,
         );
+        let start = Instant::now();
         estimate_errors(hierarchy, settings.estimate);
         if let Some(control) = &settings.error_control {
             // The summary the user reads is the final radiance's; a pass judged at a part in a
@@ -252,9 +256,13 @@ pub fn solve(
                 |id| control.allowed(hierarchy, id),
                 settings.refine.min_area,
             );
+        }
+        report.estimate_seconds += start.elapsed().as_secs_f64();
+        if settings.error_control.is_some() {
             if let Some(last) = report.error.passes.last_mut() {
                 last.summary = report.error.summary;
                 last.solve_seconds = report.solve_seconds;
+                last.estimate_seconds = report.estimate_seconds;
             }
             if report.error.summary.leaves_above > 0 && report.error.stopped_by == ACCURACY_REACHED
             {
@@ -300,6 +308,7 @@ fn end_pass(
     refused: bool,
     swept_to_tolerance: bool,
 ) -> bool {
+    let start = Instant::now();
     estimate_errors(hierarchy, settings.estimate);
     let control = settings.error_control;
     let summary = summarize(
@@ -307,12 +316,14 @@ fn end_pass(
         |id| control.map_or(f64::INFINITY, |c| c.allowed(hierarchy, id)),
         settings.refine.min_area,
     );
+    report.estimate_seconds += start.elapsed().as_secs_f64();
     report.error.passes.push(PassEstimate {
         pass: report.passes,
         links: hierarchy.link_count(),
         summary,
         refine_seconds: report.refine_seconds,
         solve_seconds: report.solve_seconds,
+        estimate_seconds: report.estimate_seconds,
     });
     if report.diverged_in_pass.is_some() {
         if settings.error_control.is_some() {
