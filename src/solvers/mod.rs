@@ -230,6 +230,7 @@ pub fn solve(
             pass_state,
             refused,
             swept_to_tolerance,
+            progress,
         ) {
             break;
         }
@@ -247,6 +248,8 @@ pub fn solve(
             last,
         );
         let start = Instant::now();
+        let spinner = progress.spinner("estimate");
+        spinner.set_message("after the last sweeps");
         estimate_errors(hierarchy, settings.estimate);
         if let Some(control) = &settings.error_control {
             // The summary the user reads is the final radiance's; a pass judged at a part in a
@@ -257,6 +260,7 @@ pub fn solve(
                 settings.refine.min_area,
             );
         }
+        spinner.finish_and_clear();
         report.estimate_seconds += start.elapsed().as_secs_f64();
         if settings.error_control.is_some() {
             if let Some(last) = report.error.passes.last_mut() {
@@ -307,8 +311,11 @@ fn end_pass(
     (changed, settled): (bool, bool),
     refused: bool,
     swept_to_tolerance: bool,
+    progress: &Progress,
 ) -> bool {
     let start = Instant::now();
+    let spinner = progress.spinner("estimate");
+    spinner.set_message(format!("after pass {}", report.passes));
     estimate_errors(hierarchy, settings.estimate);
     let control = settings.error_control;
     let summary = summarize(
@@ -316,6 +323,7 @@ fn end_pass(
         |id| control.map_or(f64::INFINITY, |c| c.allowed(hierarchy, id)),
         settings.refine.min_area,
     );
+    spinner.finish_and_clear();
     report.estimate_seconds += start.elapsed().as_secs_f64();
     report.error.passes.push(PassEstimate {
         pass: report.passes,

@@ -328,6 +328,7 @@ pub fn solve_progressive(
             (changed, settled),
             refused,
             swept,
+            progress,
         );
         let threshold = if step == 1 {
             f64::INFINITY
