@@ -144,7 +144,7 @@ pub struct SolveReport {
     pub exitant_power: Rgb,
     pub refine_seconds: f64,
     pub solve_seconds: f64,
-    /// The a-posteriori estimates after the passes (Bekaert–Willems §4) and their summaries.
+    /// The a-posteriori estimates after the passes (Bekaert–Willems §4).
     pub estimate_seconds: f64,
     /// Whether the last pass refined (almost) nothing, fewer than [`SETTLED_FRACTION`] of the links,
     /// and the sweeps met the tolerance (under error control: whether every leaf's estimate is within
@@ -247,10 +247,13 @@ pub fn solve(
             progress,
             last,
         );
-        let start = Instant::now();
-        let spinner = progress.spinner("estimate");
-        spinner.set_message("after the last sweeps");
-        estimate_errors(hierarchy, settings.estimate);
+        timed_estimate(
+            hierarchy,
+            settings,
+            &mut report,
+            progress,
+            "after the last sweeps",
+        );
         if let Some(control) = &settings.error_control {
             // The summary the user reads is the final radiance's; a pass judged at a part in a
             // thousand may have passed a leaf that the last sweeps move over the accuracy.
@@ -259,10 +262,6 @@ pub fn solve(
                 |id| control.allowed(hierarchy, id),
                 settings.refine.min_area,
             );
-        }
-        spinner.finish_and_clear();
-        report.estimate_seconds += start.elapsed().as_secs_f64();
-        if settings.error_control.is_some() {
             if let Some(last) = report.error.passes.last_mut() {
                 last.summary = report.error.summary;
                 last.solve_seconds = report.solve_seconds;
@@ -300,6 +299,23 @@ fn finish_report(hierarchy: &Hierarchy, settings: &SolveSettings, report: &mut S
     }
 }
 
+/// The a-posteriori estimate of every element ([`estimate_errors`]) under a spinner saying `when`,
+/// its time added to the report's.
+fn timed_estimate(
+    hierarchy: &mut Hierarchy,
+    settings: &SolveSettings,
+    report: &mut SolveReport,
+    progress: &Progress,
+    when: &str,
+) {
+    let start = Instant::now();
+    let spinner = progress.spinner("estimate");
+    spinner.set_message(when.to_string());
+    estimate_errors(hierarchy, settings.estimate);
+    spinner.finish_and_clear();
+    report.estimate_seconds += start.elapsed().as_secs_f64();
+}
+
 /// After a pass: the a-posteriori estimate, then whether to stop: under error control when the accuracy
 /// is reached or the element budget `refused` a split (else, once refinement has `settled` every link
 /// at its threshold, the failing leaves' thresholds are lowered), without it when the pass left the
@@ -313,18 +329,14 @@ fn end_pass(
     swept_to_tolerance: bool,
     progress: &Progress,
 ) -> bool {
-    let start = Instant::now();
-    let spinner = progress.spinner("estimate");
-    spinner.set_message(format!("after pass {}", report.passes));
-    estimate_errors(hierarchy, settings.estimate);
+    let after_pass = format!("after pass {}", report.passes);
+    timed_estimate(hierarchy, settings, report, progress, &after_pass);
     let control = settings.error_control;
     let summary = summarize(
         hierarchy,
         |id| control.map_or(f64::INFINITY, |c| c.allowed(hierarchy, id)),
         settings.refine.min_area,
     );
-    spinner.finish_and_clear();
-    report.estimate_seconds += start.elapsed().as_secs_f64();
     report.error.passes.push(PassEstimate {
         pass: report.passes,
         links: hierarchy.link_count(),
