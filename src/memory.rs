@@ -17,7 +17,7 @@ use crate::visibility::Visibility;
 
 /// Bytes for the program itself and its threads, beyond the data counted here: code and libraries
 /// (about 20 MiB resident), rayon's worker stacks, and per-thread scratch (an item buffer's raster of
-/// 256² pixels, 768 KiB; coupling and oracle temporaries), for up to 16 threads.
+/// 128² pixels, 192 KiB; coupling and oracle temporaries), for up to 16 threads.
 pub const RUNTIME_RESERVE: usize = 64 << 20;
 
 /// Share of the budget after the fixed part that the item-buffer cache may fill (its answers are

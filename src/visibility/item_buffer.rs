@@ -30,8 +30,14 @@ use std::sync::{Mutex, RwLock};
 
 /// Pixels across the smallest object of a buffer.
 pub const PIXELS_ACROSS_SMALLEST: f64 = 4.0;
-/// Most pixels along a side of one buffer (the bound on its work and memory: 256² pixels).
-pub const MAX_SIDE: usize = 256;
+/// Most pixels along a side of one buffer (the bound on its work and memory: 128² pixels). A buffer's
+/// cost is its pixels, and clusters whose smallest object is tiny beside their extent reach the
+/// bound: on office3 a quarter of the 85,529 buffers drawn would want more than 128 pixels across
+/// (8,600 pixels a buffer on average at 256², up to 65,536 at the bound). At 128² office3's refinement
+/// takes a tenth less time and the seen points' errors are those of 256² within 0.05 points on office3,
+/// office2, the corridor and the classroom; at 64² a classroom seed's worst point moved from 24% to 29%
+/// (BENCHMARKS.md, "Item buffers at 128² pixels").
+pub const MAX_SIDE: usize = 128;
 /// Direction cells per cube-map face side: 6 × 8² = 384 buckets, each under 13° across.
 pub const BUCKETS_PER_FACE: usize = 8;
 
