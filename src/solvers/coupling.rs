@@ -44,7 +44,9 @@ use crate::geometry::near_field::{self, distance_to_polygon, is_near, NearField}
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::{ElementId, ErrorStorage, Hierarchy, LinkCoupling};
 use crate::random::{splitmix64, unit_interval};
-use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
+use crate::visibility::shaft::{
+    ShaftPrior, ShaftTest, ShaftVerdict, MAX_OWN_OCCLUDERS, MAX_PARTIAL_OCCLUDERS,
+};
 use crate::visibility::Visibility;
 
 /// How link couplings are computed.
@@ -174,11 +176,26 @@ fn couple_in_full(
         ShaftPrior::Verdict(verdict) => (Some(verdict), None),
         ShaftPrior::Among(list) => (
             None,
-            shaft_test(hierarchy, visibility, receiver, source, Some(list)),
+            shaft_test(
+                hierarchy,
+                visibility,
+                receiver,
+                source,
+                Some(list),
+                MAX_PARTIAL_OCCLUDERS,
+            ),
         ),
+        // The list serves only this link's rays: a short walk (see `MAX_OWN_OCCLUDERS`).
         ShaftPrior::Unknown => (
             None,
-            shaft_test(hierarchy, visibility, receiver, source, None),
+            shaft_test(
+                hierarchy,
+                visibility,
+                receiver,
+                source,
+                None,
+                MAX_OWN_OCCLUDERS,
+            ),
         ),
     };
     let shaft = known.or(tested.map(|t| t.verdict));
@@ -508,13 +525,17 @@ impl SourceSampler<'_> {
 }
 
 /// The shaft test of the surface link `source` → `receiver`, where the visibility back end offers one;
-/// `among`: the complete occluder list of a test of a shaft that holds this one, if known.
+/// `among`: the complete occluder list of a test of a shaft that holds this one, if known; a Partial
+/// verdict lists its occluders when there are at most `list_room` ([`ShaftCuller::classify`]).
+///
+/// [`ShaftCuller::classify`]: crate::visibility::shaft::ShaftCuller::classify
 pub fn shaft_test(
     hierarchy: &Hierarchy,
     visibility: &dyn Visibility,
     receiver: ElementId,
     source: ElementId,
     among: Option<&[u32]>,
+    list_room: usize,
 ) -> Option<ShaftTest> {
     let culler = visibility.shafts()?;
     let (r, s) = (hierarchy.patch_of(receiver), hierarchy.patch_of(source));
@@ -524,6 +545,7 @@ pub fn shaft_test(
         hierarchy.element(source).shape(),
         s.polygon,
         among,
+        list_room,
     ))
 }
 

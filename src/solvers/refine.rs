@@ -18,7 +18,7 @@ use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling, OracleFactor};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
 use crate::random::splitmix64;
-use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict};
+use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict, MAX_PARTIAL_OCCLUDERS};
 use crate::visibility::Visibility;
 use rayon::prelude::*;
 
@@ -1293,7 +1293,14 @@ fn decide(
             ShaftPrior::Among(list) => Some(list),
             _ => None,
         };
-        let test = shaft_test(h, context.visibility, c.receiver, c.source, among);
+        let test = shaft_test(
+            h,
+            context.visibility,
+            c.receiver,
+            c.source,
+            among,
+            MAX_PARTIAL_OCCLUDERS,
+        );
         verdict.shaft = test.map(|t| t.verdict);
         verdict.shaft_tested = test.is_some();
         verdict.partial_test = test.filter(|t| t.occluders().is_some()).map(Box::new);

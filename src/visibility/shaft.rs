@@ -77,8 +77,18 @@ const TOUCH: f64 = 1e-10;
 const BLOCK_T_MARGIN: f64 = 1e-3;
 
 /// Polygons that reach into a shaft without blocking it, after which the search for a single blocker
-/// stops and the verdict is Partial (bounds the cost of large shafts, which are rarely blocked).
-const MAX_PARTIAL_OCCLUDERS: usize = 16;
+/// stops and the verdict is Partial (bounds the cost of large shafts, which are rarely blocked): the
+/// most a Partial test's occluder list holds, and what a test whose list its link's descendants
+/// inherit keeps ([`ShaftPrior::Among`]).
+pub const MAX_PARTIAL_OCCLUDERS: usize = 16;
+
+/// The occluders kept by a test whose list serves only its own link's rays (a coupling's test of a
+/// link with no ancestor's list): past this many a walk stops, and the rays go to the ray-casting back
+/// end. Such a walk costs about as much as the 30 rays it might make cheaper: on the classroom
+/// (`--accuracy 10% --max-passes 7`) the walks that went on to the 17th occluder took 4.8 µs each,
+/// half of them ended there, and stopping at the 5th saved 3% of the solve's CPU time with the same
+/// verdicts and rays' answers (BENCHMARKS.md, "Shaft tests that stop early").
+pub const MAX_OWN_OCCLUDERS: usize = 4;
 
 /// Most vertices of a shaft: the corners of two quads.
 const MAX_SHAFT_POINTS: usize = 8;
@@ -336,7 +346,9 @@ impl ShaftCuller {
     /// and the rays ignore hits in the plane of their origin). With `among`, the complete occluder list
     /// of a Partial test of a shaft that holds this one (the parent link's, [`ShaftTest::occluders`]),
     /// only those polygons are examined: nothing else can reach into this shaft (Haines–Wallace's
-    /// candidate list, passed down the link hierarchy), so no tree walk is needed.
+    /// candidate list, passed down the link hierarchy), so no tree walk is needed. A Partial test
+    /// lists its occluders when there are at most `list_room` of them (at most
+    /// [`MAX_PARTIAL_OCCLUDERS`]); it stops looking at the next one.
     pub fn classify(
         &self,
         a: &Shape,
@@ -344,6 +356,7 @@ impl ShaftCuller {
         b: &Shape,
         polygon_b: usize,
         among: Option<&[u32]>,
+        list_room: usize,
     ) -> ShaftTest {
         let mut test = ShaftTest {
             verdict: ShaftVerdict::Clear,
@@ -359,6 +372,7 @@ impl ShaftCuller {
             polygon_a,
             b,
             polygon_b,
+            list_room: list_room.min(MAX_PARTIAL_OCCLUDERS),
         };
         if let Some(list) = among {
             for &i in list {
@@ -411,11 +425,13 @@ struct Query<'a> {
     polygon_a: usize,
     b: &'a Shape,
     polygon_b: usize,
+    /// Occluders the test may list before it stops ([`ShaftCuller::classify`]).
+    list_room: usize,
 }
 
 impl Query<'_> {
     /// Examines scene polygon `i` against the shaft and records what it does in `test`; breaks when
-    /// the verdict is final (Blocked, or more occluders than a list holds).
+    /// the verdict is final (Blocked, or more occluders than the list has room for).
     fn examine(&self, culler: &ShaftCuller, i: usize, test: &mut ShaftTest) -> ControlFlow<()> {
         let shape = &culler.shapes[i];
         if self.shaft.beside_bounds(&shape.bounds()) || self.shaft.excludes_points(shape.vertices())
@@ -445,7 +461,7 @@ impl Query<'_> {
             test.verdict = ShaftVerdict::Partial;
             let count = usize::from(test.count);
             if test.occluders[..count].last() != Some(&(i as u32)) {
-                if count == MAX_PARTIAL_OCCLUDERS {
+                if count == self.list_room {
                     test.count = u8::MAX;
                     return ControlFlow::Break(());
                 }
@@ -693,7 +709,7 @@ mod tests {
                 shapes.push(occluder);
             }
             let culler = ShaftCuller::new(&shapes);
-            let test = culler.classify(&a, 0, &b, 1, None);
+            let test = culler.classify(&a, 0, &b, 1, None, MAX_PARTIAL_OCCLUDERS);
             let rays = BruteForce::new(shapes.clone());
             let open = open_segments(&mut rng, &culler, &rays, &test, (&a, &b), 200);
             match test.verdict {
@@ -714,7 +730,7 @@ mod tests {
             };
             let (ca, cb) = (a.subdivide(), b.subdivide());
             let (ca, cb) = (ca[rng.random_range(0..4)], cb[rng.random_range(0..4)]);
-            let sub = culler.classify(&ca, 0, &cb, 1, Some(list));
+            let sub = culler.classify(&ca, 0, &cb, 1, Some(list), MAX_PARTIAL_OCCLUDERS);
             let open = open_segments(&mut rng, &culler, &rays, &sub, (&ca, &cb), 50);
             match sub.verdict {
                 ShaftVerdict::Clear => assert_eq!(open, 50, "Clear sub-shaft blocked: {shapes:?}"),
@@ -734,6 +750,39 @@ mod tests {
                 && sub_verdicts[ShaftVerdict::Partial as usize] >= 50,
             "sub-shaft verdicts (clear, blocked, partial): {sub_verdicts:?}"
         );
+    }
+
+    /// A Partial test lists its occluders only when they fit the room it is given, and with room
+    /// for all of them lists every one: six small squares between two parallel plates, none
+    /// covering the shaft.
+    #[test]
+    fn partial_lists_fit_their_room() {
+        let square = |x: f64, y: f64, z: f64, s: f64| {
+            Shape::Quad([
+                DVec3::new(x, y, z),
+                DVec3::new(x + s, y, z),
+                DVec3::new(x + s, y + s, z),
+                DVec3::new(x, y + s, z),
+            ])
+        };
+        let (a, b) = (
+            square(0.0, 0.0, 0.0, 1.0),
+            square(0.0, 0.0, 2.0, 1.0).flipped(),
+        );
+        let mut shapes = vec![a, b];
+        shapes.extend((0..6).map(|k| square(0.1 + 0.13 * f64::from(k), 0.4, 1.0, 0.1)));
+        let culler = ShaftCuller::new(&shapes);
+        let roomy = culler.classify(&a, 0, &b, 1, None, MAX_PARTIAL_OCCLUDERS);
+        assert_eq!(roomy.verdict, ShaftVerdict::Partial);
+        let mut listed = roomy.occluders().expect("a list").to_vec();
+        listed.sort_unstable();
+        assert_eq!(listed, (2..8).collect::<Vec<u32>>());
+        let short = culler.classify(&a, 0, &b, 1, None, MAX_OWN_OCCLUDERS);
+        assert_eq!(short.verdict, ShaftVerdict::Partial);
+        assert_eq!(short.occluders(), None);
+        // With an ancestor's list the test examines only that list, under the same room.
+        let among = culler.classify(&a, 0, &b, 1, Some(&listed[..3]), MAX_OWN_OCCLUDERS);
+        assert_eq!(among.occluders(), Some(&listed[..3]));
     }
 
     /// The shaft holds the two polygons' convex hull: points on segments between them are inside
