@@ -84,10 +84,12 @@ pub const MAX_PARTIAL_OCCLUDERS: usize = 16;
 
 /// The occluders kept by a test whose list serves only its own link's rays (a coupling's test of a
 /// link with no ancestor's list): past this many a walk stops, and the rays go to the ray-casting back
-/// end. Such a walk costs about as much as the 30 rays it might make cheaper: on the classroom
-/// (`--accuracy 10% --max-passes 7`) the walks that went on to the 17th occluder took 4.8 µs each,
-/// half of them ended there, and stopping at the 5th saved 3% of the solve's CPU time with the same
-/// verdicts and rays' answers (BENCHMARKS.md, "Shaft tests that stop early").
+/// end. Such a walk costs about as much as the rays it might make cheaper: on the classroom
+/// (`--accuracy 10% --max-passes 7`) the tree walks that went on to the 17th occluder took 4.7 µs
+/// each and were 37% of all tests. Stopping at the 5th saved 3% of the solve's CPU time there with the
+/// same couplings: a blocker met after the fifth occluder leaves the verdict Partial instead of
+/// Blocked, and the link's rays then find every pair blocked, as exact verdicts and rays agree
+/// (BENCHMARKS.md, "Shaft tests that stop early").
 pub const MAX_OWN_OCCLUDERS: usize = 4;
 
 /// Most vertices of a shaft: the corners of two quads.
