@@ -350,7 +350,7 @@ impl ShaftCuller {
     /// only those polygons are examined: nothing else can reach into this shaft (Haines–Wallace's
     /// candidate list, passed down the link hierarchy), so no tree walk is needed. A Partial test
     /// lists its occluders when there are at most `list_room` of them (at most
-    /// [`MAX_PARTIAL_OCCLUDERS`]); it stops looking at the next one.
+    /// [`MAX_PARTIAL_OCCLUDERS`]), and stops looking when it meets one more.
     pub fn classify(
         &self,
         a: &Shape,
