@@ -255,10 +255,11 @@ impl ProbeCommand {
                 )
             });
             outln!(
-                "# {within} of {} points within the accuracy {accuracy:.4} W/m²sr{and_local} \
+                "# {within} of {} points within the accuracy {} W/m²sr{and_local} \
                  (largest channel, allowing two standard errors of the reference); Bekaert–Willems \
                  promise at least 95%",
-                results.len()
+                results.len(),
+                super::render::significant(accuracy)
             )?;
         }
         if compared {

@@ -278,37 +278,47 @@ pub fn error_summary(
     };
     match error.accuracy {
         Some(accuracy) if s.leaves_above == 0 => format!(
-            "estimated error ≤ {:.3} {unit}: accuracy {:.3} {unit}{} reached",
-            k * s.max_estimate,
-            k * accuracy,
+            "estimated error ≤ {} {unit}: accuracy {} {unit}{} reached",
+            significant(k * s.max_estimate),
+            significant(k * accuracy),
             share(accuracy)
         ),
         Some(accuracy) => format!(
-            "accuracy {:.3} {unit}{} NOT reached on {} of {} leaves, {:.1}% of the area ({} at the \
-             minimum element area; stopped: {}), worst estimate {:.3}",
-            k * accuracy,
+            "accuracy {} {unit}{} NOT reached on {} of {} leaves, {:.1}% of the area ({} at the \
+             minimum element area; stopped: {}), worst estimate {}",
+            significant(k * accuracy),
             share(accuracy),
             s.leaves_above,
             s.leaves,
             100.0 * s.area_fraction_above,
             s.leaves_above_at_min_area,
             error.stopped_by,
-            k * s.max_estimate
+            significant(k * s.max_estimate)
         ),
         None if mean_radiance > 0.0 => format!(
-            "estimated error: max {:.3}, mean {:.3} {unit} ({:.0}%, {:.1}% of the mean radiance {:.3})",
-            k * s.max_estimate,
-            k * s.mean_estimate,
+            "estimated error: max {}, mean {} {unit} ({:.0}%, {:.1}% of the mean radiance {})",
+            significant(k * s.max_estimate),
+            significant(k * s.mean_estimate),
             100.0 * s.max_estimate / mean_radiance,
             100.0 * s.mean_estimate / mean_radiance,
-            k * mean_radiance
+            significant(k * mean_radiance)
         ),
         None => format!(
-            "estimated error: max {:.3}, mean {:.3} {unit}",
-            k * s.max_estimate,
-            k * s.mean_estimate
+            "estimated error: max {}, mean {} {unit}",
+            significant(k * s.max_estimate),
+            significant(k * s.mean_estimate)
         ),
     }
+}
+
+/// `x` to three significant digits in plain decimals: radiances span decades between scenes, and a
+/// fixed three decimals printed the classroom's accuracy of 7.24·10⁻⁴ W/(m² sr) as 0.001.
+pub(crate) fn significant(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let decimals = (2 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    format!("{x:.decimals$}")
 }
 
 impl RenderCommand {
@@ -376,4 +386,21 @@ fn extension(path: &Path) -> String {
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::significant;
+
+    /// Three significant digits at every scale, where three decimals lost the classroom's accuracy.
+    #[test]
+    fn figures_keep_three_significant_digits() {
+        assert_eq!(significant(7.2409e-4), "0.000724");
+        assert_eq!(significant(0.05803), "0.0580");
+        assert_eq!(significant(0.158), "0.158");
+        assert_eq!(significant(12.345), "12.3");
+        assert_eq!(significant(98_765.4), "98765");
+        assert_eq!(significant(-0.00123), "-0.00123");
+        assert_eq!(significant(0.0), "0");
+    }
 }
