@@ -311,13 +311,19 @@ pub fn error_summary(
     }
 }
 
-/// `x` to three significant digits in plain decimals: radiances span decades between scenes, and a
-/// fixed three decimals printed the classroom's accuracy of 7.24·10⁻⁴ W/(m² sr) as 0.001.
+/// `x` to three significant digits: radiances span decades between scenes, and a fixed three
+/// decimals printed the classroom's accuracy of 7.24·10⁻⁴ W/(m² sr) as 0.001. Plain decimals from
+/// 10⁻⁴ to below 10⁶, scientific notation beyond (a scene in other units, or an emitter of 10³⁰ W,
+/// printed hundreds of digits).
 pub(crate) fn significant(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return format!("{x}");
     }
-    let decimals = (2 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    let exponent = x.abs().log10().floor() as i32;
+    if !(-4..6).contains(&exponent) {
+        return format!("{x:.2e}");
+    }
+    let decimals = (2 - exponent).max(0) as usize;
     format!("{x:.decimals$}")
 }
 
@@ -402,5 +408,8 @@ mod tests {
         assert_eq!(significant(98_765.4), "98765");
         assert_eq!(significant(-0.00123), "-0.00123");
         assert_eq!(significant(0.0), "0");
+        assert_eq!(significant(5.3348e300), "5.33e300");
+        assert_eq!(significant(1.2345e-7), "1.23e-7");
+        assert_eq!(significant(-3.0e6), "-3.00e6");
     }
 }
