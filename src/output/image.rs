@@ -32,21 +32,35 @@ impl Image {
 
     /// Writes linear radiance as 32-bit float OpenEXR.
     pub fn write_exr(&self, path: &Path) -> Result<()> {
-        use exr::prelude::{Image as Exr, SpecificChannels, Vec2, WritableImage};
-        // Encoded in memory: exr's `to_file` deletes its target on a write error, even a device.
+        let bytes = self
+            .exr_bytes()
+            .with_context(|| format!("encoding {}", path.display()))?;
+        super::write_atomically(path, |to| {
+            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
+        })
+    }
+
+    /// The OpenEXR file's bytes (RLE in 64² tiles, exr's default), encoded in memory: exr's `to_file`
+    /// deletes its target on a write error, even a device. The tiles are stored in increasing order,
+    /// not in the order exr's threads finish compressing them, so that the file, not only its
+    /// pixels, is the same on any number of threads.
+    fn exr_bytes(&self) -> Result<Vec<u8>> {
+        use exr::prelude::{
+            Encoding, Image as Exr, LineOrder, SpecificChannels, Vec2, WritableImage,
+        };
         let channels = SpecificChannels::rgb(|Vec2(x, y)| {
             let [r, g, b] = self.get(x, y).to_f32();
             (r, g, b)
         });
+        let encoding = Encoding {
+            line_order: LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        };
         let mut bytes = std::io::Cursor::new(Vec::new());
-        Exr::from_channels((self.width, self.height), channels)
+        Exr::from_encoded_channels((self.width, self.height), encoding, channels)
             .write()
-            .to_buffered(&mut bytes)
-            .with_context(|| format!("encoding {}", path.display()))?;
-        let bytes = bytes.into_inner();
-        super::write_atomically(path, |to| {
-            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
-        })
+            .to_buffered(&mut bytes)?;
+        Ok(bytes.into_inner())
     }
 
     /// Reads the first RGB(A) layer of an OpenEXR file of at most
@@ -114,5 +128,35 @@ mod tests {
             assert!((a.g - b.g).abs() <= 1e-6 * a.g.abs().max(1.0));
             assert!((a.b - b.b).abs() <= 1e-6 * a.b.abs().max(1.0));
         }
+    }
+
+    /// exr compresses tiles on its own threads; stored in the order they finish, the same pixels
+    /// gave files that differ from run to run (the classroom's `--hdr` on one and two threads).
+    #[test]
+    fn exr_files_store_their_tiles_in_order() {
+        let mut img = Image::new(300, 200); // 5 × 4 tiles of 64²
+        for y in 0..img.height {
+            for x in 0..img.width {
+                // Flat in some tiles, noisy in others: their compression takes unequal time.
+                let noisy = (x / 64 + y / 64) % 2 == 0;
+                let v = if noisy {
+                    ((x * 7919 + y * 104729) % 1000) as f64
+                } else {
+                    1.0
+                };
+                img.set(x, y, Rgb::new(v, 0.5 * v, 0.25));
+            }
+        }
+        let bytes = img.exr_bytes().unwrap();
+        let meta = exr::meta::MetaData::read_from_buffered(bytes.as_slice(), false).unwrap();
+        assert_eq!(
+            meta.headers[0].line_order,
+            exr::meta::attribute::LineOrder::Increasing
+        );
+        for _ in 0..8 {
+            assert_eq!(img.exr_bytes().unwrap(), bytes);
+        }
+        let back = Image::from_exr_bytes(&bytes).unwrap();
+        assert_eq!(back.pixels, img.pixels);
     }
 }
