@@ -301,6 +301,8 @@ fn grid_writes_csv_json_and_isolux_svg_and_never_overwrites_the_scene() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let unlit_warning = "grid points get under 0.1% of the mean illuminance";
+    assert!(!String::from_utf8_lossy(&out.stderr).contains(unlit_warning));
     let csv = std::fs::read_to_string(dir.join("floor.csv")).unwrap();
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("floor.json")).unwrap()).unwrap();
@@ -335,6 +337,18 @@ fn grid_writes_csv_json_and_isolux_svg_and_never_overwrites_the_scene() {
         .unwrap();
     assert!((uniformity - min / mean).abs() < 1e-12);
     assert!(svg.contains("<svg") && svg.contains("illuminance (lux)"));
+    // A grid reaching past the box's walls: the points outside get no light, and the user is told
+    // that they pull the minimum and uniformity down.
+    let wide = dir.join("wide");
+    let mut args = vec!["grid", s, "-o", wide.to_str().unwrap()];
+    args.extend(fast);
+    args.extend(["--region", "-300,-300,850,850"]);
+    let out = radiosity(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && stderr.contains(unlit_warning),
+        "{stderr}"
+    );
     // An output that is the scene (through a link) is refused before any work; so is a bad plane.
     std::os::unix::fs::symlink(&scene, dir.join("link.csv")).unwrap();
     let link = dir.join("link");

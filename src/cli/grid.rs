@@ -4,7 +4,8 @@
 
 use super::args::{SceneArgs, SolveArgs};
 use crate::measures::illuminance::{
-    illuminance_grid, GatherSettings, Grid, ReferencePaths, Region, WorkPlane,
+    illuminance_grid, GatherSettings, Grid, GridReport, GridValue, ReferencePaths, Region,
+    WorkPlane,
 };
 use crate::output::work_plane::{output_paths, write_report};
 use crate::pipeline::simulate;
@@ -116,6 +117,9 @@ impl GridCommand {
             self.plane.height
         );
         let written = write_report(&self.output, &report, meta, &title)?;
+        if let Some(unlit) = unlit_points(&report) {
+            crate::progress::stderr_line(format_args!("warning: {name}: {unlit}"));
+        }
         let s = &report.statistics;
         let max_over_min = s
             .max_over_min
@@ -148,6 +152,32 @@ impl GridCommand {
         )?;
         Ok(())
     }
+}
+
+/// Illuminance below this fraction of the grid's mean counts as none at all.
+const UNLIT_FRACTION: f64 = 1e-3;
+
+/// What to tell the user about grid points (outside solids) that get no light to speak of, if any: the
+/// default grid spans the scene's bounds, which reach past a room's walls wherever something sticks
+/// out (office2's window frames: a row of points behind the wall, min 0.0 lux and a uniformity of 0),
+/// and the statistics then describe the room and its outside together.
+fn unlit_points(report: &GridReport) -> Option<String> {
+    let mean = report.statistics.mean;
+    let unlit: Vec<&GridValue> = report
+        .values
+        .iter()
+        .filter(|v| !v.inside_solid && v.lux < UNLIT_FRACTION * mean)
+        .collect();
+    let first = unlit.first()?;
+    let [x, y, z] = first.point;
+    Some(format!(
+        "{} of {} grid points get under {}% of the mean illuminance (the first at {x:.3}, {y:.3}, \
+         {z:.3}), and they count in the minimum and uniformity: outside the room's walls, or in an \
+         unlit closed space? --region limits the grid",
+        unlit.len(),
+        report.values.len() - report.inside_solid,
+        UNLIT_FRACTION * 100.0
+    ))
 }
 
 fn file_name(name: &str) -> &str {
