@@ -410,13 +410,12 @@ fn obj_with_mtl() {
     assert_eq!(lamp.emission.to_array(), [5.0, 4.0, 3.0]);
     assert_eq!(lamp.reflectance.r, 0.999);
     assert!(scene.warnings.iter().any(|w| w.message.contains("clamped")));
-    // Missing MTL: warning and default grey.
+    // Missing MTL: a warning at the `mtllib` line naming the library, and default grey.
     let dir = temp_dir(&[("box.obj", CUBE_OBJ)]);
     let scene = scene::load(&dir.join("box.obj"), &LoadOptions::default()).unwrap();
-    assert!(scene
-        .warnings
-        .iter()
-        .any(|w| w.message.contains("default grey")));
+    assert!(scene.warnings.iter().any(|w| w.line == 1
+        && w.message.contains("box.mtl not found")
+        && w.message.contains("default grey")));
     assert!(scene
         .polygons
         .iter()

@@ -51,13 +51,17 @@ pub fn parse_bytes(
     // problem found with a line number wins over tobj's line-less error.
     let mtl_error: std::cell::RefCell<Option<SceneError>> = Default::default();
     let sources = std::cell::RefCell::new(vec![path.to_path_buf()]);
+    let missing: std::cell::RefCell<Vec<std::path::PathBuf>> = Default::default();
     let loaded = tobj::load_obj_buf(&mut &text[..], &load_options, |name| {
         let mtl_path = path
             .parent()
             .map_or(name.to_path_buf(), |dir| dir.join(name));
         let bytes = match library(&mtl_path) {
             Ok(Some(bytes)) => bytes,
-            Ok(None) => return Err(tobj::LoadError::OpenFileFailed),
+            Ok(None) => {
+                missing.borrow_mut().push(mtl_path);
+                return Err(tobj::LoadError::OpenFileFailed);
+            }
             Err(e) => {
                 mtl_error
                     .borrow_mut()
@@ -93,10 +97,18 @@ pub fn parse_bytes(
     let mtl = match materials {
         Ok(m) => m,
         Err(e) => {
+            let (line, reason) = match missing.into_inner().first() {
+                // Named where the file names it: the first `mtllib` statement.
+                Some(library) => (
+                    mtllib_line(text),
+                    format!("material library {} not found", library.display()),
+                ),
+                None => (0, format!("material library not loaded ({e})")),
+            };
             warn(
                 &mut scene,
-                0,
-                format!("material library not loaded ({e}): using a default grey material"),
+                line,
+                format!("{reason}: using a default grey material"),
             );
             Vec::new()
         }
@@ -211,6 +223,13 @@ pub fn parse_bytes(
 }
 
 /// Checks the MTL statements `tobj` parses: colours need three numbers, scalars one.
+/// The 1-based line of the first `mtllib` statement in OBJ `text` (0 if none).
+fn mtllib_line(text: &[u8]) -> usize {
+    text.split(|&b| b == b'\n')
+        .position(|line| line.trim_ascii_start().starts_with(b"mtllib"))
+        .map_or(0, |index| index + 1)
+}
+
 fn check_mtl(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
     for (k, raw) in bytes.split(|&b| b == b'\n').enumerate() {
         let error = |m: String| SceneError::new(path, k + 1, m);
