@@ -264,8 +264,8 @@ pub fn error_summary(
         let mut parts = Vec::new();
         if mean_radiance > 0.0 {
             parts.push(format!(
-                "{:.0}% of the mean radiance",
-                100.0 * accuracy / mean_radiance
+                "{}% of the mean radiance",
+                percent(100.0 * accuracy / mean_radiance)
             ));
         }
         if let Some(p) = error.local_accuracy {
@@ -325,6 +325,17 @@ pub(crate) fn significant(x: f64) -> String {
     }
     let decimals = (2 - exponent).max(0) as usize;
     format!("{x:.decimals$}")
+}
+
+/// A percentage as the summary line prints it: whole from 1% up (as `--accuracy 30%` is given),
+/// [`significant`] below, where a whole number would read 0% (`--accuracy 1e-6` on the Cornell box
+/// is 0.000520% of its mean radiance).
+fn percent(p: f64) -> String {
+    if p.abs() >= 1.0 {
+        format!("{p:.0}")
+    } else {
+        significant(p)
+    }
 }
 
 impl RenderCommand {
@@ -396,7 +407,7 @@ fn extension(path: &Path) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::significant;
+    use super::{percent, significant};
 
     /// Three significant digits at every scale, where three decimals lost the classroom's accuracy.
     #[test]
@@ -411,5 +422,9 @@ mod tests {
         assert_eq!(significant(5.3348e300), "5.33e300");
         assert_eq!(significant(1.2345e-7), "1.23e-7");
         assert_eq!(significant(-3.0e6), "-3.00e6");
+        assert_eq!(percent(30.0), "30");
+        assert_eq!(percent(26.3), "26");
+        assert_eq!(percent(0.4), "0.400");
+        assert_eq!(percent(5.2e-4), "0.000520");
     }
 }
