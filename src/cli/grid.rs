@@ -4,8 +4,7 @@
 
 use super::args::{SceneArgs, SolveArgs};
 use crate::measures::illuminance::{
-    illuminance_grid, GatherSettings, Grid, GridReport, GridValue, ReferencePaths, Region,
-    WorkPlane,
+    illuminance_grid, GatherSettings, Grid, GridReport, ReferencePaths, Region, WorkPlane,
 };
 use crate::output::work_plane::{output_paths, write_report};
 use crate::pipeline::simulate;
@@ -162,20 +161,18 @@ const UNLIT_FRACTION: f64 = 1e-3;
 /// out (office2's window frames: a row of points behind the wall, min 0.0 lux and a uniformity of 0),
 /// and the statistics then describe the room and its outside together.
 fn unlit_points(report: &GridReport) -> Option<String> {
-    let mean = report.statistics.mean;
-    let unlit: Vec<&GridValue> = report
+    let s = &report.statistics;
+    let mut unlit = report
         .values
         .iter()
-        .filter(|v| !v.inside_solid && v.lux < UNLIT_FRACTION * mean)
-        .collect();
-    let first = unlit.first()?;
-    let [x, y, z] = first.point;
+        .filter(|v| !v.inside_solid && v.lux < UNLIT_FRACTION * s.mean);
+    let [x, y, z] = unlit.next()?.point;
     Some(format!(
         "{} of {} grid points get under {}% of the mean illuminance (the first at {x:.3}, {y:.3}, \
          {z:.3}), and they count in the minimum and uniformity: outside the room's walls, or in an \
          unlit closed space? --region limits the grid",
-        unlit.len(),
-        report.values.len() - report.inside_solid,
+        1 + unlit.count(),
+        s.count,
         UNLIT_FRACTION * 100.0
     ))
 }
