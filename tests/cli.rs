@@ -425,6 +425,54 @@ fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
 }
 
 #[test]
+fn warnings_of_one_kind_are_counted_after_three_and_info_lists_them_all() {
+    let dir = temp_dir("warnings");
+    let scene = dir.join("bent.mgf");
+    // Five non-planar quads (one corner lifted 5% of their size) beside an emitting triangle.
+    let mut text = String::from(
+        "m white =\n c\n rd 0.5\nm lamp =\n c\n ed 10\nv l1 =\n p 0 0 3\nv l2 =\n p 1 0 3\n\
+         v l3 =\n p 0 1 3\nm lamp\nf l1 l3 l2\nm white\n",
+    );
+    for k in 0..5 {
+        let x = 2 * k;
+        text.push_str(&format!(
+            "v a{k} =\n p {x} 0 0\nv b{k} =\n p {} 0 0\nv c{k} =\n p {} 1 0.05\nv d{k} =\n p {x} 1 0\nf a{k} b{k} c{k} d{k}\n",
+            x + 1,
+            x + 1
+        ));
+    }
+    std::fs::write(&scene, text).unwrap();
+    let out = radiosity(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        dir.join("bent.png").to_str().unwrap(),
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let warnings: Vec<_> = stderr
+        .lines()
+        .filter(|l| l.starts_with("warning: "))
+        .collect();
+    assert_eq!(warnings.len(), 4, "{stderr}");
+    assert!(
+        warnings[..3].iter().all(|w| w.contains("non-planar")),
+        "{stderr}"
+    );
+    assert!(
+        warnings[3].contains("2 more like the one above"),
+        "{stderr}"
+    );
+    let out = radiosity(&["info", scene.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.matches("non-planar").count(), 5, "{stderr}");
+}
+
+#[test]
 fn error_control_reports_its_accuracy_and_draws_its_estimate() {
     let dir = temp_dir("accuracy");
     let (png, stats, errors) = (dir.join("c.png"), dir.join("c.json"), dir.join("e.png"));

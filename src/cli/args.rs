@@ -74,16 +74,17 @@ fn parse_contact_gap(text: &str) -> Result<f64> {
 }
 
 impl SceneArgs {
-    /// Loads a scene to be solved: prints the loader's warnings (file:line: reason) unless quiet, and
-    /// refuses a scene without polygons.
+    /// Loads a scene to be solved: prints the loader's warnings (file:line: reason, at most
+    /// [`scene::WARNINGS_SHOWN_PER_KIND`] of a kind) unless quiet, and refuses a scene without polygons.
     pub fn load_for_solving(
         &self,
         progress: &crate::progress::Progress,
     ) -> Result<(Scene, String)> {
         let (scene, name) = self.load()?;
         if !progress.quiet {
-            for warning in &scene.warnings {
-                crate::progress::stderr_line(format_args!("warning: {warning}"));
+            let shown = scene::WARNINGS_SHOWN_PER_KIND;
+            for line in scene::grouped_warnings(&scene.warnings, shown) {
+                crate::progress::stderr_line(format_args!("warning: {line}"));
             }
         }
         anyhow::ensure!(

@@ -102,6 +102,49 @@ impl fmt::Display for Diagnostic {
     }
 }
 
+/// Warnings of one kind shown in full when a scene is loaded for solving; the rest are counted.
+pub const WARNINGS_SHOWN_PER_KIND: usize = 3;
+
+/// The lines to print for `warnings`: at most `shown` of each kind (the same message but for its
+/// numbers: the classroom has 480 non-planar polygons, whose warnings buried everything else), each
+/// kind's rest as one line naming how many and where the last lies. `radiosity info` lists them all.
+pub fn grouped_warnings(warnings: &[Diagnostic], shown: usize) -> Vec<String> {
+    let kind = |message: &str| {
+        let mut key = String::new();
+        for c in message.chars() {
+            if c.is_ascii_digit() || c == '.' {
+                if !key.ends_with('#') {
+                    key.push('#');
+                }
+            } else {
+                key.push(c);
+            }
+        }
+        key
+    };
+    let mut kinds: Vec<(String, Vec<&Diagnostic>)> = Vec::new();
+    for warning in warnings {
+        let key = kind(&warning.message);
+        match kinds.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, members)) => members.push(warning),
+            None => kinds.push((key, vec![warning])),
+        }
+    }
+    let mut lines = Vec::new();
+    for (_, members) in kinds {
+        lines.extend(members.iter().take(shown).map(|w| w.to_string()));
+        if let Some(last) = members.last().filter(|_| members.len() > shown) {
+            let file = sanitise(&last.file.display().to_string(), MAX_SHOWN_CHARS);
+            lines.push(format!(
+                "{} more like the one above, the last at {file}:{} (`radiosity info` lists them all)",
+                members.len() - shown,
+                last.line
+            ));
+        }
+    }
+    lines
+}
+
 /// Longest file name or message shown in a diagnostic, in characters.
 const MAX_SHOWN_CHARS: usize = 240;
 
@@ -478,7 +521,40 @@ fn matches_pattern(pattern: &str, name: &str) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::matches_pattern;
+    use super::{grouped_warnings, matches_pattern, Diagnostic};
+    use std::path::PathBuf;
+
+    #[test]
+    fn warnings_of_a_kind_are_shown_a_few_times_then_counted() {
+        let at = |line, message: String| Diagnostic {
+            file: PathBuf::from("room.mgf"),
+            line,
+            message,
+        };
+        let mut warnings: Vec<Diagnostic> = (1..=10)
+            .map(|k| at(k, format!("non-planar polygon ({}.5% off its plane)", k)))
+            .collect();
+        warnings.insert(2, at(40, "unknown entity 'foo': ignored".into()));
+        let lines = grouped_warnings(&warnings, 3);
+        assert_eq!(lines.len(), 5, "{lines:#?}");
+        assert_eq!(
+            lines[0],
+            "room.mgf:1: non-planar polygon (1.5% off its plane)"
+        );
+        assert_eq!(
+            lines[2],
+            "room.mgf:3: non-planar polygon (3.5% off its plane)"
+        );
+        assert!(lines[3].starts_with("7 more like the one above, the last at room.mgf:10 "));
+        assert_eq!(lines[4], "room.mgf:40: unknown entity 'foo': ignored");
+        // Different words are different kinds, however alike their numbers.
+        let two = [at(1, "a 1".into()), at(2, "b 1".into())];
+        assert_eq!(grouped_warnings(&two, 1).len(), 2);
+        assert_eq!(
+            grouped_warnings(&warnings, usize::MAX).len(),
+            warnings.len()
+        );
+    }
 
     #[test]
     fn patterns_match_whole_names_with_stars_for_any_run() {
