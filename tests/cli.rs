@@ -23,6 +23,24 @@ fn succeeds(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// Renders `scene` to an 8 × 8 `png` with the default settings, asserts that it succeeded and returns
+/// its standard error (warnings and the summary line).
+fn render_8x8(scene: &std::path::Path, png: &std::path::Path) -> String {
+    let out = radiosity(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    stderr
+}
+
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("radiosity-cli-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -375,19 +393,7 @@ fn a_scene_without_light_warns_and_a_written_scene_renders_as_it_was() {
         "m grey =\n c\n rd 0.5\nv a =\n p 0 0 0\nv b =\n p 1 0 0\nv c =\n p 1 1 0\nf a b c\n",
     )
     .unwrap();
-    let png = dir.join("dark.png");
-    let out = radiosity(&[
-        "render",
-        dark.to_str().unwrap(),
-        "-o",
-        png.to_str().unwrap(),
-        "--width",
-        "8",
-        "--height",
-        "8",
-    ]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
+    let stderr = render_8x8(&dark, &dir.join("dark.png"));
     assert!(stderr.contains("no surface emits light"), "{stderr}");
     // `scene cornell -o c.mgf`, then `render c.mgf`: the camera comes back, the image is lit.
     let scene = dir.join("c.mgf");
@@ -442,18 +448,7 @@ fn warnings_of_one_kind_are_counted_after_three_and_info_lists_them_all() {
         ));
     }
     std::fs::write(&scene, text).unwrap();
-    let out = radiosity(&[
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        dir.join("bent.png").to_str().unwrap(),
-        "--width",
-        "8",
-        "--height",
-        "8",
-    ]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
+    let stderr = render_8x8(&scene, &dir.join("bent.png"));
     let warnings: Vec<_> = stderr
         .lines()
         .filter(|l| l.starts_with("warning: "))
