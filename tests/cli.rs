@@ -750,6 +750,13 @@ fn probe_compares_with_a_stored_reference_at_the_same_points() {
         String::from_utf8_lossy(&reseeded.stderr)
     );
     assert_eq!(summary(&reseeded).len(), 3);
+    // ... and says so: another seed is not another point set.
+    assert!(
+        String::from_utf8_lossy(&reseeded.stdout).contains("the reference's own"),
+        "{}",
+        String::from_utf8_lossy(&reseeded.stdout)
+    );
+    assert!(!String::from_utf8_lossy(&against.stdout).contains("the reference's own"));
     let as_json = radiosity(&[&own_points[..], &["--json"]].concat());
     let points = |out: &std::process::Output| -> Vec<serde_json::Value> {
         let rows: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).expect("probe JSON");

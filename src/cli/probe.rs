@@ -66,6 +66,9 @@ impl ProbeCommand {
             "--spp must be at least 2 (the standard error needs two samples)"
         );
         let (scene, name) = self.scene.load_for_solving(progress)?;
+        // Whether the points are the stored reference's own (`--against` alone): then `--seed` varies
+        // the solve at one point set, which says nothing of another set (a note in the header).
+        let mut own_points = false;
         let (points, file) = match (&self.points, self.random, self.seen) {
             (Some(path), _, _) => (read_points(path)?, path.clone()),
             (None, Some(n), _) => (
@@ -89,7 +92,10 @@ impl ProbeCommand {
                 (points, PathBuf::from("points seen by the camera"))
             }
             (None, None, None) => match &self.against {
-                Some(path) => (read_stored_points(path)?, path.clone()),
+                Some(path) => {
+                    own_points = true;
+                    (read_stored_points(path)?, path.clone())
+                }
                 None => {
                     anyhow::bail!("give --points FILE, --random N, --seen N or --against REF.json")
                 }
@@ -114,6 +120,12 @@ impl ProbeCommand {
         }
         let compared = self.reference || self.against.is_some();
         let h = &solution.hierarchy;
+        let points_note = if own_points {
+            " (the reference's own: --seed changes the solve, not the points; another set needs its \
+             own reference)"
+        } else {
+            ""
+        };
         let solved = format!(
             "# solution: {}; {} elements ({} leaves), {} links, {} passes",
             super::render::error_summary(
@@ -143,7 +155,7 @@ impl ProbeCommand {
                 return Ok(());
             }
             outln!(
-                "# {name}: {} points; luminance cd/m², illuminance lux (179 lm/W × Y)",
+                "# {name}: {} points{points_note}; luminance cd/m², illuminance lux (179 lm/W × Y)",
                 results.len()
             )?;
             outln!("{solved}")?;
@@ -182,7 +194,7 @@ impl ProbeCommand {
             outln!("{}", serde_json::to_string_pretty(&results)?)?;
             return Ok(());
         }
-        outln!("# {name}: {} points", results.len())?;
+        outln!("# {name}: {} points{points_note}", results.len())?;
         outln!("{solved}")?;
         out!(
             "{:>5} {:>30} {:>6} {:>35}",
