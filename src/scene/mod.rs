@@ -18,6 +18,7 @@ pub mod polygonize;
 
 use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec3, Shape};
+use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -122,16 +123,20 @@ pub fn grouped_warnings(warnings: &[Diagnostic], shown: usize) -> Vec<String> {
         }
         key
     };
-    let mut kinds: Vec<(String, Vec<&Diagnostic>)> = Vec::new();
+    // Kinds in order of first appearance, found by hash (a file may hold many kinds: one per
+    // unknown material name).
+    let mut index: HashMap<String, usize> = HashMap::new();
+    let mut kinds: Vec<Vec<&Diagnostic>> = Vec::new();
     for warning in warnings {
-        let key = kind(&warning.message);
-        match kinds.iter_mut().find(|(k, _)| *k == key) {
-            Some((_, members)) => members.push(warning),
-            None => kinds.push((key, vec![warning])),
+        let next = kinds.len();
+        let k = *index.entry(kind(&warning.message)).or_insert(next);
+        if k == next {
+            kinds.push(Vec::new());
         }
+        kinds[k].push(warning);
     }
     let mut lines = Vec::new();
-    for (_, members) in kinds {
+    for members in kinds {
         lines.extend(members.iter().take(shown).map(|w| w.to_string()));
         if let Some(last) = members.last().filter(|_| members.len() > shown) {
             let file = sanitise(&last.file.display().to_string(), MAX_SHOWN_CHARS);
