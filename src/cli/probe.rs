@@ -68,7 +68,7 @@ impl ProbeCommand {
         let (scene, name) = self.scene.load_for_solving(progress)?;
         // Whether the points are the stored reference's own (`--against` alone): then `--seed` varies
         // the solve at one point set, which says nothing of another set (a note in the header).
-        let mut own_points = false;
+        let own_points = self.points.is_none() && self.random.is_none() && self.seen.is_none();
         let (points, file) = match (&self.points, self.random, self.seen) {
             (Some(path), _, _) => (read_points(path)?, path.clone()),
             (None, Some(n), _) => (
@@ -92,10 +92,7 @@ impl ProbeCommand {
                 (points, PathBuf::from("points seen by the camera"))
             }
             (None, None, None) => match &self.against {
-                Some(path) => {
-                    own_points = true;
-                    (read_stored_points(path)?, path.clone())
-                }
+                Some(path) => (read_stored_points(path)?, path.clone()),
                 None => {
                     anyhow::bail!("give --points FILE, --random N, --seen N or --against REF.json")
                 }

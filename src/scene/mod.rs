@@ -107,7 +107,7 @@ impl fmt::Display for Diagnostic {
 pub const WARNINGS_SHOWN_PER_KIND: usize = 3;
 
 /// The lines to print for `warnings`: at most `shown` of each kind (the same message but for its
-/// numbers: the classroom has 480 non-planar polygons, whose warnings buried everything else), each
+/// numbers: the classroom has 576 non-planar polygons, whose warnings buried everything else), each
 /// kind's rest as one line naming how many and where the last lies. `radiosity info` lists them all.
 pub fn grouped_warnings(warnings: &[Diagnostic], shown: usize) -> Vec<String> {
     let kind = |message: &str| {
