@@ -67,6 +67,11 @@ pub fn gather(hierarchy: &Hierarchy, clusters: &ClusterSweep, id: ElementId, out
         }
     }
     out[0] += clusters.pushed(id);
+    if let Some(slope) = clusters.pushed_slope(id) {
+        for (h, s) in out.iter_mut().zip(slope) {
+            *h += s;
+        }
+    }
 }
 
 /// Patches whose trees hold fewer elements gather on the calling thread: spreading a few dozen gathers

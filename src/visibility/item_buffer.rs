@@ -495,31 +495,71 @@ pub struct ItemBuffers {
 /// the allocator's rounding.
 const ENTRY_OVERHEAD: usize = 64;
 
-/// The cache's bytes kept for exposures are `1 / EXPOSURE_SHARE` of them, the buffers' the rest (a bit
-/// per patch against a buffer's fractions: a small share holds them all).
+/// The cache's bytes kept for exposures are `1 / EXPOSURE_SHARE` of them, the buffers' the rest (a
+/// few bits per patch against a buffer's fractions: a small share holds them all).
 const EXPOSURE_SHARE: usize = 8;
 
 /// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
-/// reach from outside the cluster, or which reach its link receivers, one bit each
-/// ([`ItemBuffers::exposure`]); an exposure toward a receiver holds one more word after the bits,
-/// the receiver's distance (`solvers::clustering::expose`).
+/// reach from outside the cluster, or which reach its link receivers ([`ItemBuffers::exposure`]): a bit
+/// per patch, whether the ray from its centroid reaches; then, where gradient nodes were tried (toward
+/// a source, `solvers::clustering::expose`), [`NODE_BITS`] per reached patch in order, whether the rays
+/// from its nodes do. An exposure toward a receiver holds one more word after the bits, the
+/// receiver's distance.
 pub type Exposure = Box<[u64]>;
 
-/// Whether bit `k` of `exposure` is set.
+/// Bits per reached patch for its gradient nodes: one per node.
+pub const NODE_BITS: usize = 4;
+
+/// Whether bit `k` of `exposure` is set: the ray from patch `k`'s centroid reaches.
 pub fn exposed(exposure: &[u64], k: usize) -> bool {
     exposure
         .get(k / 64)
         .is_some_and(|word| word >> (k % 64) & 1 == 1)
 }
 
-/// Packs one flag per patch into an [`Exposure`].
-pub fn pack_exposure(flags: impl ExactSizeIterator<Item = bool>) -> Exposure {
-    let mut words = vec![0u64; flags.len().div_ceil(64)];
-    for (k, flag) in flags.enumerate() {
-        if flag {
-            words[k / 64] |= 1 << (k % 64);
+/// Per patch of an exposure of `patches` patches, which of its gradient nodes' rays reach (bit `n`
+/// for node `n`): 0 where the centroid's ray did not or no nodes were tried.
+pub fn exposed_nodes(exposure: &[u64], patches: usize) -> Vec<u8> {
+    const PER_WORD: usize = 64 / NODE_BITS;
+    let nodes = exposure.get(patches.div_ceil(64)..).unwrap_or(&[]);
+    let mut rank = 0;
+    (0..patches)
+        .map(|k| {
+            if !exposed(exposure, k) {
+                return 0;
+            }
+            let word = nodes.get(rank / PER_WORD).copied().unwrap_or(0);
+            let bits = word >> (NODE_BITS * (rank % PER_WORD)) & ((1 << NODE_BITS) - 1);
+            rank += 1;
+            bits as u8
+        })
+        .collect()
+}
+
+/// Packs per patch whether its centroid's ray reaches and which of its nodes' rays do into an
+/// [`Exposure`]; the nodes' bits are kept with `nodes` only.
+pub fn pack_exposure(patches: impl ExactSizeIterator<Item = (bool, u8)>, nodes: bool) -> Exposure {
+    const PER_WORD: usize = 64 / NODE_BITS;
+    let mut words = vec![0u64; patches.len().div_ceil(64)];
+    let mut node_words: Vec<u64> = Vec::new();
+    let mut rank = 0;
+    for (k, (reached, node_bits)) in patches.enumerate() {
+        if !reached {
+            continue;
+        }
+        words[k / 64] |= 1 << (k % 64);
+        if nodes {
+            debug_assert!(usize::from(node_bits) < 1 << NODE_BITS);
+            if rank % PER_WORD == 0 {
+                node_words.push(0);
+            }
+            if let Some(word) = node_words.last_mut() {
+                *word |= u64::from(node_bits) << (NODE_BITS * (rank % PER_WORD));
+            }
+            rank += 1;
         }
     }
+    words.extend(node_words);
     words.into_boxed_slice()
 }
 
@@ -659,6 +699,31 @@ mod tests {
             centroid: DVec3::ZERO,
         };
         Orientation::new(&[facing(1.0), facing(-1.0), facing(1.0)])
+    }
+
+    /// Exposures of many patches (more than a word of each part) give back what was packed: the
+    /// centroids' bits, and the nodes' bits of the reached patches only, or none where no nodes were
+    /// kept; a word appended after them (a sending exposure's reach) changes neither.
+    #[test]
+    fn exposures_unpack_to_what_was_packed() {
+        let patches: Vec<(bool, u8)> = (0..150u32)
+            .map(|k| (k % 3 != 0, (k * 7 % 16) as u8))
+            .collect();
+        let with_nodes = pack_exposure(patches.iter().copied(), true);
+        let nodes = exposed_nodes(&with_nodes, patches.len());
+        for (k, &(reached, bits)) in patches.iter().enumerate() {
+            assert_eq!(exposed(&with_nodes, k), reached, "patch {k}");
+            assert_eq!(nodes[k], if reached { bits } else { 0 }, "patch {k}");
+        }
+        let mut without = pack_exposure(patches.iter().copied(), false).into_vec();
+        assert_eq!(without.len(), patches.len().div_ceil(64));
+        without.push(f64::to_bits(2.5));
+        assert!(exposed_nodes(&without[..without.len() - 1], patches.len())
+            .iter()
+            .all(|&b| b == 0));
+        for (k, &(reached, _)) in patches.iter().enumerate() {
+            assert_eq!(exposed(&without, k), reached, "patch {k}");
+        }
     }
 
     /// Threads asking for the same buffers at once, across many shards, each get the one answer
