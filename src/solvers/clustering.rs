@@ -1204,8 +1204,8 @@ struct Pushed {
     slopes: Vec<(ElementId, Slope)>,
 }
 
-/// Coefficients of the first three basis functions of a zero-mean variation of irradiance, per colour
-/// channel ([`Gradient`]).
+/// A zero-mean variation of irradiance over a patch ([`Gradient`]): its coefficients of the first
+/// three basis functions, each an RGB triple in single precision.
 type Slope = [[f32; 3]; 3];
 
 /// What [`ClusterSweep::push_from_clusters`] sums per patch.
