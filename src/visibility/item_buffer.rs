@@ -510,6 +510,9 @@ pub type Exposure = Box<[u64]>;
 /// Bits per reached patch for its gradient nodes: one per node.
 pub const NODE_BITS: usize = 4;
 
+/// Reached patches whose node bits one word of an [`Exposure`] holds.
+const NODE_PATCHES_PER_WORD: usize = 64 / NODE_BITS;
+
 /// Whether bit `k` of `exposure` is set: the ray from patch `k`'s centroid reaches.
 pub fn exposed(exposure: &[u64], k: usize) -> bool {
     exposure
@@ -520,7 +523,6 @@ pub fn exposed(exposure: &[u64], k: usize) -> bool {
 /// Per patch of an exposure of `patches` patches, which of its gradient nodes' rays reach (bit `n`
 /// for node `n`): 0 where the centroid's ray did not or no nodes were tried.
 pub fn exposed_nodes(exposure: &[u64], patches: usize) -> Vec<u8> {
-    const PER_WORD: usize = 64 / NODE_BITS;
     let nodes = exposure.get(patches.div_ceil(64)..).unwrap_or(&[]);
     let mut rank = 0;
     (0..patches)
@@ -528,8 +530,12 @@ pub fn exposed_nodes(exposure: &[u64], patches: usize) -> Vec<u8> {
             if !exposed(exposure, k) {
                 return 0;
             }
-            let word = nodes.get(rank / PER_WORD).copied().unwrap_or(0);
-            let bits = word >> (NODE_BITS * (rank % PER_WORD)) & ((1 << NODE_BITS) - 1);
+            let word = nodes
+                .get(rank / NODE_PATCHES_PER_WORD)
+                .copied()
+                .unwrap_or(0);
+            let bits =
+                word >> (NODE_BITS * (rank % NODE_PATCHES_PER_WORD)) & ((1 << NODE_BITS) - 1);
             rank += 1;
             bits as u8
         })
@@ -539,7 +545,6 @@ pub fn exposed_nodes(exposure: &[u64], patches: usize) -> Vec<u8> {
 /// Packs per patch whether its centroid's ray reaches and which of its nodes' rays do into an
 /// [`Exposure`]; the nodes' bits are kept with `nodes` only.
 pub fn pack_exposure(patches: impl ExactSizeIterator<Item = (bool, u8)>, nodes: bool) -> Exposure {
-    const PER_WORD: usize = 64 / NODE_BITS;
     let mut words = vec![0u64; patches.len().div_ceil(64)];
     let mut node_words: Vec<u64> = Vec::new();
     let mut rank = 0;
@@ -550,11 +555,11 @@ pub fn pack_exposure(patches: impl ExactSizeIterator<Item = (bool, u8)>, nodes: 
         words[k / 64] |= 1 << (k % 64);
         if nodes {
             debug_assert!(usize::from(node_bits) < 1 << NODE_BITS);
-            if rank % PER_WORD == 0 {
+            if rank % NODE_PATCHES_PER_WORD == 0 {
                 node_words.push(0);
             }
             if let Some(word) = node_words.last_mut() {
-                *word |= u64::from(node_bits) << (NODE_BITS * (rank % PER_WORD));
+                *word |= u64::from(node_bits) << (NODE_BITS * (rank % NODE_PATCHES_PER_WORD));
             }
             rank += 1;
         }
