@@ -1039,9 +1039,12 @@ impl ClusterSweep {
                                 share_by_areas(geometry, e.area, gathered, weights, into);
                                 return;
                             };
-                            let mut part = vec![Rgb::BLACK; into.len()];
-                            share_by_areas(geometry, e.area, gathered, weights, &mut part);
-                            for (k, (&p, &bits)) in part.iter().zip(nodes).enumerate() {
+                            let factors = area_factors(geometry, e.area, weights);
+                            for (k, (factor, &bits)) in factors.zip(nodes).enumerate() {
+                                let Some(factor) = factor else {
+                                    continue;
+                                };
+                                let p = gathered * factor;
                                 into[k] += p;
                                 let Some(d) = gradient.slope(h.element(contents[k]).shape(), bits)
                                 else {
@@ -1728,15 +1731,27 @@ fn share_by_areas(
     areas: &[f64],
     share: &mut [Rgb],
 ) {
-    let total: f64 = areas.iter().sum();
-    if total <= 0.0 {
-        return;
-    }
-    for ((s, &w), &(_, area)) in share.iter_mut().zip(areas).zip(geometry) {
-        if area > 0.0 {
-            *s += gathered * (cluster_area * w / (area * total));
+    for (s, factor) in share
+        .iter_mut()
+        .zip(area_factors(geometry, cluster_area, areas))
+    {
+        if let Some(factor) = factor {
+            *s += gathered * factor;
         }
     }
+}
+
+/// Per patch, the factor `A_cluster w_k / (A_k Σ w)` of [`share_by_areas`]; `None` for a patch
+/// without area, and for all where no patch has a weight.
+fn area_factors<'a>(
+    geometry: &'a [(DVec3, f64)],
+    cluster_area: f64,
+    areas: &'a [f64],
+) -> impl Iterator<Item = Option<f64>> + 'a {
+    let total: f64 = areas.iter().sum();
+    areas.iter().zip(geometry).map(move |(&w, &(_, area))| {
+        (total > 0.0 && area > 0.0).then(|| cluster_area * w / (area * total))
+    })
 }
 
 /// Adds irradiance `gathered` at a cluster of area `cluster_area` to its normal groups' `group_share`
