@@ -11,10 +11,10 @@ use radiosity::hierarchy::clusters::ClusteringKind;
 use radiosity::hierarchy::{ElementId, Hierarchy};
 use radiosity::pipeline::{simulate, SimulationSettings, VisibilityKind};
 use radiosity::scene::{generators, Material, Polygon, Scene};
-use radiosity::solvers::clustering::{exposure_shares, groups_toward, ClusterSweep};
+use radiosity::solvers::clustering::{exposure_shares, groups_toward, node_fraction, ClusterSweep};
 use radiosity::visibility::extinction::Extinction;
 use radiosity::visibility::item_buffer::{
-    bucket_direction, direction_bucket, exposed, IntraClusterKind,
+    bucket_direction, direction_bucket, exposed_nodes, IntraClusterKind,
 };
 use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
@@ -491,17 +491,16 @@ fn exposure_scale(h: &Hierarchy, id: ElementId, source: ElementId, v: f64) -> f6
         return 1.0;
     };
     let contents = h.contents(h.cluster(id).expect("cluster"));
+    let nodes = exposed_nodes(&exposure, contents.len());
     let (mut exposed_area, mut total) = (0.0, 0.0);
-    for (k, (&s, a)) in contents
+    for ((&s, a), &bits) in contents
         .iter()
         .zip(visible_areas(h, id, toward))
-        .enumerate()
+        .zip(&nodes)
     {
         let w = a * h.patch_of(s).normal.dot(along).max(0.0);
         total += w;
-        if exposed(&exposure, k) {
-            exposed_area += w;
-        }
+        exposed_area += w * node_fraction(h.element(s).shape(), bits);
     }
     if exposed_area <= 0.0 || exposed_area >= total {
         return 1.0;
@@ -898,6 +897,107 @@ fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
     assert!(
         varying_seeds > PLATE_SEEDS / 2,
         "only {varying_seeds} seeds gave the plate a gradient"
+    );
+}
+
+/// The mean light of a patch partly in a shadow cast from outside its cluster: the plates of
+/// [`plates_under_a_square`] under the unit emitter 4 m up, the black square at 0.2 m moved so that
+/// its edge (x = −0.38) casts the shadow of the emitter's centre across the left plate's middle
+/// (x = −0.4: a ground point at x sees emitter points x_e with `0.95 x + 0.05 x_e ≥ −0.38`), a
+/// penumbra 5 cm wide about it; the square stays out of the plates' cluster, which the emitter
+/// lights through one cluster link. Ground truth: the plate's mean irradiance, `∫ cos cos' / (π r²)`
+/// over the part of the emitter each point sees, on a 40 × 4 grid of points and a 64 × 64 grid on
+/// the emitter with the square tested exactly: half the unshadowed mean. A patch's exposed fraction
+/// is the share of its 2 × 2 Gauss nodes whose rays reach the source's centre
+/// (`solvers::clustering::node_fraction`), the quadrature of its lit part: one row of two here (the
+/// nodes at 21% and 79% of the width lie either side of the edge). Error model: that quadrature's
+/// error, `|½ − f| / f` relative for the true fraction `f`, plus the 5% of the centre-to-centre point
+/// kernel and `f32` storage of the first plate test. Decided by the centroid's ray alone (until
+/// 2026-11-30), the plate took the light of its whole area or none: twice the truth or nothing.
+#[test]
+fn a_patch_partly_in_a_shadow_outside_its_cluster_gets_the_light_of_its_lit_part() {
+    let (x0, x1, edge, z) = (-0.5, -0.3, -0.38, 0.2);
+    let scene = one_polygon_per_material(
+        vec![
+            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
+            Material::diffuse("partly shaded plate", Rgb::splat(RHO)),
+            Material::diffuse("open plate", Rgb::splat(RHO)),
+            Material::diffuse("black square", Rgb::BLACK),
+        ],
+        [
+            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
+            rectangle([x0, x1, -0.1, 0.1], 0.0, true),
+            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
+            rectangle([edge - 2.4, edge, -1.2, 1.2], z, false),
+        ],
+        |_| false,
+    );
+    let plate = 1;
+    let emitter = scene.polygons[0].shape;
+    const GRID: usize = 64;
+    let irradiance = |p: DVec3, shadowed: bool| -> f64 {
+        let cell = emitter.area() / (GRID * GRID) as f64;
+        (0..GRID * GRID)
+            .map(|i| {
+                let uv = DVec2::new((i % GRID) as f64 + 0.5, (i / GRID) as f64 + 0.5) / GRID as f64;
+                let q = emitter.point_at(uv);
+                let crossing = p + (q - p) * ((z - p.z) / (q.z - p.z));
+                if shadowed
+                    && (edge - 2.4..=edge).contains(&crossing.x)
+                    && (-1.2..=1.2).contains(&crossing.y)
+                {
+                    return 0.0;
+                }
+                let d = q - p;
+                let r2 = d.length_squared();
+                let cos = d.z / r2.sqrt();
+                cos * cos * cell / (std::f64::consts::PI * r2)
+            })
+            .sum()
+    };
+    let points: Vec<DVec3> = (0..160)
+        .map(|i| {
+            let (u, v) = (
+                ((i % 40) as f64 + 0.5) / 40.0,
+                ((i / 40) as f64 + 0.5) / 4.0,
+            );
+            DVec3::new(x0 + (x1 - x0) * u, -0.1 + 0.2 * v, 0.0)
+        })
+        .collect();
+    let mean = |shadowed: bool| {
+        points.iter().map(|&p| irradiance(p, shadowed)).sum::<f64>() / points.len() as f64
+    };
+    let (truth, open) = (mean(true), mean(false));
+    let lit = truth / open;
+    assert!((0.45..0.55).contains(&lit), "lit fraction {lit}");
+    let tolerance = (0.5 - lit).abs() / lit + 0.05;
+    let mut lit_seeds = 0;
+    for_each_seed(&scene, |seed, h| {
+        let square = h.patches[3].root;
+        let through_cluster = (0..h.elements.len() as ElementId).any(|id| {
+            holds_both_plates(h, id)
+                && !h
+                    .contents(h.cluster(id).expect("a cluster"))
+                    .contains(&square)
+                && h.element(id)
+                    .links
+                    .iter()
+                    .any(|l| l.coupling.visibility > 0.0)
+        });
+        if !through_cluster {
+            return;
+        }
+        lit_seeds += 1;
+        let radiance = mean_radiance_of(h, |k| k == plate);
+        let ratio = radiance / (RHO * truth);
+        assert!(
+            (ratio - 1.0).abs() <= tolerance,
+            "seed {seed}: the plate's mean is {ratio:.3} of the truth (tolerance {tolerance:.3})"
+        );
+    });
+    assert!(
+        lit_seeds > PLATE_SEEDS / 2,
+        "only {lit_seeds} seeds lit the pair through a cluster link"
     );
 }
 

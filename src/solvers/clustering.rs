@@ -55,9 +55,9 @@
 //! sweep ([`ClusterSweep`]), the shares of received irradiance (hidden patches get none) and the
 //! weights of the radiance it sends (hidden patches send none). The item buffer sees only the
 //! cluster's contents; what stands outside it between a patch and the source only the link's one
-//! average visibility knew, so the shares of received irradiance go to the patches *exposed* toward
-//! the source (a ray from each patch's centroid, [`expose`]), each taking the visibility its own ray
-//! found rather than the link's average: what it would receive unoccluded, or nothing
+//! average visibility knew, so the shares of received irradiance go to the parts of patches *exposed*
+//! toward the source (rays from four nodes of each patch, [`expose`]), each taking the visibility its
+//! own rays found rather than the link's average: what it would receive unoccluded, or nothing
 //! ([`exposure_shares`]), so that no patch receives more from a link than it would unoccluded.
 //!
 //! Cost: a coupling reads its cluster ends by normal group ([`groups_toward`]: each group's visible
@@ -1064,11 +1064,11 @@ impl ClusterSweep {
                             let total: Rgb = run.iter().map(|&(_, _, g, _)| g).sum();
                             let (split, nodes) = buffers
                                 .exposure(id, run[0].0, |exposure| {
-                                    let nodes = match gradient {
-                                        Some(_) => exposed_nodes(exposure, areas.len()),
-                                        None => Vec::new(),
-                                    };
-                                    (ExposureSplit::new(&areas, exposure), nodes)
+                                    let nodes = exposed_nodes(exposure, areas.len());
+                                    let split = ExposureSplit::new(&areas, |k| {
+                                        node_fraction(h.element(contents[k]).shape(), nodes[k])
+                                    });
+                                    (split, nodes)
                                 })
                                 .unwrap_or((None, Vec::new()));
                             let Some(split) = split else {
@@ -1223,7 +1223,7 @@ enum Sharing {
 
 /// Per patch root (by element id), the irradiance over π that sharing by exposure ([`expose`]) moved
 /// to or from it, summed over the clusters above it with the current radiances: the size of what the
-/// sharing decides with one centroid ray per patch, which the error estimate adds to the cluster
+/// sharing decides with four node rays per patch, which the error estimate adds to the cluster
 /// links' (`solvers::error_estimate`). Zero without item buffers or exposures.
 pub fn moved_by_exposure(h: &Hierarchy, sweep: &ClusterSweep) -> Vec<Rgb> {
     if h.item_buffers.is_none() || h.root_cluster.is_none() {
@@ -1266,10 +1266,11 @@ pub fn moved_by_sending(h: &Hierarchy, sweep: &ClusterSweep) -> Vec<f64> {
 }
 
 /// Stores each cluster's *exposure* along the direction buckets of its links that carry light, where
-/// not stored yet: for every patch the bucket's item buffer leaves visible, whether a ray from its
-/// centroid reaches the centre of the bucket's nearest link source, past the cluster's own contents
-/// and the source's (their mutual hiding is the item buffer's, §6.1). [`ClusterSweep`] shares what the
-/// cluster gathers along the bucket among the exposed patches only.
+/// not stored yet: for every patch the bucket's item buffer leaves visible, which of the rays from its
+/// four gradient nodes ([`gradient_rule`]) reach the centre of the bucket's nearest link source, past
+/// the cluster's own contents and the source's (their mutual hiding is the item buffer's, §6.1): its
+/// exposed fraction, the nodes' quadrature of its part in the open ([`node_fraction`]).
+/// [`ClusterSweep`] shares what the cluster gathers along the bucket among the exposed parts.
 ///
 /// Why: a cluster link's visibility is one average over the whole cluster (rays between random points
 /// of both ends), and the item buffer sees only the cluster's own contents, so the light a link
@@ -1278,8 +1279,11 @@ pub fn moved_by_sending(h: &Hierarchy, sweep: &ClusterSweep) -> Vec<f64> {
 /// too little and the sheltered ones too much: the classroom's chair backs, at the height of the desks
 /// in front of them, read 60–68% too dark, while a final gather of the same solution at those points
 /// agrees with the reference (BENCHMARKS.md, "Exposure"). Sharing by exposure gives each exposed
-/// patch what it would receive unoccluded, and the others only what the link's rays saw beyond what
-/// the exposed ones explain ([`exposure_shares`]).
+/// part what it would receive unoccluded, and the rest only what the link's rays saw beyond what the
+/// exposed parts explain ([`exposure_shares`]). Until 2026-11-30 one ray from the centroid decided
+/// for the whole patch, which then got the light of all its area or none: a chair seat half under a
+/// desk, a plate half in a shadow (tests/intra_cluster.rs); the nodes' fractions took the
+/// classroom's error at its seen points from 5.18% to 4.96% (BENCHMARKS.md, "Exposed fractions").
 ///
 /// The same for sending, keyed apart ([`sending_key`]): per (cluster, bucket) that links from the
 /// cluster use, which visible patches a ray from their centroid reaches the bucket's nearest
@@ -1295,7 +1299,6 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let clusters: Vec<ElementId> = (h.patches.len() as ElementId..=root)
         .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
         .collect();
-    let gradients = Gradient::new(h).is_some();
     let mut exposures: Vec<((u32, u16), Exposure)> = clusters
         .par_iter()
         .flat_map_iter(|&id| {
@@ -1323,7 +1326,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
                 .map(|(bucket, _, source)| {
                     (
                         (id, bucket),
-                        exposure(h, visibility, buffers, id, bucket, source, gradients),
+                        exposure(h, visibility, buffers, id, bucket, source, true),
                     )
                 })
                 .collect::<Vec<_>>()
@@ -1391,8 +1394,9 @@ fn sending_reach(exposure: &[u64]) -> f64 {
         .map_or(f64::INFINITY, |&word| f64::from_bits(word))
 }
 
-/// [`expose`] for one (cluster, bucket) toward the link end `other` (a source, or a receiver); with
-/// `nodes`, an exposed patch's [`Gradient`] nodes are tried too.
+/// [`expose`] for one (cluster, bucket) toward the link end `other` (a source, or a receiver): with
+/// `nodes` (toward a source), a ray from each of a patch's four gradient nodes ([`gradient_rule`]),
+/// the patch reached where any of them does; without, one ray from its centroid.
 fn exposure(
     h: &Hierarchy,
     visibility: &dyn Visibility,
@@ -1420,11 +1424,8 @@ fn exposure(
             visibility.transmittance_past_onto(from, target, polygon, &transparent) >= 0.5
         };
         let shape = h.element(patch).shape();
-        if !reaches(shape.centroid()) {
-            return (false, 0);
-        }
         if !nodes {
-            return (true, 0);
+            return (reaches(shape.centroid()), 0);
         }
         let node_bits = gradient_rule(shape.domain())
             .nodes
@@ -1432,9 +1433,31 @@ fn exposure(
             .enumerate()
             .filter(|&(_, &(uv, _))| reaches(shape.point_at(uv)))
             .fold(0, |bits, (n, _)| bits | 1 << n);
-        (true, node_bits)
+        (node_bits != 0, node_bits)
     });
     pack_exposure(patches, nodes)
+}
+
+/// The exposed fraction of `shape` whose gradient nodes' rays reached as the bits of `nodes` say
+/// ([`exposure`]): their share of the patch's area by the rule's weights and Jacobian.
+pub fn node_fraction(shape: &Shape, nodes: u8) -> f64 {
+    let rule = gradient_rule(shape.domain());
+    if nodes == 0 || u32::from(nodes) == (1 << rule.nodes.len()) - 1 {
+        return f64::from(nodes.min(1));
+    }
+    let (mut reached, mut all) = (0.0, 0.0);
+    for (n, &(uv, w)) in rule.nodes.iter().enumerate() {
+        let da = w * shape.jacobian(uv);
+        all += da;
+        if nodes >> n & 1 == 1 {
+            reached += da;
+        }
+    }
+    if all > 0.0 {
+        reached / all
+    } else {
+        0.0
+    }
 }
 
 /// The degree of the rule whose nodes ([`gradient_rule`]) tell how exposure varies over a patch.
@@ -1450,13 +1473,13 @@ fn gradient_rule(domain: crate::geometry::Domain) -> &'static crate::geometry::c
 
 /// How the light a cluster shares among its exposed patches varies over each patch.
 ///
-/// Why: sharing by exposure ([`expose`]) gives a patch the same irradiance all over, decided by its
-/// centroid's ray. A patch half in the shadow of something outside its cluster (a chair back behind
+/// Why: sharing by exposure ([`expose`]) gives a patch the same irradiance all over, its exposed
+/// fraction's. A patch half in the shadow of something outside its cluster (a chair back behind
 /// a desk) was then lit evenly, too dark at its exposed top and too bright below: at the classroom's
 /// seen points lit mostly through clusters the error was 15.9% RMS, with a mean of −6.8%, against
 /// 4.4% elsewhere; with gradients 14.1% and −1.5% (BENCHMARKS.md, "Gradients of what clusters
-/// push"). Rays from four nodes of each
-/// exposed patch to the same target say which part is exposed; the patch's share then follows the
+/// push"). The rays from its four nodes that gave that fraction say which part is exposed; the
+/// patch's share then follows the
 /// linear function through them (the projection of the node values on the basis' linear functions,
 /// `c_α = (1/|D|) Σ_n w_n φ_α(uv_n) b_n`), scaled to the same mean, so that the power each patch
 /// receives is unchanged, and flattened as far as needed to stay non-negative at every corner.
@@ -1562,7 +1585,8 @@ fn sent_along(
     let visible = average(&areas, total);
     let Some((split, reach)) = buffers
         .exposure(id, sending_key(bucket), |exposure| {
-            ExposureSplit::new(&areas, exposure).map(|split| (split, sending_reach(exposure)))
+            ExposureSplit::new(&areas, |k| f64::from(u8::from(exposed(exposure, k))))
+                .map(|split| (split, sending_reach(exposure)))
         })
         .flatten()
     else {
@@ -1576,30 +1600,28 @@ fn sent_along(
     )
 }
 
-/// A cluster's visible projected areas along a bucket split by exposure ([`expose`]): the exposed
-/// patches' and the others'.
+/// A cluster's visible projected areas along a bucket split by exposure ([`expose`]): each patch's
+/// exposed part and the rest.
 struct ExposureSplit {
-    /// The areas with every unexposed patch's set to 0.
+    /// Each patch's visible projected area times its exposed fraction.
     exposed: Vec<f64>,
-    /// The areas with every exposed patch's set to 0.
+    /// Each patch's visible projected area times its unexposed fraction.
     others: Vec<f64>,
     exposed_total: f64,
     total: f64,
 }
 
 impl ExposureSplit {
-    /// `None` where no patch with an area is exposed, or every one is: exposure then tells no patch
-    /// from another, and sharing and sending take all visible patches alike.
-    fn new(areas: &[f64], exposure: &[u64]) -> Option<Self> {
+    /// The split of `areas` by each patch's exposed fraction `exposed(k)` in [0, 1]. `None` where
+    /// nothing with an area is exposed, or everything is: exposure then tells no patch from
+    /// another, and sharing and sending take all visible patches alike.
+    fn new(areas: &[f64], exposed: impl Fn(usize) -> f64) -> Option<Self> {
         let (exposed, others): (Vec<f64>, Vec<f64>) = areas
             .iter()
             .enumerate()
             .map(|(k, &w)| {
-                if exposed(exposure, k) {
-                    (w, 0.0)
-                } else {
-                    (0.0, w)
-                }
+                let x = exposed(k);
+                (w * x, w * (1.0 - x))
             })
             .unzip();
         let exposed_total: f64 = exposed.iter().sum();
@@ -1622,17 +1644,17 @@ impl ExposureSplit {
 pub const CLUSTER_RECEIVER_SAMPLES: usize = 2 * CLUSTER_VISIBILITY_SAMPLES;
 
 /// What a cluster link gathered, `g` (its sampled visibility `v` included), goes to the exposed
-/// patches, `g e / v`, and to the other visible ones, `g max(0, v − v_e) / v` with
-/// `v_e = e + 3 √(e (1 − e) / N)`, where `e` is the exposed patches' share of the visible projected
-/// area along the link's bucket and `N` = [`CLUSTER_RECEIVER_SAMPLES`]; shared within each part by
+/// parts of the patches, `g e / v`, and to the rest, `g max(0, v − v_e) / v` with
+/// `v_e = e + 3 √(e (1 − e) / N)`, where `e` is the exposed parts' share of the visible projected
+/// area along the link's bucket and `N` = [`CLUSTER_RECEIVER_SAMPLES`]; shared within each by
 /// visible projected area. Returns the two factors of `g`.
 ///
-/// Why: each patch takes the visibility its own centroid ray found ([`expose`]), 1 where it reached
-/// the source, rather than the cluster's average `v`: an exposed patch gets what it would unoccluded,
+/// Why: each patch takes the visibility its own node rays found ([`expose`]), 1 where all reached
+/// the source, rather than the cluster's average `v`: an exposed part gets what it would unoccluded,
 /// a hidden one nothing, whatever the few rays of `v` found (exact where the occlusion is all or
-/// nothing per patch: a chair back behind a desk, the ceiling over a corridor lamp lit by the lamp's
-/// back). `v` only adds what the centroid rays cannot explain: its excess over `e` beyond three
-/// standard deviations of `N` Bernoulli samples at `e`, spread over the unexposed patches (a source
+/// nothing per node row: a chair back behind a desk, the ceiling over a corridor lamp lit by the
+/// lamp's back). `v` only adds what the node rays cannot explain: its excess over `e` beyond three
+/// standard deviations of `N` Bernoulli samples at `e`, spread over the unexposed parts (a source
 /// whose centre is hidden from most patches while most of it is not). Until 2026-11-28 the exposed
 /// patches got all of `g`, `v / e` times what they would unoccluded: a patch holding 0.45% of a
 /// desk's visible area took the floor's light for the whole desk, one patch of the classroom

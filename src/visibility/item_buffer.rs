@@ -501,9 +501,9 @@ const EXPOSURE_SHARE: usize = 8;
 
 /// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
 /// reach from outside the cluster, or which reach its link receivers ([`ItemBuffers::exposure`]): a bit
-/// per patch, whether the ray from its centroid reaches; then, where gradient nodes were tried (toward
-/// a source, `solvers::clustering::expose`), [`NODE_BITS`] per reached patch in order, whether the rays
-/// from its nodes do. An exposure toward a receiver holds one more word after the bits, the
+/// per patch, whether it is reached: toward a receiver, by the ray from its centroid; toward a source
+/// (`solvers::clustering::expose`), by the ray from any of its nodes, followed by [`NODE_BITS`] per
+/// reached patch in order, whether the rays from its nodes do. An exposure toward a receiver holds one more word after the bits, the
 /// receiver's distance.
 pub type Exposure = Box<[u64]>;
 
@@ -513,7 +513,7 @@ pub const NODE_BITS: usize = 4;
 /// Reached patches whose node bits one word of an [`Exposure`] holds.
 const NODE_PATCHES_PER_WORD: usize = 64 / NODE_BITS;
 
-/// Whether bit `k` of `exposure` is set: the ray from patch `k`'s centroid reaches.
+/// Whether bit `k` of `exposure` is set: patch `k` is reached (by its centroid's ray, or some node's).
 pub fn exposed(exposure: &[u64], k: usize) -> bool {
     exposure
         .get(k / 64)
@@ -521,7 +521,7 @@ pub fn exposed(exposure: &[u64], k: usize) -> bool {
 }
 
 /// Per patch of an exposure of `patches` patches, which of its gradient nodes' rays reach (bit `n`
-/// for node `n`): 0 where the centroid's ray did not or no nodes were tried.
+/// for node `n`): 0 where the patch is not reached or no nodes were tried.
 pub fn exposed_nodes(exposure: &[u64], patches: usize) -> Vec<u8> {
     let nodes = exposure.get(patches.div_ceil(64)..).unwrap_or(&[]);
     let mut rank = 0;
@@ -542,8 +542,8 @@ pub fn exposed_nodes(exposure: &[u64], patches: usize) -> Vec<u8> {
         .collect()
 }
 
-/// Packs per patch whether its centroid's ray reaches and which of its nodes' rays do into an
-/// [`Exposure`]; the nodes' bits are kept with `nodes` only.
+/// Packs per patch whether it is reached and which of its nodes' rays do into an [`Exposure`]; the
+/// nodes' bits are kept with `nodes` only.
 pub fn pack_exposure(patches: impl ExactSizeIterator<Item = (bool, u8)>, nodes: bool) -> Exposure {
     let mut words = vec![0u64; patches.len().div_ceil(64)];
     let mut node_words: Vec<u64> = Vec::new();
@@ -583,9 +583,9 @@ impl ItemBuffers {
             .contains_key(&(cluster, bucket))
     }
 
-    /// The exposure of `cluster` along `bucket`, when stored: which of its patches a ray from their
-    /// centroid reaches the bucket's nearest link source by (or, for a sending key, its nearest
-    /// receiver), past the cluster's own contents (the item buffer answers for those). See
+    /// The exposure of `cluster` along `bucket`, when stored: which of its patches (and which of their
+    /// nodes) rays reach the bucket's nearest link source from (or, for a sending key, its nearest
+    /// receiver, from their centroids), past the cluster's own contents (the item buffer answers for those). See
     /// `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read
     /// lock: sweeps ask for exposures hundreds of thousands of times, and a copy each was an
     /// allocation each.
@@ -707,7 +707,7 @@ mod tests {
     }
 
     /// Exposures of many patches (more than a word of each part) give back what was packed: the
-    /// centroids' bits, and the nodes' bits of the reached patches only, or none where no nodes were
+    /// patches' bits, and the nodes' bits of the reached patches only, or none where no nodes were
     /// kept; a word appended after them (a sending exposure's reach) changes neither.
     #[test]
     fn exposures_unpack_to_what_was_packed() {
