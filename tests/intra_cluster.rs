@@ -787,6 +787,76 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     );
 }
 
+/// The black square of [`plates_beside_a_square_edge`]: 2.4 m wide, its right edge at `x = edge`, at
+/// `height` over the ground.
+#[derive(Clone, Copy)]
+struct BlackSquare {
+    edge: f64,
+    height: f64,
+}
+
+impl BlackSquare {
+    /// Whether the segment from ground point `p` to emitter point `q` crosses the square.
+    fn hides(self, p: DVec3, q: DVec3) -> bool {
+        let x = p + (q - p) * ((self.height - p.z) / (q.z - p.z));
+        (self.edge - 2.4..=self.edge).contains(&x.x) && (-1.2..=1.2).contains(&x.y)
+    }
+}
+
+/// The plates of [`plates_under_a_square`] (the left one 0.2 m wide, from x = −0.5) under the unit
+/// emitter, with the black square moved to `square`.
+fn plates_beside_a_square_edge(square: BlackSquare) -> Scene {
+    let BlackSquare { edge, height } = square;
+    one_polygon_per_material(
+        vec![
+            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
+            Material::diffuse("partly shaded plate", Rgb::splat(RHO)),
+            Material::diffuse("open plate", Rgb::splat(RHO)),
+            Material::diffuse("black square", Rgb::BLACK),
+        ],
+        [
+            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
+            rectangle([-0.5, -0.3, -0.1, 0.1], 0.0, true),
+            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
+            rectangle([edge - 2.4, edge, -1.2, 1.2], height, false),
+        ],
+        |_| false,
+    )
+}
+
+/// The irradiance factor at ground point `p` (facing up) from `emitter`, past `square` where given:
+/// `∫ cos cos' / (π r²)` over a 64 × 64 grid of the emitter, the square tested exactly.
+fn irradiance_past(emitter: &Shape, p: DVec3, square: Option<BlackSquare>) -> f64 {
+    const GRID: usize = 64;
+    let cell = emitter.area() / (GRID * GRID) as f64;
+    (0..GRID * GRID)
+        .map(|i| {
+            let uv = DVec2::new((i % GRID) as f64 + 0.5, (i / GRID) as f64 + 0.5) / GRID as f64;
+            let q = emitter.point_at(uv);
+            if square.is_some_and(|s| s.hides(p, q)) {
+                return 0.0;
+            }
+            let d = q - p;
+            let r2 = d.length_squared();
+            let cos = d.z / r2.sqrt();
+            cos * cos * cell / (std::f64::consts::PI * r2)
+        })
+        .sum()
+}
+
+/// Points over the left plate of [`plates_beside_a_square_edge`], 40 across and 4 deep.
+fn left_plate_points() -> Vec<DVec3> {
+    (0..160)
+        .map(|i| {
+            let (u, v) = (
+                ((i % 40) as f64 + 0.5) / 40.0,
+                ((i / 40) as f64 + 0.5) / 4.0,
+            );
+            DVec3::new(-0.5 + 0.2 * u, -0.1 + 0.2 * v, 0.0)
+        })
+        .collect()
+}
+
 /// How the light a cluster shares varies over a patch partly in the shadow of something outside the
 /// cluster (`solvers::clustering::Gradient`): the two plates of [`plates_under_a_square`] under the
 /// unit emitter 4 m up, linear elements, with the black square at 0.2 m moved right so that its edge
@@ -796,8 +866,8 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
 /// stay out of the plates' cluster, which the emitter lights through one cluster link. Ground truth:
 /// the irradiance at each point, `∫ cos cos' / (π r²)` over the part of the emitter the point sees, on
 /// a 64 × 64 grid with the square tested exactly. Compared is the shape of the light over the plate,
-/// the solution's radiance over its mean against the truth's (the mean is sharing by exposure's, one
-/// centroid ray per patch, which the tests above check). An even share, the plates' shape until
+/// the solution's radiance over its mean against the truth's (the mean is sharing by exposure's, the
+/// share of the patch's nodes that see the source, which the tests around this one check). An even share, the plates' shape until
 /// 2026-11-30, has an L² shape error of 0.57 here. The rays from the 2 × 2 Gauss nodes (at 21% and 79%
 /// of the width) find one row shaded and one lit, and the plate's light follows the linear function
 /// through them, flattened to zero at the shaded edge (twice the mean at the lit one): against the
@@ -807,57 +877,18 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
 /// under 0.6, where an even share gives 1.
 #[test]
 fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
-    let (x0, x1, edge) = (-0.5, -0.3, -0.42);
-    let scene = one_polygon_per_material(
-        vec![
-            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
-            Material::diffuse("half-shaded plate", Rgb::splat(RHO)),
-            Material::diffuse("open plate", Rgb::splat(RHO)),
-            Material::diffuse("black square", Rgb::BLACK),
-        ],
-        [
-            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
-            rectangle([x0, x1, -0.1, 0.1], 0.0, true),
-            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
-            rectangle([edge - 2.4, edge, -1.2, 1.2], 0.2, false),
-        ],
-        |_| false,
-    );
+    let square = BlackSquare {
+        edge: -0.42,
+        height: 0.2,
+    };
+    let scene = plates_beside_a_square_edge(square);
     let plate = 1;
     let emitter = scene.polygons[0].shape;
-    let hides = |p: DVec3, q: DVec3| {
-        let t = (0.2 - p.z) / (q.z - p.z);
-        let x = p + (q - p) * t;
-        (edge - 2.4..=edge).contains(&x.x) && (-1.2..=1.2).contains(&x.y)
-    };
-    const GRID: usize = 64;
-    let irradiance = |p: DVec3| -> f64 {
-        let cell = emitter.area() / (GRID * GRID) as f64;
-        (0..GRID * GRID)
-            .map(|i| {
-                let uv = DVec2::new((i % GRID) as f64 + 0.5, (i / GRID) as f64 + 0.5) / GRID as f64;
-                let q = emitter.point_at(uv);
-                if hides(p, q) {
-                    return 0.0;
-                }
-                let d = q - p;
-                let r2 = d.length_squared();
-                let cos = d.z / r2.sqrt();
-                cos * cos * cell / (std::f64::consts::PI * r2)
-            })
-            .sum()
-    };
-    // Sample points over the plate, 40 across and 4 deep.
-    let points: Vec<DVec3> = (0..160)
-        .map(|i| {
-            let (u, v) = (
-                ((i % 40) as f64 + 0.5) / 40.0,
-                ((i / 40) as f64 + 0.5) / 4.0,
-            );
-            DVec3::new(x0 + (x1 - x0) * u, -0.1 + 0.2 * v, 0.0)
-        })
+    let points = left_plate_points();
+    let truth: Vec<f64> = points
+        .iter()
+        .map(|&p| irradiance_past(&emitter, p, Some(square)))
         .collect();
-    let truth: Vec<f64> = points.iter().map(|&p| irradiance(p)).collect();
     let shape_error = |values: &[f64]| -> f64 {
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
         let (m, t) = (mean(values), mean(&truth));
@@ -916,58 +947,22 @@ fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
 /// 2026-11-30), the plate took the light of its whole area or none: twice the truth or nothing.
 #[test]
 fn a_patch_partly_in_a_shadow_outside_its_cluster_gets_the_light_of_its_lit_part() {
-    let (x0, x1, edge, z) = (-0.5, -0.3, -0.38, 0.2);
-    let scene = one_polygon_per_material(
-        vec![
-            Material::emitter("lamp", Rgb::BLACK, Rgb::splat(1.0)),
-            Material::diffuse("partly shaded plate", Rgb::splat(RHO)),
-            Material::diffuse("open plate", Rgb::splat(RHO)),
-            Material::diffuse("black square", Rgb::BLACK),
-        ],
-        [
-            rectangle([-0.5, 0.5, -0.5, 0.5], HEIGHT, false),
-            rectangle([x0, x1, -0.1, 0.1], 0.0, true),
-            rectangle([0.3, 0.5, -0.1, 0.1], 0.0, true),
-            rectangle([edge - 2.4, edge, -1.2, 1.2], z, false),
-        ],
-        |_| false,
-    );
+    let square = BlackSquare {
+        edge: -0.38,
+        height: 0.2,
+    };
+    let scene = plates_beside_a_square_edge(square);
     let plate = 1;
     let emitter = scene.polygons[0].shape;
-    const GRID: usize = 64;
-    let irradiance = |p: DVec3, shadowed: bool| -> f64 {
-        let cell = emitter.area() / (GRID * GRID) as f64;
-        (0..GRID * GRID)
-            .map(|i| {
-                let uv = DVec2::new((i % GRID) as f64 + 0.5, (i / GRID) as f64 + 0.5) / GRID as f64;
-                let q = emitter.point_at(uv);
-                let crossing = p + (q - p) * ((z - p.z) / (q.z - p.z));
-                if shadowed
-                    && (edge - 2.4..=edge).contains(&crossing.x)
-                    && (-1.2..=1.2).contains(&crossing.y)
-                {
-                    return 0.0;
-                }
-                let d = q - p;
-                let r2 = d.length_squared();
-                let cos = d.z / r2.sqrt();
-                cos * cos * cell / (std::f64::consts::PI * r2)
-            })
-            .sum()
+    let points = left_plate_points();
+    let mean = |square: Option<BlackSquare>| {
+        points
+            .iter()
+            .map(|&p| irradiance_past(&emitter, p, square))
+            .sum::<f64>()
+            / points.len() as f64
     };
-    let points: Vec<DVec3> = (0..160)
-        .map(|i| {
-            let (u, v) = (
-                ((i % 40) as f64 + 0.5) / 40.0,
-                ((i / 40) as f64 + 0.5) / 4.0,
-            );
-            DVec3::new(x0 + (x1 - x0) * u, -0.1 + 0.2 * v, 0.0)
-        })
-        .collect();
-    let mean = |shadowed: bool| {
-        points.iter().map(|&p| irradiance(p, shadowed)).sum::<f64>() / points.len() as f64
-    };
-    let (truth, open) = (mean(true), mean(false));
+    let (truth, open) = (mean(Some(square)), mean(None));
     let lit = truth / open;
     assert!((0.45..0.55).contains(&lit), "lit fraction {lit}");
     let tolerance = (0.5 - lit).abs() / lit + 0.05;
