@@ -4,6 +4,7 @@
 //! closed furnace full of small objects, and the per-sweep exchange by direction bucket against the
 //! per-link exchange it stands for.
 
+use radiosity::bases::BasisKind;
 use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::parallel_rectangles;
 use radiosity::geometry::{DVec2, DVec3, Shape};
@@ -14,7 +15,7 @@ use radiosity::scene::{generators, Material, Polygon, Scene};
 use radiosity::solvers::clustering::{exposure_shares, groups_toward, node_fraction, ClusterSweep};
 use radiosity::visibility::extinction::Extinction;
 use radiosity::visibility::item_buffer::{
-    bucket_direction, direction_bucket, exposed_nodes, IntraClusterKind,
+    bucket_direction, direction_bucket, exposed, exposed_nodes, IntraClusterKind,
 };
 use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
@@ -477,8 +478,8 @@ fn bucket_weight_change(h: &Hierarchy, id: ElementId, toward: DVec3) -> f64 {
 /// The factor by which sharing by exposure scales what a link of visibility `v` from `source`
 /// delivers to cluster `id` (`solvers::clustering::exposure_shares`): the sum of its two parts where
 /// the bucket's exposure tells some visible patches from others, else 1. The exposed share `e` is
-/// taken from the bucket's visible projected areas along its centre direction, as the sweep weighs
-/// them.
+/// taken from the bucket's visible projected areas along its centre direction, each times its
+/// exposed fraction, as the sweep weighs them.
 fn exposure_scale(h: &Hierarchy, id: ElementId, source: ElementId, v: f64) -> f64 {
     let toward = h.center_of(source);
     let bucket = direction_bucket(toward - h.center_of(id));
@@ -491,16 +492,21 @@ fn exposure_scale(h: &Hierarchy, id: ElementId, source: ElementId, v: f64) -> f6
         return 1.0;
     };
     let contents = h.contents(h.cluster(id).expect("cluster"));
+    // Node rays come with gradients (linear bases and up); otherwise the centroid's ray decides.
     let nodes = exposed_nodes(&exposure, contents.len());
     let (mut exposed_area, mut total) = (0.0, 0.0);
-    for ((&s, a), &bits) in contents
+    for (k, (&s, a)) in contents
         .iter()
         .zip(visible_areas(h, id, toward))
-        .zip(&nodes)
+        .enumerate()
     {
         let w = a * h.patch_of(s).normal.dot(along).max(0.0);
         total += w;
-        exposed_area += w * node_fraction(h.element(s).shape(), bits);
+        exposed_area += w * if h.basis_size() >= 3 {
+            node_fraction(h.element(s).shape(), nodes[k])
+        } else {
+            f64::from(u8::from(exposed(&exposure, k)))
+        };
     }
     if exposed_area <= 0.0 || exposed_area >= total {
         return 1.0;
@@ -705,12 +711,14 @@ fn plates_under_a_square(
 /// Seeds of the cluster links' visibility samples over which the plate tests average.
 const PLATE_SEEDS: u64 = 16;
 
-/// Solves `scene` with item buffers (coarse: the plates and the square stay linked as clusters) for
-/// each of [`PLATE_SEEDS`] seeds, handing each solution to `each` with its seed.
-fn for_each_seed(scene: &Scene, mut each: impl FnMut(u64, &Hierarchy)) {
+/// Solves `scene` with item buffers and elements of `basis` (coarse: the plates and the square stay
+/// linked as clusters) for each of [`PLATE_SEEDS`] seeds, handing each solution to `each` with its
+/// seed.
+fn for_each_seed(scene: &Scene, basis: BasisKind, mut each: impl FnMut(u64, &Hierarchy)) {
     for seed in 1..=PLATE_SEEDS {
         let settings = SimulationSettings {
             seed,
+            basis,
             ..settings(IntraClusterKind::ItemBuffer)
         };
         each(
@@ -762,7 +770,7 @@ fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     let factor = mean_factor_up(&right, &emitter, 20);
     let analytic = RHO * factor;
     let mut lit_seeds = 0;
-    for_each_seed(&scene, |seed, h| {
+    for_each_seed(&scene, BasisKind::Constant, |seed, h| {
         let lit = (0..h.elements.len() as ElementId).any(|id| {
             holds_both_plates(h, id)
                 && h.element(id)
@@ -904,7 +912,7 @@ fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
     for seed in 1..=PLATE_SEEDS {
         let settings = SimulationSettings {
             seed,
-            basis: radiosity::bases::BasisKind::Linear,
+            basis: BasisKind::Linear,
             ..settings(IntraClusterKind::ItemBuffer)
         };
         let h = simulate(&scene, &settings, &quiet())
@@ -938,8 +946,9 @@ fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
 /// penumbra 5 cm wide about it; the square stays out of the plates' cluster, which the emitter
 /// lights through one cluster link. Ground truth: the plate's mean irradiance, `∫ cos cos' / (π r²)`
 /// over the part of the emitter each point sees, on a 40 × 4 grid of points and a 64 × 64 grid on
-/// the emitter with the square tested exactly: half the unshadowed mean. A patch's exposed fraction
-/// is the share of its 2 × 2 Gauss nodes whose rays reach the source's centre
+/// the emitter with the square tested exactly: half the unshadowed mean. With linear elements (the
+/// node rays come with gradients), a patch's exposed fraction is the share of its 2 × 2 Gauss nodes
+/// whose rays reach the source's centre
 /// (`solvers::clustering::node_fraction`), the quadrature of its lit part: one row of two here (the
 /// nodes at 21% and 79% of the width lie either side of the edge). Error model: that quadrature's
 /// error, `|½ − f| / f` relative for the true fraction `f`, plus the 5% of the centre-to-centre point
@@ -967,7 +976,7 @@ fn a_patch_partly_in_a_shadow_outside_its_cluster_gets_the_light_of_its_lit_part
     assert!((0.45..0.55).contains(&lit), "lit fraction {lit}");
     let tolerance = (0.5 - lit).abs() / lit + 0.05;
     let mut lit_seeds = 0;
-    for_each_seed(&scene, |seed, h| {
+    for_each_seed(&scene, BasisKind::Linear, |seed, h| {
         let square = h.patches[3].root;
         let through_cluster = (0..h.elements.len() as ElementId).any(|id| {
             holds_both_plates(h, id)
@@ -1024,7 +1033,7 @@ fn a_cluster_sends_only_the_light_of_the_patches_that_reach_the_receiver() {
     // Reciprocity: A_square F_square→lamp = A_lamp F_lamp→square, the latter over a 20 × 20 grid.
     let analytic = RHO * lamp.area() * mean_factor_up(&lamp, &receiver, 20) / receiver.area();
     let mut cluster_links = 0;
-    for_each_seed(&scene, |seed, h| {
+    for_each_seed(&scene, BasisKind::Constant, |seed, h| {
         cluster_links += h
             .element(h.patches[square].root)
             .links
@@ -1071,7 +1080,7 @@ fn the_error_bar_of_a_receiver_spans_what_choosing_the_exposed_patches_moved() {
     let lamp = scene.polygons[open].shape;
     let analytic = RHO * lamp.area() * mean_factor_up(&lamp, &receiver, 20) / receiver.area();
     let mut partly_blocked = 0;
-    for_each_seed(&scene, |seed, h| {
+    for_each_seed(&scene, BasisKind::Constant, |seed, h| {
         let root = h.patches[square].root;
         let sweep = ClusterSweep::new(h);
         let centre = h.center_of(root);

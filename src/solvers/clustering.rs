@@ -994,6 +994,9 @@ impl ClusterSweep {
     /// much sharing by exposure moved its share (zero without item buffers).
     fn push_from_clusters(&self, h: &Hierarchy, sharing: Sharing) -> Pushed {
         let kind = h.clustering;
+        // Node rays where gradients use them ([`expose`]); the error estimate's sharing takes the
+        // same fractions, without the slopes.
+        let node_rays = Gradient::new(h).is_some();
         let gradient = Gradient::new(h).filter(|_| sharing == Sharing::Pushed);
         let with_links: Vec<ElementId> = (0..h.elements.len() as ElementId)
             .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
@@ -1064,10 +1067,18 @@ impl ClusterSweep {
                             let total: Rgb = run.iter().map(|&(_, _, g, _)| g).sum();
                             let (split, nodes) = buffers
                                 .exposure(id, run[0].0, |exposure| {
-                                    let nodes = exposed_nodes(exposure, areas.len());
-                                    let split = ExposureSplit::new(&areas, |k| {
-                                        node_fraction(h.element(contents[k]).shape(), nodes[k])
-                                    });
+                                    let nodes = if node_rays {
+                                        exposed_nodes(exposure, areas.len())
+                                    } else {
+                                        Vec::new()
+                                    };
+                                    let split =
+                                        ExposureSplit::new(&areas, |k| match nodes.get(k) {
+                                            Some(&bits) => {
+                                                node_fraction(h.element(contents[k]).shape(), bits)
+                                            }
+                                            None => exposed_bit(exposure, k),
+                                        });
                                     (split, nodes)
                                 })
                                 .unwrap_or((None, Vec::new()));
@@ -1269,8 +1280,9 @@ pub fn moved_by_sending(h: &Hierarchy, sweep: &ClusterSweep) -> Vec<f64> {
 /// not stored yet: for every patch the bucket's item buffer leaves visible, which of the rays from its
 /// four gradient nodes ([`gradient_rule`]) reach the centre of the bucket's nearest link source, past
 /// the cluster's own contents and the source's (their mutual hiding is the item buffer's, §6.1): its
-/// exposed fraction, the nodes' quadrature of its part in the open ([`node_fraction`]).
-/// [`ClusterSweep`] shares what the cluster gathers along the bucket among the exposed parts.
+/// exposed fraction, the nodes' quadrature of its part in the open ([`node_fraction`]). Without
+/// gradients (the constant basis) one ray from its centroid decides, 1 or 0. [`ClusterSweep`] shares
+/// what the cluster gathers along the bucket among the exposed parts.
 ///
 /// Why: a cluster link's visibility is one average over the whole cluster (rays between random points
 /// of both ends), and the item buffer sees only the cluster's own contents, so the light a link
@@ -1284,6 +1296,9 @@ pub fn moved_by_sending(h: &Hierarchy, sweep: &ClusterSweep) -> Vec<f64> {
 /// for the whole patch, which then got the light of all its area or none: a chair seat half under a
 /// desk, a plate half in a shadow (tests/intra_cluster.rs); the nodes' fractions took the
 /// classroom's error at its seen points from 5.18% to 4.96% (BENCHMARKS.md, "Exposed fractions").
+/// With the constant basis, whose elements hold a patch's light evenly, the fractions took the dim
+/// chair points lit through clusters further below the reference (six point sets 8.87 → 9.26%), so
+/// there the centroid still decides.
 ///
 /// The same for sending, keyed apart ([`sending_key`]): per (cluster, bucket) that links from the
 /// cluster use, which visible patches a ray from their centroid reaches the bucket's nearest
@@ -1299,6 +1314,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let clusters: Vec<ElementId> = (h.patches.len() as ElementId..=root)
         .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
         .collect();
+    let gradients = Gradient::new(h).is_some();
     let mut exposures: Vec<((u32, u16), Exposure)> = clusters
         .par_iter()
         .flat_map_iter(|&id| {
@@ -1326,7 +1342,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
                 .map(|(bucket, _, source)| {
                     (
                         (id, bucket),
-                        exposure(h, visibility, buffers, id, bucket, source, true),
+                        exposure(h, visibility, buffers, id, bucket, source, gradients),
                     )
                 })
                 .collect::<Vec<_>>()
@@ -1395,8 +1411,8 @@ fn sending_reach(exposure: &[u64]) -> f64 {
 }
 
 /// [`expose`] for one (cluster, bucket) toward the link end `other` (a source, or a receiver): with
-/// `nodes` (toward a source), a ray from each of a patch's four gradient nodes ([`gradient_rule`]),
-/// the patch reached where any of them does; without, one ray from its centroid.
+/// `nodes` (toward a source, with gradients), a ray from each of a patch's four gradient nodes
+/// ([`gradient_rule`]), the patch reached where any of them does; without, one ray from its centroid.
 fn exposure(
     h: &Hierarchy,
     visibility: &dyn Visibility,
@@ -1436,6 +1452,11 @@ fn exposure(
         (node_bits != 0, node_bits)
     });
     pack_exposure(patches, nodes)
+}
+
+/// Patch `k`'s exposure, 1 or 0, where one ray decided it ([`exposure`] without nodes).
+fn exposed_bit(exposure: &[u64], k: usize) -> f64 {
+    f64::from(u8::from(exposed(exposure, k)))
 }
 
 /// The exposed fraction of `shape` whose gradient nodes' rays reached as the bits of `nodes` say
@@ -1585,7 +1606,7 @@ fn sent_along(
     let visible = average(&areas, total);
     let Some((split, reach)) = buffers
         .exposure(id, sending_key(bucket), |exposure| {
-            ExposureSplit::new(&areas, |k| f64::from(u8::from(exposed(exposure, k))))
+            ExposureSplit::new(&areas, |k| exposed_bit(exposure, k))
                 .map(|split| (split, sending_reach(exposure)))
         })
         .flatten()
