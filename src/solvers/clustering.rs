@@ -56,8 +56,8 @@
 //! weights of the radiance it sends (hidden patches send none). The item buffer sees only the
 //! cluster's contents; what stands outside it between a patch and the source only the link's one
 //! average visibility knew, so the shares of received irradiance go to the parts of patches *exposed*
-//! toward the source (rays from four nodes of each patch, [`expose`]), each taking the visibility its
-//! own rays found rather than the link's average: what it would receive unoccluded, or nothing
+//! toward the source (rays from four nodes of each patch with linear bases and up, from its centroid
+//! with the constant basis, [`expose`]), each taking the visibility its own rays found rather than the link's average: what it would receive unoccluded, or nothing
 //! ([`exposure_shares`]), so that no patch receives more from a link than it would unoccluded.
 //!
 //! Cost: a coupling reads its cluster ends by normal group ([`groups_toward`]: each group's visible
@@ -1234,7 +1234,7 @@ enum Sharing {
 
 /// Per patch root (by element id), the irradiance over π that sharing by exposure ([`expose`]) moved
 /// to or from it, summed over the clusters above it with the current radiances: the size of what the
-/// sharing decides with four node rays per patch, which the error estimate adds to the cluster
+/// sharing decides with a few rays per patch, which the error estimate adds to the cluster
 /// links' (`solvers::error_estimate`). Zero without item buffers or exposures.
 pub fn moved_by_exposure(h: &Hierarchy, sweep: &ClusterSweep) -> Vec<Rgb> {
     if h.item_buffers.is_none() || h.root_cluster.is_none() {
@@ -1670,11 +1670,11 @@ pub const CLUSTER_RECEIVER_SAMPLES: usize = 2 * CLUSTER_VISIBILITY_SAMPLES;
 /// area along the link's bucket and `N` = [`CLUSTER_RECEIVER_SAMPLES`]; shared within each by
 /// visible projected area. Returns the two factors of `g`.
 ///
-/// Why: each patch takes the visibility its own node rays found ([`expose`]), 1 where all reached
+/// Why: each patch takes the visibility its own rays found ([`expose`]), 1 where all reached
 /// the source, rather than the cluster's average `v`: an exposed part gets what it would unoccluded,
 /// a hidden one nothing, whatever the few rays of `v` found (exact where the occlusion is all or
 /// nothing per node row: a chair back behind a desk, the ceiling over a corridor lamp lit by the
-/// lamp's back). `v` only adds what the node rays cannot explain: its excess over `e` beyond three
+/// lamp's back). `v` only adds what those rays cannot explain: its excess over `e` beyond three
 /// standard deviations of `N` Bernoulli samples at `e`, spread over the unexposed parts (a source
 /// whose centre is hidden from most patches while most of it is not). Until 2026-11-28 the exposed
 /// patches got all of `g`, `v / e` times what they would unoccluded: a patch holding 0.45% of a
