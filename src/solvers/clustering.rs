@@ -996,8 +996,9 @@ impl ClusterSweep {
         let kind = h.clustering;
         // Node rays where gradients use them ([`expose`]); the error estimate's sharing takes the
         // same fractions, without the slopes.
-        let node_rays = Gradient::new(h).is_some();
-        let gradient = Gradient::new(h).filter(|_| sharing == Sharing::Pushed);
+        let gradients = Gradient::new(h);
+        let node_rays = gradients.is_some();
+        let gradient = gradients.filter(|_| sharing == Sharing::Pushed);
         let with_links: Vec<ElementId> = (0..h.elements.len() as ElementId)
             .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
             .collect();

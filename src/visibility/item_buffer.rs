@@ -501,10 +501,10 @@ const EXPOSURE_SHARE: usize = 8;
 
 /// Which patches of a cluster (by position in its contents) the link sources of one direction bucket
 /// reach from outside the cluster, or which reach its link receivers ([`ItemBuffers::exposure`]): a bit
-/// per patch, whether it is reached: toward a receiver, by the ray from its centroid; toward a source
-/// (`solvers::clustering::expose`), by the ray from any of its nodes, followed by [`NODE_BITS`] per
-/// reached patch in order, whether the rays from its nodes do. An exposure toward a receiver holds one more word after the bits, the
-/// receiver's distance.
+/// per patch, whether it is reached: by the ray from its centroid, or (toward a source with gradients,
+/// `solvers::clustering::expose`) by the ray from any of its nodes, followed by [`NODE_BITS`] per
+/// reached patch in order, whether the rays from its nodes do. An exposure toward a receiver holds
+/// one more word after the bits, the receiver's distance.
 pub type Exposure = Box<[u64]>;
 
 /// Bits per reached patch for its gradient nodes: one per node.
@@ -585,8 +585,8 @@ impl ItemBuffers {
 
     /// The exposure of `cluster` along `bucket`, when stored: which of its patches (and which of their
     /// nodes) rays reach the bucket's nearest link source from (or, for a sending key, its nearest
-    /// receiver, from their centroids), past the cluster's own contents (the item buffer answers for those). See
-    /// `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read
+    /// receiver, from their centroids), past the cluster's own contents (the item buffer answers for
+    /// those). See `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read
     /// lock: sweeps ask for exposures hundreds of thousands of times, and a copy each was an
     /// allocation each.
     pub fn exposure<T>(
