@@ -738,23 +738,24 @@ fn holds_both_plates(h: &Hierarchy, id: ElementId) -> bool {
     })
 }
 
-/// Two small plates side by side on the ground under a unit emitter at `HEIGHT`, the left one under a
-/// black square 2.4 m wide at 0.2 m that hides the whole emitter from it (large, so that the cluster
-/// hierarchy keeps it out of the pair's cluster), the right one in the open: the pair receives through
-/// one cluster link whose sampled visibility `v` is about ½ (8 rays from either plate), and the item
-/// buffer, which sees only the pair, hides neither. Ground truth: the left plate's radiance is 0
-/// (nothing else lights it: the plates are coplanar, the square is black), the right one's `ρ E F`
-/// with `F` its exact factor from the emitter (the square is outside every ray from it). Shared by
-/// visible projected area alone, both got the link's average, half of the right plate's light each.
-/// Shared by exposure (a ray from each plate's centroid to the source), each plate takes the
-/// visibility its own ray found (`solvers::clustering::exposure_shares`): in every seed whose link
-/// carries light (`v` > 0; all 8 rays blocked has probability 2⁻⁸) the right plate gets what it would
-/// unoccluded, whatever `v`, with the centre-to-centre point kernel's error as its only one: the
-/// pair's centre 0.4 m from the plate's at a height of 4 m, `1 / cos⁴θ` = 1.0202, times the point
-/// kernel's excess over the unit source's exact factor, about `1 + a² / (π d²)` = 1.0199: 4.05%, and
-/// 5% with the couplings' `f32` storage and the item buffer's fractions; and the left one nothing (`v` never exceeds
-/// what `e` = ½ explains within three standard deviations of 8 samples). Until 2026-11-28 the exposed
-/// plate got all the link delivered, `2v` times the truth: 0.25 to 2 from seed to seed.
+/// Two small plates side by side on the ground under a unit emitter at `HEIGHT`, the left one under
+/// a black square 2.4 m wide at 0.2 m that hides the whole emitter from it (large, so that the
+/// cluster hierarchy keeps it out of the pair's cluster), the right one in the open: the pair
+/// receives through one cluster link whose sampled visibility `v` is about ½ (8 rays from either
+/// plate), and the item buffer, which sees only the pair, hides neither. Ground truth: the left
+/// plate's radiance is 0 (nothing else lights it: the plates are coplanar, the square is black),
+/// the right one's `ρ E F` with `F` its exact factor from the emitter (the square is outside every
+/// ray from it). Shared by visible projected area alone, both got the link's average, half of the
+/// right plate's light each. Shared by exposure (a ray from each plate's centroid to the source),
+/// each plate takes the visibility its own ray found (`solvers::clustering::exposure_shares`): in
+/// every seed whose link carries light (`v` > 0; all 8 rays blocked has probability 2⁻⁸) the right
+/// plate gets what it would unoccluded, whatever `v`, with the centre-to-centre point kernel's
+/// error as its only one: the pair's centre 0.4 m from the plate's at a height of 4 m,
+/// `1 / cos⁴θ` = 1.0202, times the point kernel's excess over the unit source's exact factor,
+/// about `1 + a² / (π d²)` = 1.0199: 4.05%, and 5% with the couplings' `f32` storage and the
+/// item buffer's fractions; and the left one nothing (`v` never exceeds what `e` = ½ explains
+/// within three standard deviations of 8 samples). Until 2026-11-28 the exposed plate got all the
+/// link delivered, `2v` times the truth: 0.25 to 2 from seed to seed.
 #[test]
 fn a_cluster_shares_its_light_among_the_patches_that_the_source_reaches() {
     let scene = plates_under_a_square(
@@ -867,22 +868,23 @@ fn left_plate_points() -> Vec<DVec3> {
 
 /// How the light a cluster shares varies over a patch partly in the shadow of something outside the
 /// cluster (`solvers::clustering::Gradient`): the two plates of [`plates_under_a_square`] under the
-/// unit emitter 4 m up, linear elements, with the black square at 0.2 m moved right so that its edge
-/// (x = −0.42) crosses the left plate (x from −0.5 to −0.3): a ground point at x sees emitter points
-/// x_e with `0.95 x + 0.05 x_e ≥ −0.42`, so the plate's first 16% is in umbra and the next 26% in
-/// penumbra, while its centroid (x = −0.4) sees the emitter's centre. The square is large enough to
-/// stay out of the plates' cluster, which the emitter lights through one cluster link. Ground truth:
-/// the irradiance at each point, `∫ cos cos' / (π r²)` over the part of the emitter the point sees, on
-/// a 64 × 64 grid with the square tested exactly. Compared is the shape of the light over the plate,
-/// the solution's radiance over its mean against the truth's (the mean is sharing by exposure's, the
-/// share of the patch's nodes that see the source, which the tests around this one check). An even share, the plates' shape until
-/// 2026-11-30, has an L² shape error of 0.57 here. The rays from the 2 × 2 Gauss nodes (at 21% and 79%
-/// of the width) find one row shaded and one lit, and the plate's light follows the linear function
-/// through them, flattened to zero at the shaded edge (twice the mean at the lit one): against the
-/// true profile (the penumbra as a ramp over an emitter of even brightness) that line's error is 0.53
-/// of the even share's, computed from the geometry above. The cosines and the point factor's
-/// variation over the plate (under 2% at 4 m) move the ratio by a few hundredths; the test asks for
-/// under 0.6, where an even share gives 1.
+/// unit emitter 4 m up, linear elements, with the black square at 0.2 m moved right so that its
+/// edge (x = −0.42) crosses the left plate (x from −0.5 to −0.3): a ground point at x sees emitter
+/// points x_e with `0.95 x + 0.05 x_e ≥ −0.42`, so the plate's first 16% is in umbra and the next
+/// 26% in penumbra, while its centroid (x = −0.4) sees the emitter's centre. The square is large
+/// enough to stay out of the plates' cluster, which the emitter lights through one cluster link.
+/// Ground truth: the irradiance at each point, `∫ cos cos' / (π r²)` over the part of the emitter
+/// the point sees, on a 64 × 64 grid with the square tested exactly. Compared is the shape of the
+/// light over the plate, the solution's radiance over its mean against the truth's (the mean is
+/// sharing by exposure's, the share of the patch's nodes that see the source, which the tests
+/// around this one check). An even share, the plates' shape until 2026-11-30, has an L² shape error
+/// of 0.57 here. The rays from the 2 × 2 Gauss nodes (at 21% and 79% of the width) find one row
+/// shaded and one lit, and the plate's light follows the linear function through them, flattened to
+/// zero at the shaded edge (twice the mean at the lit one): against the true profile (the penumbra
+/// as a ramp over an emitter of even brightness) that line's error is 0.53 of the even share's,
+/// computed from the geometry above. The cosines and the point factor's variation over the plate
+/// (under 2% at 4 m) move the ratio by a few hundredths; the test asks for under 0.6, where an even
+/// share gives 1.
 #[test]
 fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
     let square = BlackSquare {
@@ -909,18 +911,10 @@ fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
     };
     let even = shape_error(&vec![1.0; points.len()]);
     let mut varying_seeds = 0;
-    for seed in 1..=PLATE_SEEDS {
-        let settings = SimulationSettings {
-            seed,
-            basis: BasisKind::Linear,
-            ..settings(IntraClusterKind::ItemBuffer)
-        };
-        let h = simulate(&scene, &settings, &quiet())
-            .expect("solve")
-            .hierarchy;
+    for_each_seed(&scene, BasisKind::Linear, |seed, h| {
         let root = h.patches[plate].root;
-        if ClusterSweep::new(&h).pushed_slope(root).is_none() {
-            continue;
+        if ClusterSweep::new(h).pushed_slope(root).is_none() {
+            return;
         }
         varying_seeds += 1;
         let radiance: Vec<f64> = points
@@ -932,7 +926,7 @@ fn a_patch_half_in_a_shadow_outside_its_cluster_gets_the_shadow_across_it() {
             ratio < 0.6,
             "seed {seed}: the plate's shape error is {ratio:.3} of an even share's ({even:.3})"
         );
-    }
+    });
     assert!(
         varying_seeds > PLATE_SEEDS / 2,
         "only {varying_seeds} seeds gave the plate a gradient"

@@ -44,20 +44,21 @@
 //! contains, evenly (isotropic) or with each patch group's cosine toward the link's source, normalised so
 //! that the power the link delivered is what the patches receive (oriented).
 //!
-//! Intra-cluster visibility (Sillion–Drettakis §6.1, `--intra-cluster item-buffer`): an item buffer of
-//! the cluster seen from the other end ([`crate::visibility::item_buffer`]) scales each patch's
+//! Intra-cluster visibility (Sillion–Drettakis §6.1, `--intra-cluster item-buffer`): an item buffer
+//! of the cluster seen from the other end ([`crate::visibility::item_buffer`]) scales each patch's
 //! projected area by its visible fraction. Those visible projected areas are then the cluster's
 //! projected area in the kernel (`c = Σ_k w_k / A`, for either transfer kind: the isotropic 1/4 is
-//! only an estimate of it), the weights of its visibility samples, whose rays pass the end clusters'
-//! own contents ([`Visibility::transmittance_past`]: a point drawn on a partly hidden patch would
-//! otherwise count its hiding twice, darkening furniture by ~2% on a chair's own parts), so that `v`
-//! only counts occluders outside them; and, taken along the item buffer's direction bucket once per
-//! sweep ([`ClusterSweep`]), the shares of received irradiance (hidden patches get none) and the
-//! weights of the radiance it sends (hidden patches send none). The item buffer sees only the
-//! cluster's contents; what stands outside it between a patch and the source only the link's one
-//! average visibility knew, so the shares of received irradiance go to the parts of patches *exposed*
-//! toward the source (rays from four nodes of each patch with linear bases and up, from its centroid
-//! with the constant basis, [`expose`]), each taking the visibility its own rays found rather than the link's average: what it would receive unoccluded, or nothing
+//! only an estimate of it), the weights of its visibility samples, whose rays pass the end
+//! clusters' own contents ([`Visibility::transmittance_past`]: a point drawn on a partly hidden
+//! patch would otherwise count its hiding twice, darkening furniture by ~2% on a chair's own
+//! parts), so that `v` only counts occluders outside them; and, taken along the item buffer's
+//! direction bucket once per sweep ([`ClusterSweep`]), the shares of received irradiance (hidden
+//! patches get none) and the weights of the radiance it sends (hidden patches send none). The item
+//! buffer sees only the cluster's contents; what stands outside it between a patch and the source
+//! only the link's one average visibility knew, so the shares of received irradiance go to the
+//! parts of patches *exposed* toward the source (rays from four nodes of each patch with linear
+//! bases and up, from its centroid with the constant basis, [`expose`]), each taking the visibility
+//! its own rays found rather than the link's average: what it would receive unoccluded, or nothing
 //! ([`exposure_shares`]), so that no patch receives more from a link than it would unoccluded.
 //!
 //! Cost: a coupling reads its cluster ends by normal group ([`groups_toward`]: each group's visible
@@ -755,12 +756,12 @@ fn sampled_coupling(
     }
 }
 
-/// The coupling of a near link into a cluster (larger than [`NEAR_RECEIVER_PATCHES`], or left unsplit
-/// by a budget): nothing is transferred, since the cluster's sharing could not place it (RenderPark's Galerkin radiosity
-/// does the same for overlapping bounding boxes), and its error coefficient is 0: its bound is
-/// already below the refinement threshold, and counting it as error made office3's error control
-/// refine past its memory (95 → 106 MB) for the classroom 6.8 → 6.0% (BENCHMARKS.md, "The end
-/// plate in the slot").
+/// The coupling of a near link into a cluster (larger than [`NEAR_RECEIVER_PATCHES`], or left
+/// unsplit by a budget): nothing is transferred, since the cluster's sharing could not place it
+/// (RenderPark's Galerkin radiosity does the same for overlapping bounding boxes), and its error
+/// coefficient is 0: its bound is already below the refinement threshold, and counting it as error
+/// made office3's error control refine past its memory (95 → 106 MB) for the classroom 6.8 → 6.0%
+/// (BENCHMARKS.md, "The end plate in the slot").
 fn unplaced_near_coupling(h: &Hierarchy) -> Coupling {
     let size = h.basis_size();
     Coupling {
@@ -1501,10 +1502,10 @@ fn gradient_rule(domain: crate::geometry::Domain) -> &'static crate::geometry::c
 /// seen points lit mostly through clusters the error was 15.9% RMS, with a mean of −6.8%, against
 /// 4.4% elsewhere; with gradients 14.1% and −1.5% (BENCHMARKS.md, "Gradients of what clusters
 /// push"). The rays from its four nodes that gave that fraction say which part is exposed; the
-/// patch's share then follows the
-/// linear function through them (the projection of the node values on the basis' linear functions,
-/// `c_α = (1/|D|) Σ_n w_n φ_α(uv_n) b_n`), scaled to the same mean, so that the power each patch
-/// receives is unchanged, and flattened as far as needed to stay non-negative at every corner.
+/// patch's share then follows the linear function through them (the projection of the node values
+/// on the basis' linear functions, `c_α = (1/|D|) Σ_n w_n φ_α(uv_n) b_n`), scaled to the same mean,
+/// so that the power each patch receives is unchanged, and flattened as far as needed to stay
+/// non-negative at every corner.
 /// Needs a basis with linear functions (linear or above) and item buffers.
 struct Gradient<'a> {
     basis: &'a crate::bases::Basis,
@@ -1568,9 +1569,10 @@ impl<'a> Gradient<'a> {
 /// their patches.
 const SHARE_RUN: usize = 1 << 15;
 
-/// Whether a link's coupling carries any light: a near link into a cluster ([`unplaced_near_coupling`]) or a fully
-/// occluded one has a zero block (its constant entry is a mean of non-negative node values, zero only
-/// when all are), and asking what its source sends would draw item buffers for nothing.
+/// Whether a link's coupling carries any light: a near link into a cluster
+/// ([`unplaced_near_coupling`]) or a fully occluded one has a zero block (its constant entry is a
+/// mean of non-negative node values, zero only when all are), and asking what its source sends
+/// would draw item buffers for nothing.
 pub fn carries_light(link: &crate::hierarchy::Link) -> bool {
     link.form_factor() > 0.0
 }

@@ -15,10 +15,10 @@
 //! the caller multiplies it by the item's exact projected area.
 //!
 //! Buffers are cached per (cluster, direction bucket) ([`ItemBuffers`], with each normal group's
-//! visible area beside the fractions): directions are quantised on a cube map of `6 ×` [`BUCKETS_PER_FACE`]²
-//! cells and each buffer is drawn along its cell's centre direction, so the answer is a pure function
-//! of the cluster and the bucket and does not depend on which thread (or in which order) first asked
-//! for it.
+//! visible area beside the fractions): directions are quantised on a cube map of `6 ×`
+//! [`BUCKETS_PER_FACE`]² cells and each buffer is drawn along its cell's centre direction, so the
+//! answer is a pure function of the cluster and the bucket and does not depend on which thread (or
+//! in which order) first asked for it.
 
 use crate::geometry::{DVec2, DVec3, Shape};
 use crate::hierarchy::clusters::VisibleAreas;
@@ -583,12 +583,12 @@ impl ItemBuffers {
             .contains_key(&(cluster, bucket))
     }
 
-    /// The exposure of `cluster` along `bucket`, when stored: which of its patches (and which of their
-    /// nodes) rays reach the bucket's nearest link source from (or, for a sending key, its nearest
-    /// receiver, from their centroids), past the cluster's own contents (the item buffer answers for
-    /// those). See `solvers::clustering::expose`. `read` is given the bits in place, under the cache's read
-    /// lock: sweeps ask for exposures hundreds of thousands of times, and a copy each was an
-    /// allocation each.
+    /// The exposure of `cluster` along `bucket`, when stored: which of its patches (and which of
+    /// their nodes) rays reach the bucket's nearest link source from (or, for a sending key, its
+    /// nearest receiver, from their centroids), past the cluster's own contents (the item buffer
+    /// answers for those). See `solvers::clustering::expose`. `read` is given the bits in place,
+    /// under the cache's read lock: sweeps ask for exposures hundreds of thousands of times, and a
+    /// copy each was an allocation each.
     pub fn exposure<T>(
         &self,
         cluster: u32,
