@@ -680,6 +680,41 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
     ]);
 }
 
+/// `probe --final-gather` evaluates the points by a gather of the solution (other values than the
+/// leaves', at the same points) and says so with the rays it cast; a bad gather setting is refused
+/// by name before any solve.
+#[test]
+fn probe_final_gather_says_what_it_did_and_refuses_bad_settings() {
+    let common = ["probe", "-q", "--random", "10", "--eps", "1e-3"];
+    let rows = |out: &std::process::Output| -> Vec<String> {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(str::to_owned)
+            .collect()
+    };
+    let plain = radiosity(&common);
+    let gathered = radiosity(&[&common[..], &["--final-gather"]].concat());
+    let (plain_rows, gathered_rows) = (rows(&plain), rows(&gathered));
+    assert_eq!(plain_rows.len(), gathered_rows.len());
+    assert!(plain_rows.iter().zip(&gathered_rows).any(|(a, b)| a != b));
+    let stdout = String::from_utf8_lossy(&gathered.stdout);
+    assert!(
+        stdout.contains("# final gather: radiance = emission + ρ/π") && stdout.contains(" rays, "),
+        "{stdout}"
+    );
+    assert!(!String::from_utf8_lossy(&plain.stdout).contains("# final gather"));
+    let bad = radiosity(&[&common[..], &["--final-gather", "--max-solid-angle", "0"]].concat());
+    assert!(!bad.status.success());
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(stderr.contains("--max-solid-angle"), "{stderr}");
+}
+
 /// A reference path traced once (`probe --reference --json`) is compared with later solutions at the
 /// same points (`probe --against`): the same error summary (and count of points within their
 /// estimated error) as a fresh reference gives, and a clear error when the points are not the same.

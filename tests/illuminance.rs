@@ -474,3 +474,61 @@ fn points_inside_furniture_are_found_and_points_under_desks_are_not() {
         }
     }
 }
+
+/// A final gather at probed points (`probe --final-gather`) against Howell's analytic factor: a plate
+/// lit by a parallel emitting square of the same size (the emitter black, so the plate's radiance is
+/// exactly `ρ L_e F(x)`), solved on coarse elements (at least a tenth of the plate) whose linear
+/// expansion cannot follow the factor's fall toward the plate's edges and corner. The gather reads the
+/// emitter's constant radiance with its exact piece factors and no occluder, so its value is exact up
+/// to rounding, and its error estimate (the solver's error propagated plus the gather's own) covers
+/// the rest, while the leaf values at the same points miss by several percent.
+#[test]
+fn a_final_gather_gives_the_analytic_radiance_where_coarse_elements_do_not() {
+    use radiosity::measures::illuminance::{final_gather, probe_gather_points};
+    use radiosity::reference::probe::{parse_points, probe_points};
+    let (rho, le, h) = (0.6, 2.0, 0.5);
+    let scene = generators::parallel_plates(1.0, h, rho, le);
+    let settings = SimulationSettings {
+        min_area: 0.1,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+    let xy = [
+        (0.5, 0.5),
+        (0.02, 0.5),
+        (0.02, 0.02),
+        (0.3, 0.9),
+        (0.98, 0.1),
+    ];
+    let text: String = xy
+        .iter()
+        .map(|(x, y)| format!("{x} {y} 0 0 0 1\n"))
+        .collect();
+    let file = std::path::Path::new("plate.csv");
+    let points = parse_points(&text, file).expect("points");
+    let visibility = solution.visibility.as_ref();
+    let mut results = probe_points(&scene, visibility, &solution.hierarchy, &points, None, file)
+        .expect("on the plate");
+    let exact: Vec<f64> = xy
+        .iter()
+        .map(|&(x, y)| rho * le * rectangle_factor(x, y, [0.0, 0.0, 1.0, 1.0], h))
+        .collect();
+    let leaf_worst = results
+        .iter()
+        .zip(&exact)
+        .map(|(r, &e)| (r.radiosity.g - e).abs() / e)
+        .fold(0.0, f64::max);
+    assert!(leaf_worst > 0.03, "the coarse leaves miss by {leaf_worst}");
+    let gather = IrradianceGather::new(&solution.hierarchy, visibility, GatherSettings::default());
+    let irradiance = gather.at_all(&probe_gather_points(&results));
+    final_gather(&solution.hierarchy, &mut results, &irradiance);
+    for ((r, &e), (x, y)) in results.iter().zip(&exact).zip(xy) {
+        let error = (r.radiosity.g - e).abs();
+        assert!(error <= 1e-9 * e, "({x}, {y}): {} vs {e}", r.radiosity.g);
+        assert!(error <= r.estimated_error + 1e-12, "({x}, {y}): estimate");
+        assert_eq!(
+            (r.radiosity.r, r.radiosity.b),
+            (r.radiosity.g, r.radiosity.g)
+        );
+    }
+}

@@ -5,6 +5,7 @@ use crate::geometry::near_field::NearField;
 use crate::geometry::DVec3;
 use crate::hierarchy::clusters::{ClusterTreeKind, ClusteringKind};
 use crate::hierarchy::ErrorStorage;
+use crate::measures::illuminance::GatherSettings;
 use crate::pipeline::{
     default_max_memory, Accuracy, MethodKind, OracleKind, SimulationSettings, SolverKind,
     VisibilityKind,
@@ -460,6 +461,38 @@ impl SolveArgs {
                 link_budget,
                 max_steps: self.max_steps,
             }),
+        })
+    }
+}
+
+/// How the hierarchical gather of irradiance at points refines (`measures::illuminance`): for work-plane
+/// grids and for `probe --final-gather`.
+#[derive(Args, Debug, Clone, Copy)]
+pub struct GatherArgs {
+    /// Largest gather error of one piece of surface, relative to the scene's mean radiance times
+    /// --max-solid-angle (see `measures::illuminance`).
+    #[arg(long, default_value_t = GatherSettings::default().tolerance, value_name = "T")]
+    pub gather_tolerance: f64,
+    /// Largest projected solid angle (sr) of a piece of surface gathered as a whole.
+    #[arg(long, default_value_t = GatherSettings::default().max_solid_angle, value_name = "SR")]
+    pub max_solid_angle: f64,
+}
+
+impl GatherArgs {
+    /// The gather's settings, refusing values that would not end or would cost without bound.
+    pub fn settings(&self) -> Result<GatherSettings> {
+        anyhow::ensure!(
+            self.gather_tolerance.is_finite() && self.gather_tolerance > 0.0,
+            "--gather-tolerance must be a positive number"
+        );
+        anyhow::ensure!(
+            self.max_solid_angle.is_finite() && self.max_solid_angle >= 1e-4,
+            "--max-solid-angle must be at least 1e-4 sr"
+        );
+        Ok(GatherSettings {
+            tolerance: self.gather_tolerance,
+            max_solid_angle: self.max_solid_angle,
+            ..GatherSettings::default()
         })
     }
 }

@@ -2,9 +2,9 @@
 //! in lux on a work plane, with an error estimate per point, as BASE.csv, BASE.json and an isolux plot
 //! BASE.svg.
 
-use super::args::{SceneArgs, SolveArgs};
+use super::args::{GatherArgs, SceneArgs, SolveArgs};
 use crate::measures::illuminance::{
-    illuminance_grid, GatherSettings, Grid, GridReport, ReferencePaths, Region, WorkPlane,
+    illuminance_grid, Grid, GridReport, ReferencePaths, Region, WorkPlane,
 };
 use crate::output::work_plane::{output_paths, write_report};
 use crate::pipeline::simulate;
@@ -39,25 +39,13 @@ pub struct GridCommand {
     /// error (rounded up to a multiple of 16).
     #[arg(long, value_name = "N", value_parser = super::args::count(2, 1 << 24))]
     pub reference_paths: Option<usize>,
-    /// Largest gather error of one piece of surface, relative to the scene's mean radiance times
-    /// --max-solid-angle (see `measures::illuminance`).
-    #[arg(long, default_value_t = GatherSettings::default().tolerance, value_name = "T")]
-    pub gather_tolerance: f64,
-    /// Largest projected solid angle (sr) of a piece of surface gathered as a whole.
-    #[arg(long, default_value_t = GatherSettings::default().max_solid_angle, value_name = "SR")]
-    pub max_solid_angle: f64,
+    #[command(flatten)]
+    pub gather: GatherArgs,
 }
 
 impl GridCommand {
     pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
-        anyhow::ensure!(
-            self.gather_tolerance.is_finite() && self.gather_tolerance > 0.0,
-            "--gather-tolerance must be a positive number"
-        );
-        anyhow::ensure!(
-            self.max_solid_angle.is_finite() && self.max_solid_angle >= 1e-4,
-            "--max-solid-angle must be at least 1e-4 sr"
-        );
+        let gather = self.gather.settings()?;
         let paths = output_paths(&self.output);
         let outputs: Vec<(&str, &std::path::Path)> = ["-o (csv)", "-o (json)", "-o (svg)"]
             .into_iter()
@@ -82,11 +70,6 @@ impl GridCommand {
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
         let solve_seconds = start.elapsed().as_secs_f64();
-        let gather = GatherSettings {
-            tolerance: self.gather_tolerance,
-            max_solid_angle: self.max_solid_angle,
-            ..GatherSettings::default()
-        };
         let reference = self
             .reference_paths
             .map(|paths| ReferencePaths { paths, seed });

@@ -1,10 +1,13 @@
 //! `radiosity probe [SCENE] --points pts.csv|--random N|--seen N [--reference --spp N]`: the
 //! radiosity solution's radiance at given surface points (or random ones: over all surfaces, or where
-//! the camera looks), optionally beside the unbiased path-traced estimate.
+//! the camera looks), or with `--final-gather` what a gather of the solution finds at each point,
+//! optionally beside the unbiased path-traced estimate.
 
-use super::args::{CameraArgs, SceneArgs, SolveArgs};
+use super::args::{CameraArgs, GatherArgs, SceneArgs, SolveArgs};
 use crate::color::Units;
-use crate::measures::illuminance::{probe_photometry, GatherSettings, IrradianceGather};
+use crate::measures::illuminance::{
+    final_gather, probe_gather_points, probe_photometry, IrradianceGather,
+};
 use crate::measures::point_errors::{point_errors, LIT_FRACTION};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
@@ -57,6 +60,14 @@ pub struct ProbeCommand {
     /// illuminance arriving at the point (lux, gathered from the solution, with its estimated error).
     #[arg(long, value_enum, default_value_t = Units::Radiometric)]
     pub units: Units,
+    /// Each point's radiance by a final gather of the solution at the point (its emission plus ρ/π
+    /// times the irradiance gathered hierarchically from the solved radiances, with exact factors
+    /// and visibility rays; `measures::illuminance::final_gather`) instead of its leaf's value, and
+    /// its error estimate the gather's.
+    #[arg(long)]
+    pub final_gather: bool,
+    #[command(flatten)]
+    pub gather: GatherArgs,
 }
 
 impl ProbeCommand {
@@ -98,6 +109,7 @@ impl ProbeCommand {
                 }
             },
         };
+        let gather_settings = self.gather.settings()?;
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
         let reference = self.reference.then_some(ProbeReference {
@@ -115,6 +127,28 @@ impl ProbeCommand {
         if let Some(path) = &self.against {
             attach_stored_reference(&mut results, path)?;
         }
+        // The irradiance at the points, once, for the final gather and the illuminance column.
+        let gathered = (self.final_gather || self.units == Units::Photometric).then(|| {
+            let start = std::time::Instant::now();
+            let gather = IrradianceGather::new(
+                &solution.hierarchy,
+                solution.visibility.as_ref(),
+                gather_settings,
+            );
+            let irradiance = gather.at_all(&probe_gather_points(&results));
+            (irradiance, start.elapsed().as_secs_f64())
+        });
+        let gather_note = match &gathered {
+            Some((irradiance, seconds)) if self.final_gather => {
+                final_gather(&solution.hierarchy, &mut results, irradiance);
+                let rays: u64 = irradiance.iter().map(|e| u64::from(e.rays)).sum();
+                format!(
+                    "\n# final gather: radiance = emission + ρ/π × the irradiance gathered from the \
+                     solution at each point ({rays} rays, {seconds:.2} s)"
+                )
+            }
+            _ => String::new(),
+        };
         let compared = self.reference || self.against.is_some();
         let h = &solution.hierarchy;
         let points_note = if own_points {
@@ -134,14 +168,10 @@ impl ProbeCommand {
             h.leaf_count(),
             h.link_count(),
             solution.report.passes
-        );
+        ) + &gather_note;
         if self.units == Units::Photometric {
-            let gather = IrradianceGather::new(
-                &solution.hierarchy,
-                solution.visibility.as_ref(),
-                GatherSettings::default(),
-            );
-            let photometry = probe_photometry(&results, &gather);
+            let (irradiance, _) = gathered.as_ref().expect("gathered for photometric units");
+            let photometry = probe_photometry(&results, irradiance);
             if self.json {
                 let rows: Vec<_> = results
                     .iter()
