@@ -715,6 +715,54 @@ fn probe_final_gather_says_what_it_did_and_refuses_bad_settings() {
     assert!(stderr.contains("--max-solid-angle"), "{stderr}");
 }
 
+/// `render --final-gather` writes its image, and an image of more samples than it may gather at is
+/// refused with the budget named, before any solve.
+#[test]
+fn render_final_gather_writes_small_images_and_refuses_large_ones() {
+    let dir = temp_dir("final_gather");
+    let png = dir.join("g.png");
+    let small = radiosity(&[
+        "render",
+        "-q",
+        "--eps",
+        "1e-3",
+        "--final-gather",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--spp",
+        "1",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(
+        small.status.success(),
+        "{}",
+        String::from_utf8_lossy(&small.stderr)
+    );
+    assert!(png.exists());
+    let large = radiosity(&[
+        "render",
+        "-q",
+        "--final-gather",
+        "--width",
+        "1024",
+        "--height",
+        "1024",
+        "--spp",
+        "16",
+        "-o",
+        dir.join("h.png").to_str().unwrap(),
+    ]);
+    assert!(!large.status.success());
+    let stderr = String::from_utf8_lossy(&large.stderr);
+    assert!(
+        stderr.contains("--final-gather gathers at every sample") && stderr.contains("1048576"),
+        "{stderr}"
+    );
+}
+
 /// A reference path traced once (`probe --reference --json`) is compared with later solutions at the
 /// same points (`probe --against`): the same error summary (and count of points within their
 /// estimated error) as a fresh reference gives, and a clear error when the points are not the same.

@@ -475,6 +475,24 @@ fn points_inside_furniture_are_found_and_points_under_desks_are_not() {
     }
 }
 
+/// The unit plate 0.5 under a parallel emitting square of radiance 2 with black reflectance, its own
+/// reflectance 0.6, solved on coarse elements (at least a tenth of the plate): the scene and solution
+/// of the final-gather tests.
+fn coarse_lit_plate() -> (Scene, Solution) {
+    let scene = generators::parallel_plates(1.0, 0.5, 0.6, 2.0);
+    let settings = SimulationSettings {
+        min_area: 0.1,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+    (scene, solution)
+}
+
+/// The exact radiance at `(x, y, 0)` on [`coarse_lit_plate`]'s plate: `ρ L_e F(x)`, Howell's factor.
+fn lit_plate_radiance(x: f64, y: f64) -> f64 {
+    0.6 * 2.0 * rectangle_factor(x, y, [0.0, 0.0, 1.0, 1.0], 0.5)
+}
+
 /// A final gather at probed points (`probe --final-gather`) against Howell's analytic factor: a plate
 /// lit by a parallel emitting square of the same size (the emitter black, so the plate's radiance is
 /// exactly `ρ L_e F(x)`), solved on coarse elements (at least a tenth of the plate) whose linear
@@ -486,13 +504,7 @@ fn points_inside_furniture_are_found_and_points_under_desks_are_not() {
 fn a_final_gather_gives_the_analytic_radiance_where_coarse_elements_do_not() {
     use radiosity::measures::illuminance::{final_gather, probe_gather_points};
     use radiosity::reference::probe::{parse_points, probe_points};
-    let (rho, le, h) = (0.6, 2.0, 0.5);
-    let scene = generators::parallel_plates(1.0, h, rho, le);
-    let settings = SimulationSettings {
-        min_area: 0.1,
-        ..Default::default()
-    };
-    let solution = simulate(&scene, &settings, &Progress::new(true)).expect("solve");
+    let (scene, solution) = coarse_lit_plate();
     let xy = [
         (0.5, 0.5),
         (0.02, 0.5),
@@ -509,10 +521,7 @@ fn a_final_gather_gives_the_analytic_radiance_where_coarse_elements_do_not() {
     let visibility = solution.visibility.as_ref();
     let mut results = probe_points(&scene, visibility, &solution.hierarchy, &points, None, file)
         .expect("on the plate");
-    let exact: Vec<f64> = xy
-        .iter()
-        .map(|&(x, y)| rho * le * rectangle_factor(x, y, [0.0, 0.0, 1.0, 1.0], h))
-        .collect();
+    let exact: Vec<f64> = xy.iter().map(|&(x, y)| lit_plate_radiance(x, y)).collect();
     let leaf_worst = results
         .iter()
         .zip(&exact)
@@ -531,4 +540,62 @@ fn a_final_gather_gives_the_analytic_radiance_where_coarse_elements_do_not() {
             (r.radiosity.g, r.radiosity.g)
         );
     }
+}
+
+/// `render --final-gather`: each pixel of a view of the coarsely solved plate above (from between the
+/// plates, looking down) is the analytic `ρ L_e F(x)` at the point its centre ray meets, as the
+/// probe's final gather gives, on one thread and on three alike; without it the leaves' values.
+#[test]
+fn a_final_gather_render_shows_the_analytic_radiance_at_every_pixel() {
+    use radiosity::output::camera::Camera;
+    use radiosity::output::render::{render, RenderOptions, Shading};
+    use radiosity::scene::CameraSpec;
+    let (_, solution) = coarse_lit_plate();
+    let spec = CameraSpec {
+        eye: DVec3::new(0.5, 0.5, 0.4),
+        look_at: DVec3::new(0.5, 0.5, 0.0),
+        up: DVec3::Y,
+        fov_degrees: 100.0,
+    };
+    let camera = Camera::new(&spec, 12, 12);
+    let visibility = solution.visibility.as_ref();
+    let options = RenderOptions {
+        shading: Shading::Basis,
+        final_gather: Some(GatherSettings::default()),
+        ..Default::default()
+    };
+    let on_threads = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool")
+            .install(|| render(&solution.hierarchy, visibility, &camera, &options))
+    };
+    let image = on_threads(1);
+    assert_eq!(image, on_threads(3));
+    let leaves = render(
+        &solution.hierarchy,
+        visibility,
+        &camera,
+        &RenderOptions {
+            final_gather: None,
+            ..options
+        },
+    );
+    let mut leaf_worst = 0.0f64;
+    for y in 0..12 {
+        for x in 0..12 {
+            let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
+            let t = -ray.origin.z / ray.direction.z;
+            let p = ray.origin + ray.direction * t;
+            let exact = lit_plate_radiance(p.x, p.y);
+            let got = image.get(x, y).g;
+            assert!(
+                (got - exact).abs() <= 1e-9 * exact,
+                "({x}, {y}): {got} vs {exact}"
+            );
+            leaf_worst = leaf_worst.max((leaves.get(x, y).g - exact).abs() / exact);
+        }
+    }
+    assert!(leaf_worst > 0.03, "the coarse leaves miss by {leaf_worst}");
 }

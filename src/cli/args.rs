@@ -618,11 +618,31 @@ pub fn check_pixels(width: usize, height: usize) -> Result<()> {
 
 /// Refuses images above the sample budget (pixels times samples per pixel).
 pub fn check_samples(width: usize, height: usize, spp: usize) -> Result<()> {
+    samples_within(width, height, spp, MAX_SAMPLES, "")
+}
+
+/// Most samples `render --final-gather` gathers at: each costs a hierarchical gather (3–30 ms on 2
+/// cores on the scenes of BENCHMARKS.md), so 256² pixels at 16 samples is already minutes to hours.
+pub const MAX_GATHERED_SAMPLES: u128 = 1 << 20;
+
+/// Refuses a `render --final-gather` of more than [`MAX_GATHERED_SAMPLES`] samples.
+pub fn check_gathered_samples(width: usize, height: usize, spp: usize) -> Result<()> {
+    samples_within(
+        width,
+        height,
+        spp,
+        MAX_GATHERED_SAMPLES,
+        "--final-gather gathers at every sample (milliseconds each): ",
+    )
+}
+
+/// Refuses `width × height × spp` samples above `limit`, the message led by `why`.
+fn samples_within(width: usize, height: usize, spp: usize, limit: u128, why: &str) -> Result<()> {
     let total = width as u128 * height as u128 * spp as u128;
     anyhow::ensure!(
-        total <= MAX_SAMPLES,
-        "{width}x{height} pixels at {spp} samples per pixel is {total} samples, more than the \
-         {MAX_SAMPLES} allowed: lower --spp or the image size"
+        total <= limit,
+        "{why}{width}x{height} pixels at {spp} samples per pixel is {total} samples, more than the \
+         {limit} allowed: lower --spp or the image size"
     );
     Ok(())
 }

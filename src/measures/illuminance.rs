@@ -786,10 +786,16 @@ pub fn final_gather(
         // Probes lie on a side with a patch (`reference::probe` refuses others).
         if let Some(patch) = h.patch_for_side(r.polygon, r.front) {
             let patch = &h.patches[patch as usize];
-            r.radiosity = patch.emission + patch.reflectance * e.irradiance * (1.0 / PI);
+            r.radiosity = gathered_radiance(patch, e.irradiance);
             r.estimated_error = patch.reflectance.max_channel() / PI * e.error();
         }
     }
+}
+
+/// The radiance a Lambertian point of `patch` leaves with under `irradiance`: `L_e + ρ E / π`
+/// ([`final_gather`], and `render --final-gather` per pixel sample).
+pub fn gathered_radiance(patch: &crate::hierarchy::Patch, irradiance: Rgb) -> Rgb {
+    patch.emission + patch.reflectance * irradiance * (1.0 / PI)
 }
 
 #[cfg(test)]

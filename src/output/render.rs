@@ -10,6 +10,7 @@ use crate::color::Rgb;
 use crate::geometry::{DVec3, Shape};
 use crate::hierarchy::Hierarchy;
 use crate::measures::fbem::Mask;
+use crate::measures::illuminance::{gathered_radiance, GatherSettings, IrradianceGather};
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -119,6 +120,12 @@ pub struct RenderOptions {
     pub seed: u64,
     /// Colour of the mesh lines (linear radiance).
     pub mesh_colour: Rgb,
+    /// Each sample's radiance by a final gather of the solution at its point
+    /// ([`gathered_radiance`] of the irradiance [`IrradianceGather`] finds there, as `probe
+    /// --final-gather` gives) instead of the shading's value: what the solution's radiance field
+    /// implies at the point, at 3–30 ms a sample on 2 cores (BENCHMARKS.md, "A final gather at probed
+    /// points"). `None`: the shading's value.
+    pub final_gather: Option<GatherSettings>,
 }
 
 impl Default for RenderOptions {
@@ -131,6 +138,7 @@ impl Default for RenderOptions {
             antialias: Antialias::Stratified,
             seed: 0,
             mesh_colour: Rgb::BLACK,
+            final_gather: None,
         }
     }
 }
@@ -170,12 +178,17 @@ pub fn render_with(
         }
         (_, v) => v,
     };
+    let gather = options
+        .final_gather
+        .filter(|_| options.quantity == Quantity::Radiance)
+        .map(|settings| IrradianceGather::new(hierarchy, visibility, settings));
     let tracer = Tracer {
         hierarchy,
         visibility,
         camera,
         options,
         vertices,
+        gather: gather.as_ref(),
     };
     let mut image = Image::new(camera.width, camera.height);
     let samples = options.samples_per_pixel.max(1);
@@ -268,6 +281,8 @@ struct Tracer<'a> {
     camera: &'a Camera,
     options: &'a RenderOptions,
     vertices: Option<&'a VertexRadiosity>,
+    /// The final gather of [`RenderOptions::final_gather`], when asked for.
+    gather: Option<&'a IrradianceGather<'a>>,
 }
 
 impl Tracer<'_> {
@@ -305,6 +320,9 @@ impl Tracer<'_> {
         }
         if self.options.quantity == Quantity::ErrorEstimate {
             return Rgb::new(element.error, element.error, element.error);
+        }
+        if let Some(gather) = self.gather {
+            return gathered_radiance(patch_ref, gather.at(p, patch_ref.normal).irradiance);
         }
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
