@@ -775,8 +775,8 @@ pub fn probe_gather_points(
 /// projected area and exposure), a factor that varies faster across the element than its basis (a
 /// receiver touching a perpendicular wall). The gather reads the same solution, but at the point,
 /// with the exact factor of every piece it uses and rays for its visibility: what the solution's
-/// radiance field implies there. Seen points of the classroom go from 5.0% to 1.6% RMS at the same
-/// solve, the Cornell box from 3.5% to 0.8% (BENCHMARKS.md, "A final gather at probed points").
+/// radiance field implies there. Seen points of the classroom go from 6.2% to 1.7% RMS at the same
+/// solve, the Cornell box's from 3.0% to 0.7% (BENCHMARKS.md, "A final gather at probed points").
 pub fn final_gather(
     h: &Hierarchy,
     results: &mut [crate::reference::probe::ProbeResult],
