@@ -682,7 +682,7 @@ fn multires_visibility_needs_a_feature_size_and_solves_with_one() {
 
 /// `probe --final-gather` evaluates the points by a gather of the solution (other values than the
 /// leaves', at the same points) and says so with the rays it cast; a bad gather setting is refused
-/// by name before any solve.
+/// by name before any solve; with `--cached`, the values a cached render shows, said as such.
 #[test]
 fn probe_final_gather_says_what_it_did_and_refuses_bad_settings() {
     let common = ["probe", "-q", "--random", "10", "--eps", "1e-3"];
@@ -713,54 +713,90 @@ fn probe_final_gather_says_what_it_did_and_refuses_bad_settings() {
     assert!(!bad.status.success());
     let stderr = String::from_utf8_lossy(&bad.stderr);
     assert!(stderr.contains("--max-solid-angle"), "{stderr}");
+    // At points a 32² image sees, `--cached` gives the image's values: other than the leaves'.
+    let seen = [
+        "probe", "-q", "--seen", "10", "--eps", "1e-3", "--width", "32", "--height", "32",
+    ];
+    let plain = radiosity(&seen);
+    let cached = radiosity(&[&seen[..], &["--final-gather", "--cached"]].concat());
+    let (plain_rows, cached_rows) = (rows(&plain), rows(&cached));
+    assert_eq!(plain_rows.len(), cached_rows.len());
+    assert!(plain_rows.iter().zip(&cached_rows).any(|(a, b)| a != b));
+    let stdout = String::from_utf8_lossy(&cached.stdout);
+    assert!(
+        stdout.contains("# final gather as rendered: ")
+            && stdout.contains("records for a 32x32 image"),
+        "{stdout}"
+    );
+    let orphan = radiosity(&[&seen[..], &["--cached"]].concat());
+    assert!(!orphan.status.success(), "--cached needs --final-gather");
 }
 
-/// `render --final-gather` writes its image, and an image of more samples than it may gather at is
-/// refused with the budget named, before any solve.
+/// `render --final-gather` writes its image and says how many records its cache gathered at (or that
+/// it gathered at every sample), and an image of more gathers than it may make is refused with the
+/// budget named, before any solve: a record per pixel for the cache, every sample without it.
 #[test]
 fn render_final_gather_writes_small_images_and_refuses_large_ones() {
     let dir = temp_dir("final_gather");
     let png = dir.join("g.png");
-    let small = radiosity(&[
-        "render",
-        "-q",
-        "--eps",
-        "1e-3",
-        "--final-gather",
-        "--width",
-        "8",
-        "--height",
-        "8",
-        "--spp",
-        "1",
-        "-o",
-        png.to_str().unwrap(),
-    ]);
+    let small = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "--eps",
+            "1e-3",
+            "--final-gather",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--spp",
+            "1",
+            "-o",
+        ];
+        args.push(png.to_str().unwrap());
+        args.extend(extra);
+        let out = radiosity(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(png.exists());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let cached = small(&[]);
+    assert!(cached.contains(" cached records) -> "), "{cached}");
+    let every = small(&["--gather-every-sample"]);
     assert!(
-        small.status.success(),
-        "{}",
-        String::from_utf8_lossy(&small.stderr)
+        every.contains("(final gather at every sample) -> "),
+        "{every}"
     );
-    assert!(png.exists());
-    let large = radiosity(&[
-        "render",
-        "-q",
-        "--final-gather",
-        "--width",
-        "1024",
-        "--height",
-        "1024",
-        "--spp",
-        "16",
-        "-o",
-        dir.join("h.png").to_str().unwrap(),
-    ]);
-    assert!(!large.status.success());
-    let stderr = String::from_utf8_lossy(&large.stderr);
+    let large = dir.join("h.png");
+    let refused = |size: [&str; 2], spp: &str, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "-q",
+            "--final-gather",
+            "--width",
+            size[0],
+            "--height",
+        ];
+        args.extend([size[1], "--spp", spp, "-o", large.to_str().unwrap()]);
+        args.extend(extra);
+        let out = radiosity(&args);
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let stderr = refused(["1024", "1024"], "16", &["--gather-every-sample"]);
     assert!(
-        stderr.contains("--final-gather gathers at every sample") && stderr.contains("1048576"),
+        stderr.contains("--final-gather gathers at up to a record per pixel")
+            && stderr.contains("1048576"),
         "{stderr}"
     );
+    let stderr = refused(["2048", "1024"], "16", &[]);
+    assert!(stderr.contains("2097152 samples"), "{stderr}");
+    let stderr = refused(["8", "8"], "1", &["--cache-accuracy", "0"]);
+    assert!(stderr.contains("--cache-accuracy"), "{stderr}");
 }
 
 /// A reference path traced once (`probe --reference --json`) is compared with later solutions at the

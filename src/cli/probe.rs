@@ -3,12 +3,15 @@
 //! the camera looks), or with `--final-gather` what a gather of the solution finds at each point,
 //! optionally beside the unbiased path-traced estimate.
 
-use super::args::{CameraArgs, GatherArgs, SceneArgs, SolveArgs};
+use super::args::{cache_settings, CameraArgs, GatherArgs, SceneArgs, SolveArgs};
 use crate::color::Units;
+use crate::geometry::DVec3;
 use crate::measures::illuminance::{
     final_gather, probe_gather_points, probe_photometry, IrradianceGather,
 };
+use crate::measures::irradiance_cache::CacheSettings;
 use crate::measures::point_errors::{point_errors, LIT_FRACTION};
+use crate::output::render::{radiance_as_rendered, RenderOptions, Shading};
 use crate::pipeline::simulate;
 use crate::progress::Progress;
 use crate::reference::probe::{
@@ -16,7 +19,7 @@ use crate::reference::probe::{
     seen_points, ProbeReference,
 };
 use crate::solvers::{allowed_error, LOCAL_ACCURACY_FLOOR};
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -66,6 +69,15 @@ pub struct ProbeCommand {
     /// its error estimate the gather's.
     #[arg(long)]
     pub final_gather: bool,
+    /// With --final-gather: each point's radiance as `render --final-gather` shows it through this
+    /// camera (--width, --height, --eye, ...): the default seamless shading plus the correction its
+    /// irradiance cache interpolates between records placed at that camera's pixels (errors still the
+    /// leaves' estimates). With --seen, what the image shows at the points it sees.
+    #[arg(long, requires = "final_gather")]
+    pub cached: bool,
+    /// With --cached: Ward's a (`render --cache-accuracy`).
+    #[arg(long, requires = "cached", value_name = "A", default_value_t = CacheSettings::default().accuracy)]
+    pub cache_accuracy: f64,
     #[command(flatten)]
     pub gather: GatherArgs,
 }
@@ -80,6 +92,14 @@ impl ProbeCommand {
         // Whether the points are the stored reference's own (`--against` alone): then `--seed` varies
         // the solve at one point set, which says nothing of another set (a note in the header).
         let own_points = self.points.is_none() && self.random.is_none() && self.seen.is_none();
+        let camera = self.camera.camera(&scene, 512)?;
+        let cache = self
+            .cached
+            .then(|| cache_settings(self.cache_accuracy))
+            .transpose()?;
+        if cache.is_some() {
+            super::args::check_gathered_samples(camera.width, camera.height, 1)?;
+        }
         let (points, file) = match (&self.points, self.random, self.seen) {
             (Some(path), _, _) => (read_points(path)?, path.clone()),
             (None, Some(n), _) => (
@@ -87,7 +107,6 @@ impl ProbeCommand {
                 PathBuf::from("random points"),
             ),
             (None, None, Some(n)) => {
-                let camera = self.camera.camera(&scene, 512)?;
                 let points = seen_points(&scene, &camera, n, seed);
                 anyhow::ensure!(
                     !points.is_empty(),
@@ -109,7 +128,7 @@ impl ProbeCommand {
                 }
             },
         };
-        let gather_settings = self.gather.settings()?;
+        let gather_settings = self.gather.settings(self.cached)?;
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
         let reference = self.reference.then_some(ProbeReference {
@@ -128,17 +147,50 @@ impl ProbeCommand {
             attach_stored_reference(&mut results, path)?;
         }
         // The irradiance at the points, once, for the final gather and the illuminance column.
-        let gathered = (self.final_gather || self.units == Units::Photometric).then(|| {
-            let start = std::time::Instant::now();
-            let gather = IrradianceGather::new(
-                &solution.hierarchy,
-                solution.visibility.as_ref(),
-                gather_settings,
-            );
-            let irradiance = gather.at_all(&probe_gather_points(&results));
-            (irradiance, start.elapsed().as_secs_f64())
-        });
+        let gathered = ((self.final_gather && !self.cached) || self.units == Units::Photometric)
+            .then(|| {
+                let start = std::time::Instant::now();
+                let gather = IrradianceGather::new(
+                    &solution.hierarchy,
+                    solution.visibility.as_ref(),
+                    gather_settings,
+                );
+                let irradiance = gather.at_all(&probe_gather_points(&results));
+                (irradiance, start.elapsed().as_secs_f64())
+            });
         let gather_note = match &gathered {
+            _ if cache.is_some() => {
+                let start = std::time::Instant::now();
+                let options = RenderOptions {
+                    shading: Shading::Seamless,
+                    final_gather: Some(gather_settings),
+                    gather_cache: cache,
+                    seed,
+                    ..Default::default()
+                };
+                let h = &solution.hierarchy;
+                let points: Vec<(u32, DVec3)> = results
+                    .iter()
+                    .map(|r| {
+                        let patch = h.patch_for_side(r.polygon, r.front).context("a patch")?;
+                        Ok((patch, h.onto_patch_plane(patch, DVec3::from_array(r.point))))
+                    })
+                    .collect::<Result<_>>()?;
+                let visibility = solution.visibility.as_ref();
+                let (radiances, report) =
+                    radiance_as_rendered(h, visibility, &camera, &options, &points);
+                for (r, radiance) in results.iter_mut().zip(radiances) {
+                    r.radiosity = radiance;
+                }
+                format!(
+                    "\n# final gather as rendered: seamless shading plus the correction cached at {} \
+                     records for a {}x{} image ({:.2} s)",
+                    report.gather_records,
+                    camera.width,
+                    camera.height,
+                    start.elapsed().as_secs_f64()
+                )
+            }
             Some((irradiance, seconds)) if self.final_gather => {
                 final_gather(&solution.hierarchy, &mut results, irradiance);
                 let rays: u64 = irradiance.iter().map(|e| u64::from(e.rays)).sum();

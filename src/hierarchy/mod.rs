@@ -1111,6 +1111,14 @@ impl Hierarchy {
         self.polygon_patches[polygon][usize::from(!front)]
     }
 
+    /// `p` moved along the normal of `patch` onto its plane, so that parameter inversion sees an
+    /// in-plane point (a ray's hit, a probe's point, off the plane by rounding).
+    pub fn onto_patch_plane(&self, patch: u32, p: DVec3) -> DVec3 {
+        let normal = self.patches[patch as usize].normal;
+        let corner = self.patch_shape(patch).vertices()[0];
+        p - normal * normal.dot(p - corner)
+    }
+
     /// The leaf element of `patch` containing the world point `p` (which lies on the patch): its
     /// parameters on the root, then one child per level by the two-scale map of the parameters
     /// ([`crate::bases::child_containing`]), with no geometry below the root.

@@ -230,6 +230,12 @@ impl<'a> IrradianceGather<'a> {
         out
     }
 
+    /// The radiance `patch` leaves `x` with under the irradiance gathered there ([`gathered_radiance`]).
+    pub fn radiance_at(&self, patch: u32, x: DVec3) -> Rgb {
+        let patch = &self.hierarchy.patches[patch as usize];
+        gathered_radiance(patch, self.at(x, patch.normal).irradiance)
+    }
+
     /// The irradiance at every `(point, normal)`, in parallel; each point is gathered on its own, so the
     /// result does not depend on the thread count.
     pub fn at_all(&self, points: &[(DVec3, DVec3)]) -> Vec<PointIrradiance> {

@@ -5,6 +5,7 @@ pub mod global_lines;
 pub mod illuminance;
 pub mod image_metrics;
 pub mod information;
+pub mod irradiance_cache;
 pub mod link_audit;
 pub mod morphology;
 pub mod point_errors;

@@ -1,16 +1,19 @@
 //! Ray-cast rendering of a radiosity solution: each camera ray finds the visible surface point, and the
 //! image holds the solution's exitant radiance there (linear, so that it can be compared with a reference
 //! renderer pixel by pixel). Flat shading shows the leaf elements' constant radiance, smooth shading the
-//! vertex interpolation of [`VertexRadiosity`]; the mesh overlay draws the leaf edges.
+//! vertex interpolation of [`VertexRadiosity`]; the mesh overlay draws the leaf edges. A final gather
+//! corrects the shading where the solution misplaced its light within elements, at cached records
+//! ([`IrradianceCache`]) or at every sample.
 
 use super::camera::Camera;
 use super::image::Image;
 use super::mesh_values::{LeafCorrections, VertexRadiosity};
 use crate::color::Rgb;
-use crate::geometry::{DVec3, Shape};
-use crate::hierarchy::Hierarchy;
+use crate::geometry::{DVec2, DVec3, Shape};
+use crate::hierarchy::{ElementId, Hierarchy};
 use crate::measures::fbem::Mask;
-use crate::measures::illuminance::{gathered_radiance, GatherSettings, IrradianceGather};
+use crate::measures::illuminance::{GatherSettings, IrradianceGather};
+use crate::measures::irradiance_cache::{CacheSettings, Candidate, IrradianceCache};
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -120,12 +123,15 @@ pub struct RenderOptions {
     pub seed: u64,
     /// Colour of the mesh lines (linear radiance).
     pub mesh_colour: Rgb,
-    /// Each sample's radiance by a final gather of the solution at its point
-    /// ([`gathered_radiance`] of the irradiance [`IrradianceGather`] finds there, as `probe
-    /// --final-gather` gives) instead of the shading's value: what the solution's radiance field
-    /// implies at the point, at 3–30 ms a sample on 2 cores (BENCHMARKS.md, "A final gather at probed
-    /// points"). `None`: the shading's value.
+    /// A final gather of the solution ([`IrradianceGather::radiance_at`]: `L_e + ρ E / π` with the
+    /// irradiance gathered at the point, as `probe --final-gather` gives): what the solution's
+    /// radiance field implies at a point, at 1–30 ms a gather on 2 cores (BENCHMARKS.md, "A final
+    /// gather at probed points"). `None`: the shading's value.
     pub final_gather: Option<GatherSettings>,
+    /// With `final_gather`: gather at records placed where the camera looks and add the gather's
+    /// correction to the shading, interpolated between them, to each sample ([`IrradianceCache`]);
+    /// `None`: gather at every sample instead of shading it.
+    pub gather_cache: Option<CacheSettings>,
 }
 
 impl Default for RenderOptions {
@@ -139,6 +145,7 @@ impl Default for RenderOptions {
             seed: 0,
             mesh_colour: Rgb::BLACK,
             final_gather: None,
+            gather_cache: None,
         }
     }
 }
@@ -170,6 +177,62 @@ pub fn render_with(
     options: &RenderOptions,
     vertices: Option<&VertexRadiosity>,
 ) -> Image {
+    render_reporting(hierarchy, visibility, camera, options, vertices).0
+}
+
+/// What a render did besides its image.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderReport {
+    /// Records of the final gather's irradiance cache ([`RenderOptions::gather_cache`]).
+    pub gather_records: usize,
+}
+
+/// [`render_with`], with what the render did.
+pub fn render_reporting(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    camera: &Camera,
+    options: &RenderOptions,
+    vertices: Option<&VertexRadiosity>,
+) -> (Image, RenderReport) {
+    with_tracer(hierarchy, visibility, camera, options, vertices, |tracer| {
+        draw(tracer)
+    })
+}
+
+/// The radiance a render with `options` shows at each surface point `(patch, point)` (on the patch's
+/// plane), the irradiance cache's records placed for `camera` as [`render_with`] places them: the
+/// shading, with a cached final gather its interpolated correction added (the shading alone where no
+/// record reaches the point), with an uncached one the gather at the point. What `probe
+/// --final-gather --cached` measures against a reference at points the camera sees.
+pub fn radiance_as_rendered(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    camera: &Camera,
+    options: &RenderOptions,
+    points: &[(u32, DVec3)],
+) -> (Vec<Rgb>, RenderReport) {
+    with_tracer(hierarchy, visibility, camera, options, None, |tracer| {
+        points
+            .par_iter()
+            .map_init(LeafCorrections::default, |memo, &(patch, point)| {
+                let (leaf, uv) = hierarchy.locate_with_parameters(patch, point);
+                tracer.finish(patch, leaf, point, tracer.shade(leaf, point, uv, memo))
+            })
+            .collect()
+    })
+}
+
+/// Builds what a render's primary rays need (vertex radiosity if the shading needs it and `vertices`
+/// is `None`; the final gather and its cache if asked for) and hands it to `work`, with the report.
+fn with_tracer<T>(
+    hierarchy: &Hierarchy,
+    visibility: &dyn Visibility,
+    camera: &Camera,
+    options: &RenderOptions,
+    vertices: Option<&VertexRadiosity>,
+    work: impl FnOnce(&Tracer) -> T,
+) -> (T, RenderReport) {
     let built;
     let vertices = match (options.shading.needs_vertices(), vertices) {
         (true, None) => {
@@ -182,14 +245,41 @@ pub fn render_with(
         .final_gather
         .filter(|_| options.quantity == Quantity::Radiance)
         .map(|settings| IrradianceGather::new(hierarchy, visibility, settings));
-    let tracer = Tracer {
+    let mut tracer = Tracer {
         hierarchy,
         visibility,
         camera,
         options,
         vertices,
         gather: gather.as_ref(),
+        cache: None,
     };
+    let cache = gather
+        .as_ref()
+        .zip(options.gather_cache)
+        .map(|(gather, settings)| {
+            let extent = hierarchy.patch_bounds().diagonal();
+            let mut cache = IrradianceCache::new(settings, extent, options.seed);
+            let order = coarse_to_fine(camera.width, camera.height);
+            // A block of candidates at a time: traced in parallel, offered in order, then gathered.
+            for pixels in order.chunks(CANDIDATE_BLOCK) {
+                for candidate in tracer.cache_candidates(pixels) {
+                    cache.offer(&candidate, visibility);
+                }
+                cache.gather(gather);
+            }
+            cache
+        });
+    tracer.cache = cache.as_ref();
+    let report = RenderReport {
+        gather_records: cache.as_ref().map_or(0, IrradianceCache::len),
+    };
+    (work(&tracer), report)
+}
+
+/// The image of the tracer's camera.
+fn draw(tracer: &Tracer) -> Image {
+    let (camera, options) = (tracer.camera, tracer.options);
     let mut image = Image::new(camera.width, camera.height);
     let samples = options.samples_per_pixel.max(1);
     let cells = strata(samples);
@@ -283,47 +373,79 @@ struct Tracer<'a> {
     vertices: Option<&'a VertexRadiosity>,
     /// The final gather of [`RenderOptions::final_gather`], when asked for.
     gather: Option<&'a IrradianceGather<'a>>,
+    /// Its records, when the gather is cached ([`RenderOptions::gather_cache`]).
+    cache: Option<&'a IrradianceCache>,
 }
 
 impl Tracer<'_> {
     /// Radiance seen through image position (x, y) in pixels; `memo` keeps the corrections of the
     /// last leaf continuous shading saw ([`LeafCorrections`]).
     fn radiance(&self, x: f64, y: f64, memo: &mut LeafCorrections) -> Rgb {
+        let surface = match self.seen(x, y) {
+            Seen::Shown(radiance) => return radiance,
+            Seen::Surface(surface) => surface,
+        };
+        let shaded = self.shade(surface.leaf, surface.point, surface.uv, memo);
+        self.finish(surface.patch, surface.leaf, surface.point, shaded)
+    }
+
+    /// The radiance shown at a point of `patch` whose shading gives `shaded`: corrected by the cached
+    /// final gather, replaced by the uncached one, or as it is.
+    fn finish(&self, patch: u32, leaf: ElementId, point: DVec3, shaded: Rgb) -> Rgb {
+        match (self.cache, self.gather) {
+            (Some(cache), _) => cache.corrected(leaf, point, shaded).unwrap_or(shaded),
+            (None, Some(gather)) => gather.radiance_at(patch, point),
+            (None, None) => shaded,
+        }
+    }
+
+    /// What the primary ray through image position (x, y) meets.
+    fn seen(&self, x: f64, y: f64) -> Seen {
         let ray = self.camera.ray(x, y);
         let Some(hit) = self.visibility.intersect(&ray, 0.0, f64::INFINITY) else {
-            return self.nothing();
+            return Seen::Shown(self.nothing());
         };
         // A luminaire's opening glows at I(ω)/A_proj(ω) toward the eye.
         if let Some(luminaire) = self.hierarchy.opening_at(hit.polygon) {
-            return match self.options.quantity {
+            return Seen::Shown(match self.options.quantity {
                 Quantity::Radiance => luminaire.luminance(-ray.direction),
                 Quantity::ErrorEstimate => self.nothing(),
-            };
+            });
         }
         // The back of a one-sided polygon is an opaque black surface.
         let Some(patch) = self.hierarchy.patch_for_side(hit.polygon, hit.front) else {
-            return self.nothing();
+            return Seen::Shown(self.nothing());
         };
         let patch_ref = &self.hierarchy.patches[patch as usize];
-        // Project onto the patch plane so that parameter inversion sees an in-plane point.
-        let p = ray.at(hit.t);
-        let corner = self.hierarchy.patch_shape(patch).vertices()[0];
-        let p = p - patch_ref.normal * patch_ref.normal.dot(p - corner);
+        let p = self.hierarchy.onto_patch_plane(patch, ray.at(hit.t));
         let (leaf, uv) = self.hierarchy.locate_with_parameters(patch, p);
         let element = self.hierarchy.element(leaf);
-        if self.options.mesh {
-            // Camera rays are unit length, so t is the distance from the eye.
-            let width = MESH_HALF_WIDTH * self.camera.pixel_footprint(hit.t);
-            if boundary_distance(element.shape(), p) < width {
-                return self.options.mesh_colour;
-            }
+        // Camera rays are unit length, so t is the distance from the eye.
+        let footprint = self.camera.pixel_footprint(hit.t);
+        if self.options.mesh && boundary_distance(element.shape(), p) < MESH_HALF_WIDTH * footprint
+        {
+            return Seen::Shown(self.options.mesh_colour);
         }
         if self.options.quantity == Quantity::ErrorEstimate {
-            return Rgb::new(element.error, element.error, element.error);
+            return Seen::Shown(Rgb::new(element.error, element.error, element.error));
         }
-        if let Some(gather) = self.gather {
-            return gathered_radiance(patch_ref, gather.at(p, patch_ref.normal).irradiance);
-        }
+        Seen::Surface(Surface {
+            patch,
+            point: p,
+            leaf,
+            uv,
+            // Along the surface: a grazing view stretches a pixel over it.
+            footprint: footprint
+                / patch_ref
+                    .normal
+                    .dot(ray.direction)
+                    .abs()
+                    .max(GRAZING_COSINE),
+        })
+    }
+
+    /// The shading's radiance at a seen surface point.
+    fn shade(&self, leaf: ElementId, p: DVec3, uv: DVec2, memo: &mut LeafCorrections) -> Rgb {
         match (self.options.shading, self.vertices) {
             (Shading::Smooth, Some(vertices)) => vertices.evaluate(self.hierarchy, leaf, p),
             (Shading::Continuous | Shading::Seamless, Some(vertices)) => {
@@ -335,6 +457,30 @@ impl Tracer<'_> {
         }
     }
 
+    /// The irradiance cache's candidates: the surface points seen through the centres of `pixels`, in
+    /// their order.
+    fn cache_candidates(&self, pixels: &[(usize, usize)]) -> Vec<Candidate> {
+        let width = self.camera.width;
+        pixels
+            .par_iter()
+            .map_init(LeafCorrections::default, |memo, &(x, y)| {
+                let Seen::Surface(surface) = self.seen(x as f64 + 0.5, y as f64 + 0.5) else {
+                    return None;
+                };
+                Some(Candidate {
+                    patch: surface.patch,
+                    leaf: surface.leaf,
+                    point: surface.point,
+                    normal: self.hierarchy.patches[surface.patch as usize].normal,
+                    footprint: surface.footprint,
+                    key: (y * width + x) as u64,
+                    shaded: self.shade(surface.leaf, surface.point, surface.uv, memo),
+                })
+            })
+            .flatten()
+            .collect()
+    }
+
     /// What a pixel shows where no surface of the solution is seen (the background, the black back of
     /// a one-sided polygon): black radiance, or no error estimate at all (NaN, shown grey).
     fn nothing(&self) -> Rgb {
@@ -342,6 +488,52 @@ impl Tracer<'_> {
             Quantity::Radiance => Rgb::BLACK,
             Quantity::ErrorEstimate => Rgb::new(f64::NAN, f64::NAN, f64::NAN),
         }
+    }
+}
+
+/// What a primary ray meets: a value to show as is, or a surface point of a patch to shade.
+enum Seen {
+    Shown(Rgb),
+    Surface(Surface),
+}
+
+/// A surface point seen by a primary ray.
+struct Surface {
+    patch: u32,
+    /// On the patch's plane.
+    point: DVec3,
+    leaf: ElementId,
+    uv: DVec2,
+    /// A pixel's size along the surface there.
+    footprint: f64,
+}
+
+/// Pixels whose candidates are traced at once for the irradiance cache: the candidates held are a
+/// block's, not an image's.
+const CANDIDATE_BLOCK: usize = 16_384;
+
+/// Smallest cosine between a primary ray and the surface it meets used to stretch the pixel's
+/// footprint along the surface (at most 20 times).
+const GRAZING_COSINE: f64 = 0.05;
+
+/// Pixels `(x, y)` of a `width × height` image, each once: every 32nd pixel of every 32nd row first,
+/// then the ones halfway between them, and so on down to every pixel.
+fn coarse_to_fine(width: usize, height: usize) -> Vec<(usize, usize)> {
+    let mut order = Vec::with_capacity(width * height);
+    let mut step = 32;
+    loop {
+        for y in (0..height).step_by(step) {
+            for x in (0..width).step_by(step) {
+                let coarser = step < 32 && x % (2 * step) == 0 && y % (2 * step) == 0;
+                if !coarser {
+                    order.push((x, y));
+                }
+            }
+        }
+        if step == 1 {
+            return order;
+        }
+        step /= 2;
     }
 }
 
