@@ -310,6 +310,17 @@ impl<'a> IrradianceGather<'a> {
         }
         let nodes_cast = rays;
         let visible = (seen / open).clamp(0.0, 1.0);
+        if visible > 0.0 && visible < 1.0 {
+            // The nodes disagree: the piece is partly visible whatever its corners say.
+            return NodeSample {
+                radiance: lit / open,
+                visible,
+                mixed: Some(visible),
+                brightest,
+                nodes: f64::from(nodes_cast),
+                rays,
+            };
+        }
         let centroid = piece.shape.centroid();
         for &corner in piece.shape.vertices() {
             let corner = corner + (centroid - corner) * CORNER_INSET;
@@ -319,11 +330,7 @@ impl<'a> IrradianceGather<'a> {
             }
         }
         let fraction = visible_samples / f64::from(rays);
-        let mixed = if visible > 0.0 && visible < 1.0 {
-            Some(visible)
-        } else {
-            (fraction > 0.0 && fraction < 1.0).then_some(fraction)
-        };
+        let mixed = (fraction > 0.0 && fraction < 1.0).then_some(fraction);
         NodeSample {
             radiance: lit / open,
             visible,
