@@ -649,6 +649,7 @@ fn a_cached_final_gather_interpolates_exact_corrections_between_records() {
             accuracy: 1e-9,
             min_pixels: 1e-3,
             max_pixels: 1e-3,
+            ..CacheSettings::default()
         }),
         ..cached
     };

@@ -642,14 +642,16 @@ pub const CACHED_GATHER_TOLERANCE: f64 = 0.2;
 
 /// The irradiance cache's settings for Ward's `a` of `--cache-accuracy`, refused outside [0.01, 10]
 /// (records nearly at every pixel already at 0.01 on the scenes of BENCHMARKS.md; past 10 the
-/// largest radius always holds).
-pub fn cache_settings(accuracy: f64) -> Result<CacheSettings> {
+/// largest radius always holds), for a solution by `method` (Monte Carlo radiosity's leaves are
+/// noisy: `CacheSettings::noisy_leaves`).
+pub fn cache_settings(accuracy: f64, method: MethodKind) -> Result<CacheSettings> {
     anyhow::ensure!(
         accuracy.is_finite() && (0.01..=10.0).contains(&accuracy),
         "--cache-accuracy must lie between 0.01 and 10"
     );
     Ok(CacheSettings {
         accuracy,
+        noisy_leaves: method == MethodKind::StochasticJacobi,
         ..Default::default()
     })
 }

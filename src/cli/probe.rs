@@ -95,7 +95,7 @@ impl ProbeCommand {
         let camera = self.camera.camera(&scene, 512)?;
         let cache = self
             .cached
-            .then(|| cache_settings(self.cache_accuracy))
+            .then(|| cache_settings(self.cache_accuracy, self.solve.method))
             .transpose()?;
         if cache.is_some() {
             super::args::check_gathered_samples(camera.width, camera.height, 1)?;

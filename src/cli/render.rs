@@ -126,7 +126,7 @@ impl RenderCommand {
         super::args::check_samples(camera.width, camera.height, self.spp as usize)?;
         let gather = self.gather.settings(!self.gather_every_sample)?;
         let gather_cache = (self.final_gather && !self.gather_every_sample)
-            .then(|| super::args::cache_settings(self.cache_accuracy))
+            .then(|| super::args::cache_settings(self.cache_accuracy, self.solve.method))
             .transpose()?;
         if self.final_gather {
             // A cache gathers at most once per pixel.

@@ -393,7 +393,9 @@ impl Tracer<'_> {
     /// final gather, replaced by the uncached one, or as it is.
     fn finish(&self, patch: u32, leaf: ElementId, point: DVec3, shaded: Rgb) -> Rgb {
         match (self.cache, self.gather) {
-            (Some(cache), _) => cache.corrected(leaf, point, shaded).unwrap_or(shaded),
+            (Some(cache), _) => cache
+                .corrected(patch, leaf, point, shaded)
+                .unwrap_or(shaded),
             (None, Some(gather)) => gather.radiance_at(patch, point),
             (None, None) => shaded,
         }
