@@ -158,13 +158,13 @@ impl ProbeCommand {
                 let irradiance = gather.at_all(&probe_gather_points(&results));
                 (irradiance, start.elapsed().as_secs_f64())
             });
-        let gather_note = match &gathered {
-            _ if cache.is_some() => {
+        let gather_note = match (cache, &gathered) {
+            (Some(cache), _) => {
                 let start = std::time::Instant::now();
                 let options = RenderOptions {
                     shading: Shading::Seamless,
                     final_gather: Some(gather_settings),
-                    gather_cache: cache,
+                    gather_cache: Some(cache),
                     seed,
                     ..Default::default()
                 };
@@ -191,7 +191,7 @@ impl ProbeCommand {
                     start.elapsed().as_secs_f64()
                 )
             }
-            Some((irradiance, seconds)) if self.final_gather => {
+            (None, Some((irradiance, seconds))) if self.final_gather => {
                 final_gather(&solution.hierarchy, &mut results, irradiance);
                 let rays: u64 = irradiance.iter().map(|e| u64::from(e.rays)).sum();
                 format!(

@@ -124,10 +124,10 @@ impl RenderCommand {
         let settings = self.solve.settings(seed)?;
         let camera = self.camera.camera(&scene, 512)?;
         super::args::check_samples(camera.width, camera.height, self.spp as usize)?;
-        let gather = self.gather.settings(!self.gather_every_sample)?;
         let gather_cache = (self.final_gather && !self.gather_every_sample)
             .then(|| super::args::cache_settings(self.cache_accuracy, self.solve.method))
             .transpose()?;
+        let gather = self.gather.settings(gather_cache.is_some())?;
         if self.final_gather {
             // A cache gathers at most once per pixel.
             let samples = if gather_cache.is_some() {
@@ -273,10 +273,12 @@ impl RenderCommand {
                 s.solve,
                 s.estimate,
                 s.render,
-                match (report.gather_records, self.final_gather) {
-                    (_, false) => String::new(),
-                    (0, true) => " (final gather at every sample)".to_string(),
-                    (records, true) => format!(" (final gather at {records} cached records)"),
+                match (self.final_gather, gather_cache) {
+                    (false, _) => String::new(),
+                    (true, None) => " (final gather at every sample)".to_string(),
+                    (true, Some(_)) => {
+                        format!(" (final gather at {} cached records)", report.gather_records)
+                    }
                 },
                 self.output.display()
             ));

@@ -310,27 +310,21 @@ impl<'a> IrradianceGather<'a> {
         }
         let nodes_cast = rays;
         let visible = (seen / open).clamp(0.0, 1.0);
-        if visible > 0.0 && visible < 1.0 {
+        let mixed = if visible > 0.0 && visible < 1.0 {
             // The nodes disagree: the piece is partly visible whatever its corners say.
-            return NodeSample {
-                radiance: lit / open,
-                visible,
-                mixed: Some(visible),
-                brightest,
-                nodes: f64::from(nodes_cast),
-                rays,
-            };
-        }
-        let centroid = piece.shape.centroid();
-        for &corner in piece.shape.vertices() {
-            let corner = corner + (centroid - corner) * CORNER_INSET;
-            if point_to_point(x, normal, corner, n_y) > 0.0 {
-                rays += 1;
-                visible_samples += self.visibility.transmittance(x, corner);
+            Some(visible)
+        } else {
+            let centroid = piece.shape.centroid();
+            for &corner in piece.shape.vertices() {
+                let corner = corner + (centroid - corner) * CORNER_INSET;
+                if point_to_point(x, normal, corner, n_y) > 0.0 {
+                    rays += 1;
+                    visible_samples += self.visibility.transmittance(x, corner);
+                }
             }
-        }
-        let fraction = visible_samples / f64::from(rays);
-        let mixed = (fraction > 0.0 && fraction < 1.0).then_some(fraction);
+            let fraction = visible_samples / f64::from(rays);
+            (fraction > 0.0 && fraction < 1.0).then_some(fraction)
+        };
         NodeSample {
             radiance: lit / open,
             visible,
