@@ -6,12 +6,18 @@
 use radiosity::color::Rgb;
 use radiosity::geometry::form_factor::point_to_polygon;
 use radiosity::geometry::{DVec3, Shape};
+use radiosity::hierarchy::clusters::ClusteringKind;
 use radiosity::measures::illuminance::{GatherSettings, IrradianceGather};
 use radiosity::pipeline::{simulate, SimulationSettings, Solution};
 use radiosity::progress::Progress;
 use radiosity::reference::PathTracer;
 use radiosity::scene::{generators, Material, Object, Polygon, Scene};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
 use std::f64::consts::PI;
+
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 
 /// A scene of axis-aligned squares `[x0, x1] × [y0, y1]` at height `z`, facing down (emitting or
 /// reflecting towards -z) when `down`, each with its material.
@@ -85,7 +91,9 @@ fn a_small_emitter_gives_the_analytic_illuminance() {
             "({px}, {py}): {} vs {exact}",
             e.irradiance.g
         );
-        assert!(e.error() <= 1e-9 * exact, "no shadow, no solver error");
+        // No shadow and no solver error; a piece too faint to matter (far beside the lamp) reports
+        // its bound as its gather error, although its one ray gives the exact value too.
+        assert!(e.solver_error <= 1e-9 * exact, "no solver error");
     }
     // Tilted normals at known distance and angle: the inverse-square cosine law L A cos θx cos θy / d²,
     // whose relative error for a source of size s at distance d is O((s/d)²) ≈ 4e-4 here: within 1%.
@@ -160,6 +168,86 @@ fn the_white_furnace_gives_pi_l_in_every_direction() {
     check(&solution, 0.0);
 }
 
+/// Faint clusters and pieces, gathered from one random sample each, against the furnace's exact
+/// answer: in a closed box full of small cubes where every surface emits L and reflects nothing, every
+/// free point receives π L from any direction, whatever the cubes hide. Each faint sample lies between
+/// 0 and its bound, so every point is within its gather error of π L, with the cluster tree and
+/// without; the clusters' samples are unbiased, so the two gathers' differences average out (their
+/// mean within four standard errors, an error model of the samples' own spread). Tolerance 1, so that
+/// the cubes' clusters are faint from a metre or so.
+#[test]
+fn faint_clusters_sampled_once_keep_a_furnace_full_of_cubes_exact() {
+    let le = 1.0;
+    let (per_axis, side) = (10, 0.06);
+    let size = DVec3::splat(6.0);
+    let scene = common::furnace_with_cubes_of(size, per_axis, side, 0.0, le);
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let mut points = Vec::new();
+    while points.len() < 200 {
+        let x = DVec3::new(rng.random(), rng.random(), rng.random()) * size;
+        let cell = (x / size * per_axis as f64).floor() + DVec3::splat(0.5);
+        if (x - cell * size / per_axis as f64).abs().max_element() < side {
+            continue;
+        }
+        let v = DVec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - DVec3::ONE;
+        if v.length() > 0.1 && v.length() <= 1.0 {
+            points.push((x, v.normalize()));
+        }
+    }
+    // Each point's irradiance, and the pieces used over all points.
+    let gathered = |clustering: ClusteringKind| {
+        let settings = SimulationSettings {
+            clustering,
+            ..Default::default()
+        };
+        let solution = simulate(&scene, &settings, &common::quiet()).expect("solve");
+        assert_eq!(
+            solution.hierarchy.root_cluster.is_some(),
+            clustering != ClusteringKind::None
+        );
+        let gather = IrradianceGather::new(
+            &solution.hierarchy,
+            solution.visibility.as_ref(),
+            GatherSettings {
+                tolerance: 1.0,
+                seed: 7,
+                ..Default::default()
+            },
+        );
+        let mut clusters = 0;
+        let values: Vec<f64> = points
+            .iter()
+            .map(|&(x, normal)| {
+                let e = gather.at(x, normal);
+                assert!(
+                    (e.irradiance.g - PI * le).abs() <= e.gather_error + 1e-9,
+                    "{clustering:?}, {x} facing {normal}: {} against π L, gather error {}",
+                    e.irradiance.g,
+                    e.gather_error
+                );
+                clusters += e.clusters;
+                e.irradiance.g
+            })
+            .collect();
+        (values, clusters)
+    };
+    let (whole, clusters) = gathered(ClusteringKind::Oriented);
+    let (patches, _) = gathered(ClusteringKind::None);
+    assert!(
+        clusters >= 100 * points.len() as u32,
+        "{clusters} clusters gathered whole at {} points",
+        points.len()
+    );
+    let differences: Vec<f64> = whole.iter().zip(&patches).map(|(a, b)| a - b).collect();
+    let n = differences.len() as f64;
+    let mean = differences.iter().sum::<f64>() / n;
+    let spread = (differences.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    assert!(
+        mean.abs() <= 4.0 * spread / n.sqrt(),
+        "mean difference {mean} (spread {spread})"
+    );
+}
+
 /// An emitter square [0, 1]² at z = 1 facing down, a black occluder square at z = 0.5 below part of it:
 /// the points on z = 0 see the emitter minus the occluder's shadow-projection onto the emitter plane.
 const EMITTER: [f64; 4] = [0.0, 0.0, 1.0, 1.0];
@@ -224,6 +312,7 @@ fn in_a_penumbra_the_gather_converges_and_its_error_estimate_covers_the_error() 
             tolerance: 0.05,
             max_depth: 1,
             cubature_degree: 1,
+            seed: 0,
         },
     );
     let (mut fine_error, mut coarse_error) = (0.0, 0.0);

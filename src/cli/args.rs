@@ -482,8 +482,9 @@ pub struct GatherArgs {
 
 impl GatherArgs {
     /// The gather's settings, refusing values that would not end or would cost without bound; with
-    /// `cached`, the default tolerance is [`CACHED_GATHER_TOLERANCE`].
-    pub fn settings(&self, cached: bool) -> Result<GatherSettings> {
+    /// `cached`, the default tolerance is [`CACHED_GATHER_TOLERANCE`]; `seed` seeds the single samples
+    /// of faint pieces and clusters.
+    pub fn settings(&self, cached: bool, seed: u64) -> Result<GatherSettings> {
         let tolerance = self.gather_tolerance.unwrap_or(if cached {
             CACHED_GATHER_TOLERANCE
         } else {
@@ -500,6 +501,7 @@ impl GatherArgs {
         Ok(GatherSettings {
             tolerance,
             max_solid_angle: self.max_solid_angle,
+            seed,
             ..GatherSettings::default()
         })
     }

@@ -45,7 +45,7 @@ pub struct GridCommand {
 
 impl GridCommand {
     pub fn run(&self, seed: u64, progress: &Progress) -> Result<()> {
-        let gather = self.gather.settings(false)?;
+        let gather = self.gather.settings(false, seed)?;
         let paths = output_paths(&self.output);
         let outputs: Vec<(&str, &std::path::Path)> = ["-o (csv)", "-o (json)", "-o (svg)"]
             .into_iter()

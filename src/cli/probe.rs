@@ -128,7 +128,7 @@ impl ProbeCommand {
                 }
             },
         };
-        let gather_settings = self.gather.settings(self.cached)?;
+        let gather_settings = self.gather.settings(self.cached, seed)?;
         let settings = self.solve.settings(seed)?;
         let solution = simulate(&scene, &settings, progress)?;
         let reference = self.reference.then_some(ProbeReference {

@@ -127,7 +127,7 @@ impl RenderCommand {
         let gather_cache = (self.final_gather && !self.gather_every_sample)
             .then(|| super::args::cache_settings(self.cache_accuracy, self.solve.method))
             .transpose()?;
-        let gather = self.gather.settings(gather_cache.is_some())?;
+        let gather = self.gather.settings(gather_cache.is_some(), seed)?;
         if self.final_gather {
             // A cache gathers at most once per pixel.
             let samples = if gather_cache.is_some() {

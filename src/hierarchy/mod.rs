@@ -929,16 +929,19 @@ impl Hierarchy {
         self.polygon_patches[polygon]
             .iter()
             .flatten()
-            .any(|&patch| {
-                let mut id = self.patches[patch as usize].root;
-                while let Some(parent) = self.elements[id as usize].parent() {
-                    if parent >= cluster {
-                        return parent == cluster;
-                    }
-                    id = parent;
-                }
-                false
-            })
+            .any(|&patch| self.cluster_holds(cluster, self.patches[patch as usize].root))
+    }
+
+    /// Whether element `id` lies in cluster `cluster`, at any depth (the walk of
+    /// [`Hierarchy::cluster_holds_polygon`]).
+    pub fn cluster_holds(&self, cluster: ElementId, mut id: ElementId) -> bool {
+        while let Some(parent) = self.elements[id as usize].parent() {
+            if parent >= cluster {
+                return parent == cluster;
+            }
+            id = parent;
+        }
+        false
     }
 
     /// The patch roots inside cluster `id`.

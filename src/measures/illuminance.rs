@@ -26,6 +26,18 @@
 //! O(π / Ω_max) pieces per layer of depth of the scene plus the refinement near shadow edges and bright
 //! gradients, not every leaf.
 //!
+//! Faint pieces and clusters: a piece whose whole unoccluded contribution `Ω_p L_max` is within the
+//! piece budget is not refined or node-sampled but estimated from one ray to an area-uniform random
+//! point `y` of it, `Ω_p V(x, y) L(y)`; a cluster of the scene's cluster tree (Sillion–Drettakis §4)
+//! whose bounding sphere's solid angle `Ω_s` times its brightest radiance is within the budget is
+//! estimated from one direction `ω` uniform in that sphere's cone, `Ω_s cos θx L(y)` with `y` the first
+//! surface met that way if it is the cluster's (zero otherwise). Both estimates are unbiased and lie
+//! between 0 and that bound, so their error is at most the bound: the budget, as for any piece. A
+//! point therefore visits the clusters around it down to the size its budget resolves, not every patch
+//! facing it (the classroom's 300 seen points at `τ = 0.2`: 14.2M → 3.4M rays, the same error). The
+//! samples are seeded by `seed`, the point and the piece, so that the result does not depend on the
+//! thread count. Clusters wholly behind the point's tangent plane are skipped.
+//!
 //! Error model per point (W/m², largest channel), summed over the pieces used:
 //! * solver error propagated through the gather (Bekaert–Willems eq. (11) at a point):
 //!   `Σ_p Ω_p v_p ε_p`, with `ε_p` the element's a-posteriori estimate (`Element::error`; on an inner
@@ -44,10 +56,11 @@
 use crate::color::{Rgb, WHITE_EFFICACY};
 use crate::geometry::cubature::{nodes_on, rule};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
-use crate::geometry::{Aabb, DVec2, DVec3, Shape};
+use crate::geometry::{Aabb, DVec2, DVec3, Ray, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::random::{splitmix64, unit_interval};
 use crate::reference::PhotometricEstimate;
-use crate::visibility::Visibility;
+use crate::visibility::{Visibility, SEGMENT_EPSILON};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -63,6 +76,9 @@ pub struct GatherSettings {
     pub max_depth: u32,
     /// Degree of the cubature rule on each piece (its nodes are the visibility samples).
     pub cubature_degree: usize,
+    /// Seed of the single random samples of pieces and clusters too faint to matter alone (mixed with
+    /// the point and the piece, so that results do not depend on the thread count).
+    pub seed: u64,
 }
 
 impl Default for GatherSettings {
@@ -72,6 +88,7 @@ impl Default for GatherSettings {
             tolerance: 0.01,
             max_depth: 5,
             cubature_degree: 3,
+            seed: 0,
         }
     }
 }
@@ -88,6 +105,9 @@ pub struct PointIrradiance {
     /// Pieces used and visibility rays cast.
     pub pieces: u32,
     pub rays: u32,
+    /// Of the pieces, clusters gathered whole from one sample (faint ones; see the module
+    /// documentation).
+    pub clusters: u32,
 }
 
 impl PointIrradiance {
@@ -121,6 +141,32 @@ struct Piece {
     partial: Option<f64>,
 }
 
+/// The cone from a point around a cluster's bounding sphere.
+#[derive(Clone, Copy, Debug)]
+struct Cone {
+    /// Unit direction to the sphere's centre.
+    axis: DVec3,
+    cos_half_angle: f64,
+    /// `2π (1 − cos α)`.
+    solid_angle: f64,
+    /// Distance to the far side of the sphere.
+    far: f64,
+    /// The solid angle times the cluster's brightest radiance: a bound on what it adds.
+    unoccluded: f64,
+}
+
+impl Piece {
+    /// A whole element.
+    fn whole(h: &Hierarchy, element: ElementId) -> Piece {
+        Piece {
+            element,
+            shape: *h.element(element).shape(),
+            depth: 0,
+            partial: None,
+        }
+    }
+}
+
 /// Irradiance at arbitrary points of a solved scene (see the module documentation).
 pub struct IrradianceGather<'a> {
     hierarchy: &'a Hierarchy,
@@ -130,6 +176,10 @@ pub struct IrradianceGather<'a> {
     spread: Vec<f64>,
     /// `τ L̄ Ω_max`: the gather error accepted from one piece (W/m²).
     piece_budget: f64,
+    /// Per cluster (from `first_cluster` on): its brightest patch's largest leaf average radiance
+    /// (largest channel) and its contents' largest a-posteriori error.
+    cluster_bounds: Vec<(f64, f64)>,
+    first_cluster: ElementId,
 }
 
 impl<'a> IrradianceGather<'a> {
@@ -160,6 +210,29 @@ impl<'a> IrradianceGather<'a> {
                     .fold(0.0, f64::max);
             }
         }
+        let first_cluster = hierarchy
+            .elements
+            .iter()
+            .position(|e| matches!(e.kind, crate::hierarchy::ElementKind::Cluster(_)))
+            .unwrap_or(hierarchy.elements.len()) as ElementId;
+        let cluster_bounds = (first_cluster..hierarchy.elements.len() as ElementId)
+            .map(|id| match hierarchy.cluster(id) {
+                Some(cluster) => {
+                    hierarchy
+                        .contents(cluster)
+                        .iter()
+                        .fold((0.0, 0.0), |(l, e), &r| {
+                            let brightest =
+                                hierarchy.average_radiance(r).max_channel() + spread[r as usize];
+                            (
+                                f64::max(l, brightest),
+                                f64::max(e, hierarchy.element(r).error),
+                            )
+                        })
+                }
+                None => (0.0, 0.0),
+            })
+            .collect();
         IrradianceGather {
             hierarchy,
             visibility,
@@ -168,24 +241,30 @@ impl<'a> IrradianceGather<'a> {
             piece_budget: settings.tolerance
                 * settings.max_solid_angle
                 * crate::pipeline::mean_radiance_estimate(hierarchy),
+            cluster_bounds,
+            first_cluster,
         }
+    }
+
+    /// Uniform numbers for the single sample of a piece or cluster `key` seen from `x`.
+    fn uniforms(&self, x: DVec3, key: DVec3) -> [f64; 3] {
+        let mut bits = self.settings.seed;
+        for v in [x.x, x.y, x.z, key.x, key.y, key.z] {
+            bits = splitmix64(bits ^ v.to_bits());
+        }
+        let second = splitmix64(bits);
+        [bits, second, splitmix64(second)].map(unit_interval)
     }
 
     /// The irradiance at `x` on the side its unit `normal` points to.
     pub fn at(&self, x: DVec3, normal: DVec3) -> PointIrradiance {
         let h = self.hierarchy;
         let mut out = PointIrradiance::default();
-        let mut stack: Vec<Piece> = h
-            .patches
-            .iter()
-            .rev()
-            .map(|p| Piece {
-                element: p.root,
-                shape: *h.element(p.root).shape(),
-                depth: 0,
-                partial: None,
-            })
-            .collect();
+        let mut stack: Vec<Piece> = Vec::new();
+        match h.root_cluster {
+            Some(root) => self.through_clusters(x, normal, root, &mut stack, &mut out),
+            None => stack.extend(h.patches.iter().rev().map(|p| Piece::whole(h, p.root))),
+        }
         while let Some(piece) = stack.pop() {
             let solid_angle = PI * point_to_polygon(x, normal, &piece.shape);
             if solid_angle <= 0.0 {
@@ -197,13 +276,19 @@ impl<'a> IrradianceGather<'a> {
                 self.push_children(&mut stack, &piece, piece.partial);
                 continue;
             }
-            let sample = self.sample(x, normal, &piece);
-            out.rays += sample.rays;
             let coarse = if element.is_leaf() {
                 0.0
             } else {
                 self.spread[piece.element as usize]
             };
+            let unoccluded =
+                solid_angle * (h.average_radiance(piece.element).max_channel() + coarse);
+            if unoccluded <= self.piece_budget {
+                self.faint_piece(x, &piece, solid_angle, unoccluded, &mut out);
+                continue;
+            }
+            let sample = self.sample(x, normal, &piece);
+            out.rays += sample.rays;
             let v_error = sample.mixed.or(piece.partial).unwrap_or(sample.visible);
             let gather = solid_angle
                 * (VISIBILITY_DEVIATIONS
@@ -242,6 +327,133 @@ impl<'a> IrradianceGather<'a> {
         points.par_iter().map(|&(x, n)| self.at(x, n)).collect()
     }
 
+    /// A piece whose whole unoccluded contribution is within the piece budget, from one visibility
+    /// ray to an area-uniform random point of it: an unbiased estimate of its visible fraction, whose
+    /// error is at most that contribution (the `2 √(v (1 − v) / m)` bound at `m = 1` and `v = ½`).
+    fn faint_piece(
+        &self,
+        x: DVec3,
+        piece: &Piece,
+        solid_angle: f64,
+        unoccluded: f64,
+        out: &mut PointIrradiance,
+    ) {
+        out.gather_error += unoccluded;
+        out.pieces += 1;
+        if unoccluded <= 0.0 {
+            return;
+        }
+        let [u, v, _] = self.uniforms(x, piece.shape.centroid());
+        let y = piece.shape.sample_uniform(DVec2::new(u, v));
+        out.rays += 1;
+        let t = self.visibility.transmittance(x, y);
+        if t > 0.0 {
+            let h = self.hierarchy;
+            out.irradiance += h.exitant_radiance_at(piece.element, y) * (solid_angle * t);
+            out.solver_error += solid_angle * t * h.element(piece.element).error;
+        }
+    }
+
+    /// Walks the cluster tree from `root`: clusters wholly behind the point's tangent plane are
+    /// skipped, and a cluster whose bounding sphere's solid angle times its brightest radiance (a
+    /// bound on anything it can add to the irradiance, since each direction meets one surface) is
+    /// within the piece budget is gathered from one random sample ([`Self::faint_cluster`]); the
+    /// patch roots of the rest go on `pieces`. Far small objects thus cost one ray each instead of a
+    /// factor and rays per patch.
+    fn through_clusters(
+        &self,
+        x: DVec3,
+        normal: DVec3,
+        root: ElementId,
+        pieces: &mut Vec<Piece>,
+        out: &mut PointIrradiance,
+    ) {
+        let h = self.hierarchy;
+        let mut clusters = vec![root];
+        while let Some(id) = clusters.pop() {
+            let Some(cluster) = h.cluster(id) else {
+                pieces.push(Piece::whole(h, id));
+                continue;
+            };
+            let b = cluster.bounds;
+            // The box's highest corner above the tangent plane.
+            let half = 0.5 * (b.max - b.min);
+            if normal.dot(b.center() - x) + normal.abs().dot(half) <= 0.0 {
+                continue;
+            }
+            let (brightest, _) = self.cluster_bounds[(id - self.first_cluster) as usize];
+            let (radius, distance) = (0.5 * b.diagonal(), b.center().distance(x));
+            if radius < distance {
+                let sine = radius / distance;
+                let cos_half_angle = (1.0 - sine * sine).sqrt();
+                let solid_angle = 2.0 * PI * (1.0 - cos_half_angle);
+                let cone = Cone {
+                    axis: (b.center() - x) / distance,
+                    cos_half_angle,
+                    solid_angle,
+                    far: distance + radius,
+                    unoccluded: solid_angle * brightest,
+                };
+                if cone.unoccluded <= self.piece_budget {
+                    self.faint_cluster(x, normal, id, cone, out);
+                    continue;
+                }
+            }
+            clusters.extend(h.element(id).children.iter().rev());
+        }
+    }
+
+    /// A cluster too faint to matter alone, from one direction `ω` uniform in the cone of its bounding
+    /// sphere (solid angle `Ω_s`): the closest surface that way, if it is the cluster's, gives
+    /// `Ω_s cos θx L(y)`, an unbiased estimate of what the cluster adds to the irradiance (each
+    /// direction counts the first surface it meets, so anything in front of the cluster hides it),
+    /// between 0 and the bound `unoccluded = Ω_s L_max`, hence within it of the truth. A closest hit
+    /// rather than the [`Visibility::transmittance`] of a segment, so that a cluster with many layers
+    /// does not inflate one sample.
+    fn faint_cluster(
+        &self,
+        x: DVec3,
+        normal: DVec3,
+        id: ElementId,
+        cone: Cone,
+        out: &mut PointIrradiance,
+    ) {
+        let h = self.hierarchy;
+        out.gather_error += cone.unoccluded;
+        out.pieces += 1;
+        out.clusters += 1;
+        if cone.unoccluded <= 0.0 {
+            return;
+        }
+        let [u, v, _] = self.uniforms(x, cone.axis);
+        let cos_theta = 1.0 - u * (1.0 - cone.cos_half_angle);
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        let (b, c) = cone.axis.any_orthonormal_pair();
+        let phi = 2.0 * PI * v;
+        let direction = cone.axis * cos_theta + (b * phi.cos() + c * phi.sin()) * sin_theta;
+        let cos_x = normal.dot(direction);
+        if cos_x <= 0.0 {
+            return;
+        }
+        out.rays += 1;
+        let ray = Ray::new(x, direction * cone.far);
+        let Some(hit) = self.visibility.intersect(&ray, SEGMENT_EPSILON, 1.0) else {
+            return;
+        };
+        let Some(patch) = h.polygon_patches[hit.polygon][usize::from(!hit.front)] else {
+            return;
+        };
+        if !h.cluster_holds(id, h.patches[patch as usize].root) {
+            return;
+        }
+        let y = x + ray.direction * hit.t;
+        let (leaf, uv) = h.locate_with_parameters(patch, y);
+        let weight = cone.solid_angle * cos_x;
+        out.irradiance += h.exitant_radiance_at_parameters(leaf, uv) * weight;
+        let (_, error) = self.cluster_bounds[(id - self.first_cluster) as usize];
+        out.solver_error += weight * error;
+    }
+
     fn push_children(&self, stack: &mut Vec<Piece>, piece: &Piece, partial: Option<f64>) {
         let element = self.hierarchy.element(piece.element);
         if element.is_leaf() {
@@ -256,10 +468,8 @@ impl<'a> IrradianceGather<'a> {
         } else {
             for &child in element.children.iter().rev() {
                 stack.push(Piece {
-                    element: child,
-                    shape: *self.hierarchy.element(child).shape(),
-                    depth: 0,
                     partial,
+                    ..Piece::whole(self.hierarchy, child)
                 });
             }
         }

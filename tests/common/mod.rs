@@ -20,9 +20,13 @@ pub fn with_threads<T: Send>(threads: usize, work: impl FnOnce() -> T + Send) ->
 
 /// A closed furnace (all surfaces reflect ρ and emit E) holding a grid of small cubes.
 pub fn furnace_with_cubes(per_axis: usize, rho: f64, e: f64) -> Scene {
-    let size = DVec3::new(2.0, 1.5, 1.8);
+    furnace_with_cubes_of(DVec3::new(2.0, 1.5, 1.8), per_axis, 0.12, rho, e)
+}
+
+/// A furnace of `size` holding `per_axis³` cubes of side `side`, one at the centre of each cell of a
+/// regular grid.
+pub fn furnace_with_cubes_of(size: DVec3, per_axis: usize, side: f64, rho: f64, e: f64) -> Scene {
     let mut scene = generators::furnace(size, rho, e);
-    let side = 0.12;
     for i in 0..per_axis {
         for j in 0..per_axis {
             for k in 0..per_axis {
