@@ -111,13 +111,18 @@ pub fn nodes_on(shape: &Shape, rule: &Rule) -> Vec<Node> {
 
 /// [`nodes_on`] into `out` (cleared first), for callers that reuse one vector.
 pub fn nodes_on_into(shape: &Shape, rule: &Rule, out: &mut Vec<Node>) {
-    debug_assert_eq!(shape.domain(), rule.domain, "rule for another domain");
     out.clear();
-    out.extend(rule.nodes.iter().map(|&(uv, w)| Node {
+    out.extend(nodes_of(shape, rule));
+}
+
+/// [`nodes_on`] one at a time, for callers that visit each node once.
+pub fn nodes_of<'a>(shape: &'a Shape, rule: &'a Rule) -> impl Iterator<Item = Node> + 'a {
+    debug_assert_eq!(shape.domain(), rule.domain, "rule for another domain");
+    rule.nodes.iter().map(|&(uv, w)| Node {
         point: shape.point_at(uv),
         uv,
         weight: w * shape.jacobian(uv),
-    }));
+    })
 }
 
 /// An unbiased random rule of `cells²` nodes on `shape`, one uniform point in each cell of a regular

@@ -54,7 +54,7 @@
 //!   second order in the piece's size and is neglected.
 
 use crate::color::{Rgb, WHITE_EFFICACY};
-use crate::geometry::cubature::{nodes_on, rule};
+use crate::geometry::cubature::{nodes_of, rule};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::geometry::{Aabb, DVec2, DVec3, Ray, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
@@ -502,14 +502,11 @@ impl<'a> IrradianceGather<'a> {
     fn sample(&self, x: DVec3, normal: DVec3, piece: &Piece) -> NodeSample {
         let h = self.hierarchy;
         let n_y = h.patch_of(piece.element).normal;
-        let nodes = nodes_on(
-            &piece.shape,
-            rule(piece.shape.domain(), self.settings.cubature_degree),
-        );
+        let rule = rule(piece.shape.domain(), self.settings.cubature_degree);
         let (mut open, mut seen, mut lit) = (0.0, 0.0, Rgb::BLACK);
         let mut brightest = h.average_radiance(piece.element).max_channel();
         let (mut rays, mut visible_samples) = (0, 0.0);
-        for node in &nodes {
+        for node in nodes_of(&piece.shape, rule) {
             let k = node.weight * point_to_point(x, normal, node.point, n_y);
             if k <= 0.0 {
                 continue;
