@@ -176,7 +176,7 @@ pub struct IrradianceGather<'a> {
     spread: Vec<f64>,
     /// `τ L̄ Ω_max`: the gather error accepted from one piece (W/m²).
     piece_budget: f64,
-    /// Per cluster (from `first_cluster` on): its brightest patch's largest leaf average radiance
+    /// Per cluster (from `first_cluster` to the root): its brightest patch's largest leaf average radiance
     /// (largest channel) and its contents' largest a-posteriori error.
     cluster_bounds: Vec<(f64, f64)>,
     first_cluster: ElementId,
@@ -210,29 +210,36 @@ impl<'a> IrradianceGather<'a> {
                     .fold(0.0, f64::max);
             }
         }
+        // Clusters are stored after everything they hold, from the first to the root: each cluster's
+        // bounds from its children's, in one pass.
         let first_cluster = hierarchy
             .elements
             .iter()
             .position(|e| matches!(e.kind, crate::hierarchy::ElementKind::Cluster(_)))
             .unwrap_or(hierarchy.elements.len()) as ElementId;
-        let cluster_bounds = (first_cluster..hierarchy.elements.len() as ElementId)
-            .map(|id| match hierarchy.cluster(id) {
-                Some(cluster) => {
-                    hierarchy
-                        .contents(cluster)
-                        .iter()
-                        .fold((0.0, 0.0), |(l, e), &r| {
-                            let brightest =
-                                hierarchy.average_radiance(r).max_channel() + spread[r as usize];
-                            (
-                                f64::max(l, brightest),
-                                f64::max(e, hierarchy.element(r).error),
-                            )
-                        })
-                }
-                None => (0.0, 0.0),
-            })
-            .collect();
+        let mut cluster_bounds: Vec<(f64, f64)> = Vec::new();
+        for id in first_cluster
+            ..hierarchy
+                .root_cluster
+                .map_or(first_cluster, |root| root + 1)
+        {
+            let bound = hierarchy
+                .element(id)
+                .children
+                .iter()
+                .fold((0.0, 0.0), |(l, e), &c| {
+                    let (cl, ce) = if hierarchy.is_cluster(c) {
+                        cluster_bounds[(c - first_cluster) as usize]
+                    } else {
+                        (
+                            hierarchy.average_radiance(c).max_channel() + spread[c as usize],
+                            hierarchy.element(c).error,
+                        )
+                    };
+                    (f64::max(l, cl), f64::max(e, ce))
+                });
+            cluster_bounds.push(bound);
+        }
         IrradianceGather {
             hierarchy,
             visibility,
