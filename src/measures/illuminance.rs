@@ -28,10 +28,11 @@
 //!
 //! Faint pieces and clusters: a piece wholly above the horizon of `x` whose whole unoccluded
 //! contribution `Ω_p L_max` is within the piece budget is not refined or node-sampled but estimated
-//! from one ray to an area-uniform random point `y` of it, `Ω_p V(x, y) L(y)`; a cluster of the scene's cluster tree (Sillion–Drettakis §4)
-//! whose bounding sphere's solid angle `Ω_s` times its brightest radiance is within the budget is
-//! estimated from one direction `ω` uniform in that sphere's cone, `Ω_s cos θx L(y)` with `y` the first
-//! surface met that way if it is the cluster's (zero otherwise). Both estimates are unbiased and lie
+//! from one ray to an area-uniform random point `y` of it, `Ω_p V(x, y) L(y)`; a cluster of the
+//! scene's cluster tree (Sillion–Drettakis §4) whose bounding sphere's solid angle `Ω_s` times its
+//! brightest radiance is within the budget is estimated from one direction `ω` uniform in that
+//! sphere's cone, `Ω_s cos θx L(y)` with `y` the first surface met that way if it is the cluster's
+//! (zero otherwise). Both estimates are unbiased and lie
 //! between 0 and that bound, so their error is at most the bound: the budget, as for any piece. A
 //! point therefore visits the clusters around it down to the size its budget resolves, not every patch
 //! facing it (the classroom's 300 seen points at `τ = 0.2`: 14.2M → 3.6M rays, the same error). The
@@ -141,6 +142,18 @@ struct Piece {
     partial: Option<f64>,
 }
 
+impl Piece {
+    /// A whole element.
+    fn whole(h: &Hierarchy, element: ElementId) -> Piece {
+        Piece {
+            element,
+            shape: *h.element(element).shape(),
+            depth: 0,
+            partial: None,
+        }
+    }
+}
+
 /// The cone from a point around a cluster's bounding sphere.
 #[derive(Clone, Copy, Debug)]
 struct Cone {
@@ -155,18 +168,6 @@ struct Cone {
     unoccluded: f64,
 }
 
-impl Piece {
-    /// A whole element.
-    fn whole(h: &Hierarchy, element: ElementId) -> Piece {
-        Piece {
-            element,
-            shape: *h.element(element).shape(),
-            depth: 0,
-            partial: None,
-        }
-    }
-}
-
 /// Irradiance at arbitrary points of a solved scene (see the module documentation).
 pub struct IrradianceGather<'a> {
     hierarchy: &'a Hierarchy,
@@ -176,8 +177,8 @@ pub struct IrradianceGather<'a> {
     spread: Vec<f64>,
     /// `τ L̄ Ω_max`: the gather error accepted from one piece (W/m²).
     piece_budget: f64,
-    /// Per cluster (from `first_cluster` to the root): its brightest patch's largest leaf average radiance
-    /// (largest channel) and its contents' largest a-posteriori error.
+    /// Per cluster (from `first_cluster` to the root): its brightest patch's largest leaf average
+    /// radiance (largest channel) and its contents' largest a-posteriori error.
     cluster_bounds: Vec<(f64, f64)>,
     first_cluster: ElementId,
 }
