@@ -491,7 +491,7 @@ impl<'a> IrradianceGather<'a> {
         let Some(hit) = self.visibility.intersect(&ray, SEGMENT_EPSILON, 1.0) else {
             return;
         };
-        let Some(patch) = h.polygon_patches[hit.polygon][usize::from(!hit.front)] else {
+        let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
             return;
         };
         if !h.cluster_holds(id, h.patches[patch as usize].root) {
