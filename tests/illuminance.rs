@@ -692,6 +692,79 @@ fn a_final_gather_render_shows_the_analytic_radiance_at_every_pixel() {
     assert!(leaf_worst > 0.03, "the coarse leaves miss by {leaf_worst}");
 }
 
+/// The irradiance cache's second pass: where no pixel centre's record reaches a pixel corner (radii
+/// of 0.1 pixel footprint, which this wide view overestimates at most 3.4× at its edges, against the
+/// corner's 0.71 pixel to the nearest centre), the corner gets a record of its own,
+/// so at every corner, where adaptive antialiasing samples first, the cached render shows the
+/// gather's exact value (Howell's analytic `ρ L_e F` on [`coarse_lit_plate`]), while the coarse
+/// leaves' shading there is off by several percent; halfway between two corners on a pixel's edge,
+/// which no record reaches, the shading stays as it is.
+#[test]
+fn every_pixel_corner_is_a_record_or_reached_by_one() {
+    use radiosity::measures::irradiance_cache::CacheSettings;
+    use radiosity::output::render::{radiance_as_rendered, RenderOptions, Shading};
+    let (_, solution) = coarse_lit_plate();
+    let camera = plate_camera();
+    let visibility = solution.visibility.as_ref();
+    let h = &solution.hierarchy;
+    let plate = h
+        .patches
+        .iter()
+        .position(|patch| patch.normal.z > 0.5)
+        .expect("the lit plate faces up") as u32;
+    let on_plate = |x: f64, y: f64| {
+        let ray = camera.ray(x, y);
+        let t = -ray.origin.z / ray.direction.z;
+        ray.origin + ray.direction * t
+    };
+    let corners: Vec<(u32, DVec3)> = (0..=12)
+        .flat_map(|y| (0..=12).map(move |x| (x, y)))
+        .map(|(x, y)| (plate, on_plate(x as f64, y as f64)))
+        .collect();
+    let edge_midpoints: Vec<(u32, DVec3)> = (0..12)
+        .flat_map(|y| (0..12).map(move |x| (x, y)))
+        .map(|(x, y)| (plate, on_plate(x as f64 + 0.5, y as f64)))
+        .collect();
+    let options = |cache: Option<CacheSettings>| RenderOptions {
+        shading: Shading::Basis,
+        final_gather: Some(GatherSettings::default()),
+        gather_cache: cache,
+        ..Default::default()
+    };
+    let small_radii = options(Some(CacheSettings {
+        accuracy: 1e-9,
+        min_pixels: 0.1,
+        max_pixels: 0.1,
+        ..CacheSettings::default()
+    }));
+    let shading = |points: &[(u32, DVec3)]| {
+        let leaves = RenderOptions {
+            final_gather: None,
+            ..options(None)
+        };
+        radiance_as_rendered(h, visibility, &camera, &leaves, points).0
+    };
+    let (at_corners, report) = radiance_as_rendered(h, visibility, &camera, &small_radii, &corners);
+    assert_eq!(report.gather_records, 144 + 13 * 13);
+    let mut shading_worst = 0.0f64;
+    for ((_, p), (got, leaf)) in corners.iter().zip(at_corners.iter().zip(shading(&corners))) {
+        let exact = lit_plate_radiance(p.x, p.y);
+        assert!(
+            (got.g - exact).abs() <= 1e-9 * exact,
+            "{p}: {} vs {exact}",
+            got.g
+        );
+        shading_worst = shading_worst.max((leaf.g - exact).abs() / exact);
+    }
+    assert!(
+        shading_worst > 0.03,
+        "the coarse leaves miss by {shading_worst}"
+    );
+    let (at_midpoints, _) =
+        radiance_as_rendered(h, visibility, &camera, &small_radii, &edge_midpoints);
+    assert_eq!(at_midpoints, shading(&edge_midpoints));
+}
+
 /// `render --final-gather` with its irradiance cache (`measures::irradiance_cache`) on the coarsely
 /// solved plate of [`coarse_lit_plate`], against Howell's analytic radiance at the pixel centres:
 /// * with a record at every pixel centre and radii too small to reach another (spp 1, so each sample is
@@ -743,7 +816,8 @@ fn a_cached_final_gather_interpolates_exact_corrections_between_records() {
         ..cached
     };
     let (image, report) = render_reporting(h, visibility, &camera, &dense, None);
-    assert_eq!(report.gather_records, 144);
+    // A record at every pixel centre, and one at every pixel corner, since none reaches another.
+    assert_eq!(report.gather_records, 144 + 13 * 13);
     for (x, y) in pixels() {
         let (got, want) = (image.get(x, y).g, exact(x, y));
         assert!(

@@ -344,7 +344,11 @@ impl<'a> IrradianceGather<'a> {
     /// A piece whose whole unoccluded contribution `U` is within [`RANDOM_STRATA`] piece budgets, from
     /// `k²` rays to area-uniform random points of it, one in each cell of a `k × k` partition of its
     /// master domain (jittered), `k = ⌈U / budget⌉`, weighted by the kernel as the nodes are (the
-    /// ratio estimator of the module documentation; for one ray, exactly `Ω_p V(x, y) L(y)`, unbiased).
+    /// ratio estimator of the module documentation; for one ray, exactly `Ω_p V(x, y) L(y)`, whose mean
+    /// is `Ω_p` times the area average of `V L`: unbiased where the kernel is constant over the piece,
+    /// as it nearly is over a faint piece. The exactly unbiased `π A K V L` per stratum measured the
+    /// same: the corridor's cached points at sets 11 and 14 +0.93, +1.02% mean signed against +1.03,
+    /// +1.08%, both the solution's own bias, its leaves there +1.15, +1.02%).
     /// Its error is at most `U / k` (the `2 √(v (1 − v) / m)` bound at `m = k²` and `v = ½`), within
     /// the budget. One ray for a faint piece (`U` within the budget), four where the nodes and corners
     /// would cost eight. `false`, with nothing added, for a piece that reaches the horizon of `x` (a

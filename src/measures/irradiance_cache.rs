@@ -7,6 +7,9 @@
 //! fine (every 32nd pixel of every 32nd row first, then the pixels halfway between, and so on), so
 //! that records spread evenly over what is seen rather than along the first rows. A candidate becomes
 //! a record unless a record on the same leaf element lies within [`COVERED`] of that record's radius.
+//! Then the pixel corners, in the same order, each a record only where no record of its leaf reaches
+//! it: leaves narrower than a pixel, along contacts and corners, that no pixel centre sees (the
+//! renderer's `Lattice`).
 //! A record's radius is Ward's `a R`, `R` the harmonic mean distance to the surfaces seen from the
 //! point (over [`RADIUS_RAYS`] cosine-distributed rays): where irradiance changes fast (near other
 //! surfaces: corners, contacts, under furniture) records are dense. It is clamped to between
@@ -28,8 +31,8 @@
 //! edges (contact outlines, a light's outline, between leaves of different sizes), so a correction
 //! taken on one side is wrong on the other, and a polygon's edge is a leaf's too (a wall's correction
 //! never reaches the floor it stands on). Per leaf rather than per polygon: seen points 1.63 → 1.39%
-//! on the Cornell box, 4.8 → 3.3% on office2 (BENCHMARKS.md). A sample no record reaches (a leaf
-//! that no pixel centre sees, a sliver at an edge) keeps the shading's value, or for a Monte Carlo
+//! on the Cornell box, 4.8 → 3.3% on office2 (BENCHMARKS.md). A sample no record reaches (a sliver
+//! that neither a pixel centre nor a pixel corner sees) keeps the shading's value, or for a Monte Carlo
 //! solution's noisy leaves takes the gathered radiance of its patch's records
 //! ([`CacheSettings::noisy_leaves`]).
 //!
@@ -151,12 +154,13 @@ impl IrradianceCache {
         }
     }
 
-    /// Makes `candidate` a record unless a record of its leaf covers it ([`COVERED`]), measuring its
+    /// Makes `candidate` a record unless a record of its leaf lies within `covered` of that record's
+    /// radius ([`COVERED`] for Ward's spacing, 1 for a record only where none reaches), measuring its
     /// radius; its gather waits for [`IrradianceCache::gather`]. Candidates are offered in a fixed
     /// order, one at a time: which become records depends on that order only.
-    pub fn offer(&mut self, candidate: &Candidate, visibility: &dyn Visibility) {
+    pub fn offer(&mut self, candidate: &Candidate, visibility: &dyn Visibility, covered: f64) {
         if !(candidate.footprint > 0.0 && candidate.footprint.is_finite())
-            || self.covers(candidate.leaf, candidate.point)
+            || self.covers(candidate.leaf, candidate.point, covered)
         {
             return;
         }
@@ -200,7 +204,7 @@ impl IrradianceCache {
     /// gathered radiance of the patch's records that reach it; `None` where none does.
     ///
     /// Why the two: a Galerkin solution's leaf is deterministic and smooth, and where no record of it
-    /// reaches (a leaf seen by no pixel centre, at an edge or a corner) its shading is nearer than
+    /// reaches (a sliver seen by no pixel centre or corner, at an edge or a corner) its shading is nearer than
     /// the patch's gathered values spread over it (the Cornell box's 128² image 1.69% against 1.83%)
     /// or another leaf's correction (the same 1.69%). A Monte Carlo solution's leaves are noisy and
     /// outnumber the pixels (40,073 leaves at 128² on the Cornell box): most samples meet a leaf
@@ -228,11 +232,11 @@ impl IrradianceCache {
             })
     }
 
-    /// Whether a record of `leaf` lies within [`COVERED`] of its radius from `point`.
-    fn covers(&self, leaf: ElementId, point: DVec3) -> bool {
+    /// Whether a record of `leaf` lies within `fraction` of its radius from `point`.
+    fn covers(&self, leaf: ElementId, point: DVec3, fraction: f64) -> bool {
         let mut covered = false;
         self.for_each_near(point, &|r| r.leaf == leaf, |record, d| {
-            covered |= d < COVERED * record.radius;
+            covered |= d < fraction * record.radius;
         });
         covered
     }
