@@ -7,9 +7,9 @@
 //! fine (every 32nd pixel of every 32nd row first, then the pixels halfway between, and so on), so
 //! that records spread evenly over what is seen rather than along the first rows. A candidate becomes
 //! a record unless a record on the same leaf element lies within [`COVERED`] of that record's radius.
-//! Then the pixel corners, in the same order, each a record only where no record of its leaf reaches
-//! it: leaves narrower than a pixel, along contacts and corners, that no pixel centre sees (the
-//! renderer's `Lattice`).
+//! Then the pixel corners, in the same order, each a record only where the cache would otherwise show
+//! the shading uncorrected ([`Placement::WhereUncorrected`]): leaves narrower than a pixel, along
+//! contacts and corners, that no pixel centre sees (the renderer's `Lattice`).
 //! A record's radius is Ward's `a R`, `R` the harmonic mean distance to the surfaces seen from the
 //! point (over [`RADIUS_RAYS`] cosine-distributed rays): where irradiance changes fast (near other
 //! surfaces: corners, contacts, under furniture) records are dense. It is clamped to between
@@ -58,6 +58,16 @@ pub const COVERED: f64 = 0.5;
 /// Offset of Ward's weight: a sample at a record takes `1/κ − 1/(1 + κ)` against a weight that falls to
 /// zero at the radius, so records dominate their own neighbourhood without a singularity.
 pub const KAPPA: f64 = 0.05;
+
+/// Where an offered candidate becomes a record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Placement {
+    /// Unless a record of its leaf lies within [`COVERED`] of that record's radius: Ward's spacing.
+    Spaced,
+    /// Only where the cache would otherwise show the plain shading ([`IrradianceCache::corrected`]
+    /// gives `None`): no record of the leaf reaches the point, nor, for noisy leaves, one of its patch.
+    WhereUncorrected,
+}
 
 /// How records are placed.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -154,14 +164,27 @@ impl IrradianceCache {
         }
     }
 
-    /// Makes `candidate` a record unless a record of its leaf lies within `covered` of that record's
-    /// radius ([`COVERED`] for Ward's spacing, 1 for a record only where none reaches), measuring its
-    /// radius; its gather waits for [`IrradianceCache::gather`]. Candidates are offered in a fixed
-    /// order, one at a time: which become records depends on that order only.
-    pub fn offer(&mut self, candidate: &Candidate, visibility: &dyn Visibility, covered: f64) {
-        if !(candidate.footprint > 0.0 && candidate.footprint.is_finite())
-            || self.covers(candidate.leaf, candidate.point, covered)
-        {
+    /// Makes `candidate` a record where `placement` says so, measuring its radius; its gather waits
+    /// for [`IrradianceCache::gather`]. Candidates are offered in a fixed order, one at a time: which
+    /// become records depends on that order only.
+    pub fn offer(
+        &mut self,
+        candidate: &Candidate,
+        visibility: &dyn Visibility,
+        placement: Placement,
+    ) {
+        let placed = match placement {
+            Placement::Spaced => !self.covers(candidate.leaf, candidate.point),
+            Placement::WhereUncorrected => self
+                .corrected(
+                    candidate.patch,
+                    candidate.leaf,
+                    candidate.point,
+                    candidate.shaded,
+                )
+                .is_none(),
+        };
+        if !(placed && candidate.footprint > 0.0 && candidate.footprint.is_finite()) {
             return;
         }
         let harmonic = harmonic_mean_distance(visibility, candidate, self.seed);
@@ -232,11 +255,11 @@ impl IrradianceCache {
             })
     }
 
-    /// Whether a record of `leaf` lies within `fraction` of its radius from `point`.
-    fn covers(&self, leaf: ElementId, point: DVec3, fraction: f64) -> bool {
+    /// Whether a record of `leaf` lies within [`COVERED`] of its radius from `point`.
+    fn covers(&self, leaf: ElementId, point: DVec3) -> bool {
         let mut covered = false;
         self.for_each_near(point, &|r| r.leaf == leaf, |record, d| {
-            covered |= d < fraction * record.radius;
+            covered |= d < COVERED * record.radius;
         });
         covered
     }
@@ -373,6 +396,45 @@ mod tests {
             found.sort_by(key);
             scanned.sort_by(key);
             assert_eq!(found, scanned);
+        }
+    }
+
+    /// The corner pass's placement: a candidate becomes a record only where the cache would show its
+    /// shading uncorrected. Beside a record of leaf 10 (radius 32 footprints in an empty scene): a
+    /// candidate of the same leaf is corrected already; one of leaf 11 on the same patch gets a record
+    /// unless the leaves are noisy, when the patch's record corrects it; Ward's spacing makes a record
+    /// of leaf 11 either way, and none of leaf 10 within half the radius.
+    #[test]
+    fn records_where_uncorrected_follow_what_corrected_shows() {
+        let empty = crate::visibility::brute_force::BruteForce::new(Vec::new());
+        let candidate = |leaf: ElementId, x: f64| Candidate {
+            patch: 1,
+            leaf,
+            point: DVec3::new(x, 0.0, 0.0),
+            normal: DVec3::Z,
+            footprint: 0.01,
+            key: leaf as u64,
+            shaded: Rgb::new(0.5, 0.5, 0.5),
+        };
+        for noisy_leaves in [false, true] {
+            let settings = CacheSettings {
+                noisy_leaves,
+                ..CacheSettings::default()
+            };
+            let records_after = |placement: Placement, leaf: ElementId| {
+                let mut cache = IrradianceCache::new(settings, 10.0, 1);
+                cache.offer(&candidate(10, 0.0), &empty, Placement::Spaced);
+                assert_eq!(cache.len(), 1);
+                cache.offer(&candidate(leaf, 0.1), &empty, placement);
+                cache.len()
+            };
+            assert_eq!(records_after(Placement::WhereUncorrected, 10), 1);
+            assert_eq!(
+                records_after(Placement::WhereUncorrected, 11),
+                if noisy_leaves { 1 } else { 2 }
+            );
+            assert_eq!(records_after(Placement::Spaced, 11), 2);
+            assert_eq!(records_after(Placement::Spaced, 10), 1);
         }
     }
 

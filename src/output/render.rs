@@ -13,7 +13,7 @@ use crate::geometry::{DVec2, DVec3, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::measures::fbem::Mask;
 use crate::measures::illuminance::{GatherSettings, IrradianceGather};
-use crate::measures::irradiance_cache::{CacheSettings, Candidate, IrradianceCache, COVERED};
+use crate::measures::irradiance_cache::{CacheSettings, Candidate, IrradianceCache, Placement};
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -265,7 +265,7 @@ fn with_tracer<T>(
                 // A block of candidates at a time: traced in parallel, offered in order, then gathered.
                 for block in coarse_to_fine(columns, rows).chunks(CANDIDATE_BLOCK) {
                     for candidate in tracer.cache_candidates(lattice, block) {
-                        cache.offer(&candidate, visibility, lattice.covered());
+                        cache.offer(&candidate, visibility, lattice.placement());
                     }
                     cache.gather(gather);
                 }
@@ -514,14 +514,17 @@ struct Surface {
 
 /// The image positions whose surface points are offered to the irradiance cache, in two passes.
 ///
-/// Pixel centres first, each a record unless a record of its leaf lies within [`COVERED`] of that
-/// record's radius: Ward's spacing. Then pixel corners, each a record only where no record of its leaf
-/// reaches it at all. A leaf that no pixel centre sees (a strip along a contact or a corner, narrower
-/// than a pixel) otherwise has no record, and its samples keep the shading uncorrected, just where the
-/// shading's error is largest: on the classroom a ceiling strip at a wall showed +54% where the gather
-/// at the point is +6%. The corners are where adaptive antialiasing samples first, so every one of
-/// them is corrected. The corner pass adds about 11% more records on the classroom at 256²
-/// (BENCHMARKS.md, "Records at pixel corners").
+/// Pixel centres first, each a record unless a record of its leaf lies within
+/// [`COVERED`](crate::measures::irradiance_cache::COVERED) of that
+/// record's radius: Ward's spacing ([`Placement::Spaced`]). Then pixel corners, each a record only
+/// where the cache would otherwise show its shading uncorrected ([`Placement::WhereUncorrected`]: no
+/// record of its leaf reaches it, nor, for Monte Carlo radiosity's noisy leaves, one of its patch). A
+/// leaf that no pixel centre sees (a strip along a contact or a corner, narrower than a pixel)
+/// otherwise has no record, and its samples keep the shading uncorrected, just where the shading's
+/// error is largest: on the classroom a ceiling strip at a wall showed +54% where the gather at the
+/// point is +6%. The corners are where adaptive antialiasing samples first, so every one of them is
+/// corrected. The corner pass adds about 11% more records on the classroom at 256² (BENCHMARKS.md,
+/// "Records at pixel corners").
 #[derive(Clone, Copy, Debug)]
 enum Lattice {
     PixelCentres,
@@ -556,11 +559,11 @@ impl Lattice {
         (before + y * columns + x) as u64
     }
 
-    /// A candidate is covered by a record of its leaf within this fraction of the record's radius.
-    fn covered(self) -> f64 {
+    /// Where its candidates become records.
+    fn placement(self) -> Placement {
         match self {
-            Lattice::PixelCentres => COVERED,
-            Lattice::PixelCorners => 1.0,
+            Lattice::PixelCentres => Placement::Spaced,
+            Lattice::PixelCorners => Placement::WhereUncorrected,
         }
     }
 }
