@@ -694,11 +694,11 @@ fn a_final_gather_render_shows_the_analytic_radiance_at_every_pixel() {
 
 /// The irradiance cache's second pass: where no pixel centre's record reaches a pixel corner (radii
 /// of 0.1 pixel footprint, which this wide view overestimates at most 3.4× at its edges, against the
-/// corner's 0.71 pixel to the nearest centre), the corner gets a record of its own,
-/// so at every corner, where adaptive antialiasing samples first, the cached render shows the
-/// gather's exact value (Howell's analytic `ρ L_e F` on [`coarse_lit_plate`]), while the coarse
-/// leaves' shading there is off by several percent; halfway between two corners on a pixel's edge,
-/// which no record reaches, the shading stays as it is.
+/// corner's 0.71 pixel to the nearest centre), the corner gets a record of its own, so at every
+/// corner, where adaptive antialiasing samples first, the cached render shows the gather's exact
+/// value (Howell's analytic `ρ L_e F` on [`coarse_lit_plate`]), while the coarse leaves' shading
+/// there is off by several percent; halfway between two corners on a pixel's edge, which no record
+/// reaches, the shading stays as it is.
 #[test]
 fn every_pixel_corner_is_a_record_or_reached_by_one() {
     use radiosity::measures::irradiance_cache::CacheSettings;

@@ -227,8 +227,8 @@ impl IrradianceCache {
     /// gathered radiance of the patch's records that reach it; `None` where none does.
     ///
     /// Why the two: a Galerkin solution's leaf is deterministic and smooth, and where no record of it
-    /// reaches (a sliver seen by no pixel centre or corner, at an edge or a corner) its shading is nearer than
-    /// the patch's gathered values spread over it (the Cornell box's 128² image 1.69% against 1.83%)
+    /// reaches (a sliver at an edge that neither a pixel centre nor a pixel corner sees) its shading is
+    /// nearer than the patch's gathered values spread over it (the Cornell box's 128² image 1.69% against 1.83%)
     /// or another leaf's correction (the same 1.69%). A Monte Carlo solution's leaves are noisy and
     /// outnumber the pixels (40,073 leaves at 128² on the Cornell box): most samples meet a leaf
     /// without a record, and the patch's gathered values give 3.69% where its noisy shading gives

@@ -515,8 +515,8 @@ struct Surface {
 /// The image positions whose surface points are offered to the irradiance cache, in two passes.
 ///
 /// Pixel centres first, each a record unless a record of its leaf lies within
-/// [`COVERED`](crate::measures::irradiance_cache::COVERED) of that
-/// record's radius: Ward's spacing ([`Placement::Spaced`]). Then pixel corners, each a record only
+/// [`COVERED`](crate::measures::irradiance_cache::COVERED) of that record's radius: Ward's spacing
+/// ([`Placement::Spaced`]). Then pixel corners, each a record only
 /// where the cache would otherwise show its shading uncorrected ([`Placement::WhereUncorrected`]: no
 /// record of its leaf reaches it, nor, for Monte Carlo radiosity's noisy leaves, one of its patch). A
 /// leaf that no pixel centre sees (a strip along a contact or a corner, narrower than a pixel)
