@@ -188,8 +188,8 @@ pub struct IrradianceGather<'a> {
 
 /// What the gather's walk down the cluster tree reads of a cluster, in one place: every point's
 /// gather starts at the root, and reading the hierarchy's elements, their boxed clusters and
-/// children lists instead misses the cache at each (the classroom's cached render phase ran 9%
-/// faster reading these; BENCHMARKS.md, "The gather's walk down the cluster tree").
+/// children lists instead misses the cache at each (the classroom's cached render phase ran about
+/// 7% faster reading these; BENCHMARKS.md, "The gather's walk down the cluster tree").
 #[derive(Clone, Copy, Debug)]
 struct WalkedCluster {
     center: DVec3,
