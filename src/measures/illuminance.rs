@@ -26,16 +26,20 @@
 //! O(π / Ω_max) pieces per layer of depth of the scene plus the refinement near shadow edges and bright
 //! gradients, not every leaf.
 //!
-//! Faint pieces and clusters: a piece wholly above the horizon of `x` whose whole unoccluded
+//! Faint pieces and dim clusters: a piece wholly above the horizon of `x` whose whole unoccluded
 //! contribution `U = Ω_p L_max` is within the piece budget is not refined or node-sampled but
 //! estimated from one ray to an area-uniform random point `y` of it, `Ω_p V(x, y) L(y)`; a cluster of
-//! the scene's cluster tree (Sillion–Drettakis §4) whose bounding sphere's solid angle `Ω_s` times its
-//! brightest radiance is within the budget is estimated from one direction `ω` uniform in that
-//! sphere's cone, `Ω_s cos θx L(y)` with `y` the first surface met that way if it is the cluster's
-//! (zero otherwise). Both estimates are unbiased and lie between 0 and that bound, so their error is
-//! at most the bound: the budget, as for any piece. A piece within twice the budget gets four
-//! jittered random points, kernel-weighted as nodes are, and the binomial error `U / 2` of the
-//! sampled fraction: four rays instead of four nodes and four corners. A point therefore visits the
+//! the scene's cluster tree (Sillion–Drettakis §4) whose bound `U = Ω_s c_max L_max` is within the
+//! budget (`Ω_s` its bounding sphere's solid angle, `c_max` the largest `cos θx` over that sphere's
+//! cone, `L_max` its brightest radiance) is estimated from one direction `ω` uniform in the cone,
+//! `Ω_s cos θx L(y)` with `y` the first surface met that way if it is the cluster's (zero
+//! otherwise). Both estimates are unbiased and lie between 0 and that bound, so their error is at most
+//! the bound: the budget, as for any piece. A piece or cluster within twice the budget gets four
+//! jittered random samples (points of the piece, kernel-weighted as nodes are; directions of the
+//! cone) and the binomial error `U / 2` of the sampled fraction: four rays instead of four nodes and
+//! four corners, or instead of a ray or more for each patch of the cluster. The cosine bound and the
+//! four-ray clusters took the classroom's cached 256² image from 62.8M to 56.7M gather rays with the
+//! same errors (BENCHMARKS.md, "Dim clusters from four directions"). A point therefore visits the
 //! clusters around it down to the size its budget resolves, not every patch facing it (the
 //! classroom's 300 seen points at `τ = 0.2`: 14.2M → 3.0M rays, the same error). The samples are
 //! seeded by `seed`, the point and the piece, so that the result does not depend on the thread count.
@@ -79,7 +83,7 @@ pub struct GatherSettings {
     pub max_depth: u32,
     /// Degree of the cubature rule on each piece (its nodes are the visibility samples).
     pub cubature_degree: usize,
-    /// Seed of the single random samples of pieces and clusters too faint to matter alone (mixed with
+    /// Seed of the few random samples of pieces and clusters too dim to matter alone (mixed with
     /// the point and the piece, so that results do not depend on the thread count).
     pub seed: u64,
 }
@@ -108,7 +112,7 @@ pub struct PointIrradiance {
     /// Pieces used and visibility rays cast.
     pub pieces: u32,
     pub rays: u32,
-    /// Of the pieces, clusters gathered whole from one sample (faint ones; see the module
+    /// Of the pieces, clusters gathered whole from a few samples (dim ones; see the module
     /// documentation).
     pub clusters: u32,
 }
@@ -409,15 +413,11 @@ impl<'a> IrradianceGather<'a> {
         }
         let strata = (unoccluded / self.piece_budget).ceil().max(1.0);
         let k = strata as usize;
-        let mut unit = self.uniforms(x, piece.shape.centroid());
         let h = self.hierarchy;
         let n_y = h.patch_of(piece.element).normal;
         let (mut lit, mut seen, mut open) = (Rgb::BLACK, 0.0, 0.0);
-        for cell in 0..k * k {
-            let (i, j) = ((cell % k) as f64, (cell / k) as f64);
-            let y = piece
-                .shape
-                .sample_uniform(DVec2::new((i + unit()) / strata, (j + unit()) / strata));
+        for cell in jittered_cells(strata, self.uniforms(x, piece.shape.centroid())) {
+            let y = piece.shape.sample_uniform(cell);
             let kernel = point_to_point(x, normal, y, n_y);
             open += kernel;
             let t = self.visibility.transmittance(x, y);
@@ -440,7 +440,7 @@ impl<'a> IrradianceGather<'a> {
     /// Walks the cluster tree from `root`: clusters wholly behind the point's tangent plane are
     /// skipped, and a cluster whose bounding sphere's solid angle times its brightest radiance (a
     /// bound on anything it can add to the irradiance, since each direction meets one surface) is
-    /// within the piece budget is gathered from one random sample ([`Self::faint_cluster`]); the
+    /// within the piece budget is gathered from one random sample ([`Self::dim_cluster`]); the
     /// patch roots of the rest go on `pieces`. Far small objects thus cost one ray each instead of a
     /// factor and rays per patch.
     fn through_clusters(
@@ -470,15 +470,18 @@ impl<'a> IrradianceGather<'a> {
                 let sine = radius / distance;
                 let cos_half_angle = (1.0 - sine * sine).sqrt();
                 let solid_angle = 2.0 * PI * (1.0 - cos_half_angle);
+                let axis = (center - x) / distance;
                 let cone = Cone {
-                    axis: (center - x) / distance,
+                    axis,
                     cos_half_angle,
                     solid_angle,
                     far: distance + radius,
-                    unoccluded: solid_angle * cluster.brightest,
+                    unoccluded: solid_angle
+                        * largest_cosine(normal.dot(axis), cos_half_angle, sine)
+                        * cluster.brightest,
                 };
-                if cone.unoccluded <= self.piece_budget {
-                    self.faint_cluster(x, normal, id, cone, out);
+                if cone.unoccluded <= RANDOM_STRATA * self.piece_budget {
+                    self.dim_cluster(x, normal, id, cone, out);
                     continue;
                 }
             }
@@ -491,14 +494,15 @@ impl<'a> IrradianceGather<'a> {
         }
     }
 
-    /// A cluster too faint to matter alone, from one direction `ω` uniform in the cone of its bounding
-    /// sphere (solid angle `Ω_s`): the closest surface that way, if it is the cluster's, gives
-    /// `Ω_s cos θx L(y)`, an unbiased estimate of what the cluster adds to the irradiance (each
-    /// direction counts the first surface it meets, so anything in front of the cluster hides it),
-    /// between 0 and the bound `unoccluded = Ω_s L_max`, hence within it of the truth. A closest hit
-    /// rather than the [`Visibility::transmittance`] of a segment, so that a cluster with many layers
-    /// does not inflate one sample.
-    fn faint_cluster(
+    /// A cluster too dim to matter alone, from `k²` directions `ω` stratified in the cone of its
+    /// bounding sphere (solid angle `Ω_s`), `k = ⌈U / budget⌉` ([`RANDOM_STRATA`] at most) for its bound
+    /// `U`: the closest surface each way, if it is the cluster's, adds `Ω_s cos θx L(y) / k²`, an
+    /// unbiased estimate of what the cluster adds to the irradiance (each direction counts the first
+    /// surface it meets, so anything in front of the cluster hides it). Each sample lies between 0 and
+    /// `U`, so one sample's error is at most `U` and `k²` samples' is counted as `U / k`, as for
+    /// random pieces. Closest hits rather than the [`Visibility::transmittance`] of segments, so that
+    /// a cluster with many layers does not inflate a sample.
+    fn dim_cluster(
         &self,
         x: DVec3,
         normal: DVec3,
@@ -507,40 +511,41 @@ impl<'a> IrradianceGather<'a> {
         out: &mut PointIrradiance,
     ) {
         let h = self.hierarchy;
-        out.gather_error += cone.unoccluded;
         out.pieces += 1;
         out.clusters += 1;
         if cone.unoccluded <= 0.0 {
             return;
         }
-        let mut unit = self.uniforms(x, cone.axis);
-        let (u, v) = (unit(), unit());
-        let cos_theta = 1.0 - u * (1.0 - cone.cos_half_angle);
-        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-        let (b, c) = cone.axis.any_orthonormal_pair();
-        let phi = 2.0 * PI * v;
-        let direction = cone.axis * cos_theta + (b * phi.cos() + c * phi.sin()) * sin_theta;
-        let cos_x = normal.dot(direction);
-        if cos_x <= 0.0 {
-            return;
-        }
-        out.rays += 1;
-        let ray = Ray::new(x, direction * cone.far);
-        let Some(hit) = self.visibility.intersect(&ray, SEGMENT_EPSILON, 1.0) else {
-            return;
-        };
-        let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
-            return;
-        };
-        if !h.cluster_holds(id, h.patches[patch as usize].root) {
-            return;
-        }
-        let y = x + ray.direction * hit.t;
-        let (leaf, uv) = h.locate_with_parameters(patch, y);
-        let weight = cone.solid_angle * cos_x;
-        out.irradiance += h.exitant_radiance_at_parameters(leaf, uv) * weight;
+        let strata = (cone.unoccluded / self.piece_budget).ceil().max(1.0);
+        out.gather_error += cone.unoccluded / strata;
         let error = self.clusters[(id - self.first_cluster) as usize].error;
-        out.solver_error += weight * error;
+        let (b, c) = cone.axis.any_orthonormal_pair();
+        for cell in jittered_cells(strata, self.uniforms(x, cone.axis)) {
+            let cos_theta = 1.0 - cell.x * (1.0 - cone.cos_half_angle);
+            let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+            let phi = 2.0 * PI * cell.y;
+            let direction = cone.axis * cos_theta + (b * phi.cos() + c * phi.sin()) * sin_theta;
+            let cos_x = normal.dot(direction);
+            if cos_x <= 0.0 {
+                continue;
+            }
+            out.rays += 1;
+            let ray = Ray::new(x, direction * cone.far);
+            let Some(hit) = self.visibility.intersect(&ray, SEGMENT_EPSILON, 1.0) else {
+                continue;
+            };
+            let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
+                continue;
+            };
+            if !h.cluster_holds(id, h.patches[patch as usize].root) {
+                continue;
+            }
+            let y = x + ray.direction * hit.t;
+            let (leaf, uv) = h.locate_with_parameters(patch, y);
+            let weight = cone.solid_angle * cos_x / (strata * strata);
+            out.irradiance += h.exitant_radiance_at_parameters(leaf, uv) * weight;
+            out.solver_error += weight * error;
+        }
     }
 
     fn push_children(&self, stack: &mut Vec<Piece>, piece: &Piece, partial: Option<f64>) {
@@ -632,9 +637,31 @@ impl<'a> IrradianceGather<'a> {
     }
 }
 
-/// Most strata per side of a piece gathered from random rays ([`IrradianceGather::random_piece`]):
-/// two, four rays, while that is cheaper than its four nodes and four corners.
+/// Most strata per side of a piece or cluster gathered from random rays
+/// ([`IrradianceGather::random_piece`], [`IrradianceGather::dim_cluster`]): two, four rays, while that
+/// is cheaper than a piece's four nodes and four corners.
 const RANDOM_STRATA: f64 = 2.0;
+
+/// The largest `cos θ` between a unit normal and the directions of a cone whose axis makes cosine
+/// `cos_axis` with it, of half angle `α` (given as `cos α`, `sin α`): 1 when the normal lies inside
+/// the cone, else `cos(θ_axis − α)`, at least 0.
+fn largest_cosine(cos_axis: f64, cos_half_angle: f64, sin_half_angle: f64) -> f64 {
+    if cos_axis >= cos_half_angle {
+        return 1.0;
+    }
+    let sin_axis = (1.0 - cos_axis * cos_axis).max(0.0).sqrt();
+    (cos_axis * cos_half_angle + sin_axis * sin_half_angle).clamp(0.0, 1.0)
+}
+
+/// The `k × k` cells of the unit square, `k = strata`, row by row, each with a point jittered in it
+/// by two draws of `unit`: the stratified samples of random pieces and dim clusters.
+fn jittered_cells(strata: f64, mut unit: impl FnMut() -> f64) -> impl Iterator<Item = DVec2> {
+    let k = strata as usize;
+    (0..k * k).map(move |cell| {
+        let (i, j) = ((cell % k) as f64, (cell / k) as f64);
+        DVec2::new((i + unit()) / strata, (j + unit()) / strata)
+    })
+}
 
 /// Fraction of the way from a piece's corner to its centroid where the corner's visibility is sampled.
 const CORNER_INSET: f64 = 0.01;
@@ -1108,6 +1135,53 @@ pub fn gathered_radiance(patch: &crate::hierarchy::Patch, irradiance: Rgb) -> Rg
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cone bound of dim clusters is the largest cosine over the cone's directions: no direction
+    /// of a dense sampling of the cone (its rim included) exceeds it, and the best of them reaches it
+    /// to within the sampling's spacing, for normals inside, beside and behind the cone.
+    #[test]
+    fn the_largest_cosine_over_a_cone_is_attained_and_never_exceeded() {
+        let axis = DVec3::new(0.3, -0.5, 0.8).normalize();
+        let (b, c) = axis.any_orthonormal_pair();
+        for half_angle in [0.01f64, 0.2, 0.7, 1.4] {
+            let (sine, cosine) = f64::sin_cos(half_angle);
+            for tilt in [0.0f64, 0.1, 0.5, 1.0, 1.6, 2.5, 3.1] {
+                let normal = axis * tilt.cos() + b * tilt.sin();
+                let bound = largest_cosine(normal.dot(axis), cosine, sine);
+                let mut best = f64::NEG_INFINITY;
+                for i in 0..=64 {
+                    let theta = half_angle * f64::from(i) / 64.0;
+                    for j in 0..256 {
+                        let phi = 2.0 * PI * f64::from(j) / 256.0;
+                        let d = axis * theta.cos() + (b * phi.cos() + c * phi.sin()) * theta.sin();
+                        let cos = normal.dot(d);
+                        assert!(cos <= bound + 1e-12, "{half_angle} {tilt}: {cos} > {bound}");
+                        best = best.max(cos.max(0.0));
+                    }
+                }
+                assert!(
+                    best >= bound - 2e-3,
+                    "{half_angle} {tilt}: {best} < {bound}"
+                );
+            }
+        }
+    }
+
+    /// Jittered cells: `k²` points, one in each cell of the `k × k` grid, row by row.
+    #[test]
+    fn jittered_cells_put_one_point_in_each_cell() {
+        let mut draws = [0.0, 0.999, 0.5, 0.25, 0.75, 0.5, 0.1, 0.9].into_iter();
+        let cells: Vec<DVec2> = jittered_cells(2.0, || draws.next().unwrap()).collect();
+        assert_eq!(
+            cells,
+            [
+                DVec2::new(0.0, 0.4995),
+                DVec2::new(0.75, 0.125),
+                DVec2::new(0.375, 0.75),
+                DVec2::new(0.55, 0.95)
+            ]
+        );
+    }
 
     #[test]
     fn planes_and_regions_parse_and_refuse_nonsense() {
