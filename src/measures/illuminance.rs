@@ -411,7 +411,7 @@ impl<'a> IrradianceGather<'a> {
         {
             return false;
         }
-        let strata = (unoccluded / self.piece_budget).ceil().max(1.0);
+        let strata = self.strata(unoccluded);
         let k = strata as usize;
         let h = self.hierarchy;
         let n_y = h.patch_of(piece.element).normal;
@@ -438,11 +438,12 @@ impl<'a> IrradianceGather<'a> {
     }
 
     /// Walks the cluster tree from `root`: clusters wholly behind the point's tangent plane are
-    /// skipped, and a cluster whose bounding sphere's solid angle times its brightest radiance (a
-    /// bound on anything it can add to the irradiance, since each direction meets one surface) is
-    /// within the piece budget is gathered from one random sample ([`Self::dim_cluster`]); the
-    /// patch roots of the rest go on `pieces`. Far small objects thus cost one ray each instead of a
-    /// factor and rays per patch.
+    /// skipped, and a cluster whose bound `U` (its bounding sphere's solid angle times the largest
+    /// cosine over that cone times its brightest radiance: a bound on anything it can add to the
+    /// irradiance, since each direction meets one surface) is within [`RANDOM_STRATA`] piece budgets
+    /// is gathered from one or four random directions ([`Self::dim_cluster`]); the patch roots of the
+    /// rest go on `pieces`. Far small objects thus cost a ray or a few each instead of a factor and
+    /// rays per patch.
     fn through_clusters(
         &self,
         x: DVec3,
@@ -516,9 +517,11 @@ impl<'a> IrradianceGather<'a> {
         if cone.unoccluded <= 0.0 {
             return;
         }
-        let strata = (cone.unoccluded / self.piece_budget).ceil().max(1.0);
+        let strata = self.strata(cone.unoccluded);
         out.gather_error += cone.unoccluded / strata;
         let error = self.clusters[(id - self.first_cluster) as usize].error;
+        // Division by one or four: exact, so the same weight as dividing each sample's.
+        let solid_angle_per_ray = cone.solid_angle / (strata * strata);
         let (b, c) = cone.axis.any_orthonormal_pair();
         for cell in jittered_cells(strata, self.uniforms(x, cone.axis)) {
             let cos_theta = 1.0 - cell.x * (1.0 - cone.cos_half_angle);
@@ -542,10 +545,15 @@ impl<'a> IrradianceGather<'a> {
             }
             let y = x + ray.direction * hit.t;
             let (leaf, uv) = h.locate_with_parameters(patch, y);
-            let weight = cone.solid_angle * cos_x / (strata * strata);
+            let weight = solid_angle_per_ray * cos_x;
             out.irradiance += h.exitant_radiance_at_parameters(leaf, uv) * weight;
             out.solver_error += weight * error;
         }
+    }
+
+    /// Strata per side `k = ⌈U / budget⌉` (at least 1) of a random piece or dim cluster of bound `U`.
+    fn strata(&self, unoccluded: f64) -> f64 {
+        (unoccluded / self.piece_budget).ceil().max(1.0)
     }
 
     fn push_children(&self, stack: &mut Vec<Piece>, piece: &Piece, partial: Option<f64>) {
