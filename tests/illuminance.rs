@@ -171,10 +171,10 @@ fn the_white_furnace_gives_pi_l_in_every_direction() {
 /// Dim clusters and faint pieces, gathered from one or four random samples each, against the
 /// furnace's exact answer: in a closed box full of small cubes where every surface emits L and reflects
 /// nothing, every free point receives π L from any direction, whatever the cubes hide. Each sample
-/// lies between 0 and its bound, so every point is within its gather error of π L, with the cluster tree and
-/// without; the clusters' samples are unbiased, so the two gathers' differences average out (their
-/// mean within four standard errors, an error model of the samples' own spread). Tolerance 1, so that
-/// the cubes' clusters are faint from a metre or so.
+/// lies between 0 and its bound, so every point is within its gather error of π L, with the cluster
+/// tree and without; the clusters' samples are unbiased, so the two gathers' differences average out
+/// (their mean within four standard errors, an error model of the samples' own spread). Tolerance 1,
+/// so that the cubes' clusters are dim from a metre or so.
 #[test]
 fn dim_clusters_sampled_from_few_rays_keep_a_furnace_full_of_cubes_exact() {
     let le = 1.0;
