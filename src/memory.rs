@@ -233,15 +233,18 @@ pub fn element_bytes(basis: BasisKind) -> usize {
         + allocated_bytes(4 * 4)
 }
 
-/// `1.5 GiB`, `640 MiB`, `12 KiB` (binary units, like `--max-memory`'s suffixes).
+/// `1.5 GiB`, `640 MiB`, `12 KiB`, `500 B` (binary units, like `--max-memory`'s suffixes; under a
+/// KiB in bytes, so that `--max-memory 1` does not read back as `0 KiB`).
 pub fn format_bytes(bytes: usize) -> String {
     let b = bytes as f64;
     if bytes >= 1 << 30 {
         format!("{:.1} GiB", b / f64::from(1u32 << 30))
     } else if bytes >= 1 << 20 {
         format!("{:.0} MiB", b / f64::from(1u32 << 20))
-    } else {
+    } else if bytes >= 1 << 10 {
         format!("{:.0} KiB", b / 1024.0)
+    } else {
+        format!("{bytes} B")
     }
 }
 
@@ -250,6 +253,16 @@ mod tests {
     use super::*;
     use crate::scene::generators::BoxHall;
     use crate::visibility::bvh::Bvh;
+
+    /// Sizes read back in the unit they are nearest to, a byte budget included.
+    #[test]
+    fn sizes_read_back_in_their_unit() {
+        assert_eq!(format_bytes(1), "1 B");
+        assert_eq!(format_bytes(1023), "1023 B");
+        assert_eq!(format_bytes(12 << 10), "12 KiB");
+        assert_eq!(format_bytes(640 << 20), "640 MiB");
+        assert_eq!(format_bytes(3 << 29), "1.5 GiB");
+    }
 
     /// Vectors advised onto huge pages (and the small ones, which are not) hold what is written
     /// into them, in the room asked for, without moving while they fill.
