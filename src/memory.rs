@@ -150,6 +150,7 @@ impl MemoryBudget {
             + hierarchy.memory_bytes()
             + hierarchy.patches.len() * std::mem::size_of::<Patch>()
             + hierarchy.cluster_surfaces.len() * 4
+            + hierarchy.cluster_positions.len() * 4
             + hierarchy.polygon_patches.len() * 16;
         anyhow::ensure!(
             fixed < max_memory,

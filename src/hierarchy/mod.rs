@@ -655,6 +655,10 @@ pub struct Hierarchy {
     pub root_cluster: Option<ElementId>,
     /// Patch roots in cluster-tree order: each cluster's contents are one contiguous range.
     pub cluster_surfaces: Vec<ElementId>,
+    /// Per patch, the position of its root in `cluster_surfaces` (empty without clusters): whether a
+    /// cluster holds a patch is then whether its contents' range holds that position
+    /// ([`Hierarchy::cluster_holds_patch`]).
+    pub cluster_positions: Vec<u32>,
     /// How clusters exchange light (`ClusteringKind::None` without clusters).
     pub clustering: clusters::ClusteringKind,
     /// Intra-cluster visibility (Sillion–Drettakis §6.1): item buffers of the clusters, or `None` when
@@ -677,6 +681,7 @@ impl Hierarchy {
             direct: Vec::new(),
             root_cluster: None,
             cluster_surfaces: Vec::new(),
+            cluster_positions: Vec::new(),
             clustering: clusters::ClusteringKind::None,
             item_buffers: None,
         };
@@ -834,6 +839,7 @@ impl Hierarchy {
         }
         let root = self.elements.len() as ElementId - 1;
         self.root_cluster = Some(root);
+        self.cluster_positions = vec![u32::MAX; self.patches.len()];
         self.order_contents(root);
         self.orient_clusters(first);
         self.pull_clusters();
@@ -867,9 +873,12 @@ impl Hierarchy {
         }
     }
 
-    /// Lists the patch roots below `id` into `cluster_surfaces` and records each cluster's range.
+    /// Lists the patch roots below `id` into `cluster_surfaces` (and their positions there) and records
+    /// each cluster's range.
     fn order_contents(&mut self, id: ElementId) {
         if !self.is_cluster(id) {
+            let patch = self.elements[id as usize].patch();
+            self.cluster_positions[patch as usize] = self.cluster_surfaces.len() as u32;
             self.cluster_surfaces.push(id);
             return;
         }
@@ -922,26 +931,24 @@ impl Hierarchy {
         }
     }
 
-    /// Whether a side of `polygon` is in the contents of cluster `cluster`, at any depth: a walk up
-    /// from the side's patch root (clusters are stored after everything they hold, so the walk stops
-    /// at the first ancestor past `cluster`).
+    /// Whether a side of `polygon` is in the contents of `cluster`, at any depth (false where `cluster`
+    /// is not a cluster).
     pub fn cluster_holds_polygon(&self, cluster: ElementId, polygon: usize) -> bool {
-        self.polygon_patches[polygon]
-            .iter()
-            .flatten()
-            .any(|&patch| self.cluster_holds(cluster, self.patches[patch as usize].root))
+        self.cluster(cluster).is_some_and(|c| {
+            self.polygon_patches[polygon]
+                .iter()
+                .flatten()
+                .any(|&patch| self.cluster_holds_patch(c, patch))
+        })
     }
 
-    /// Whether element `id` lies in cluster `cluster`, at any depth (the walk of
-    /// [`Hierarchy::cluster_holds_polygon`]).
-    pub fn cluster_holds(&self, cluster: ElementId, mut id: ElementId) -> bool {
-        while let Some(parent) = self.elements[id as usize].parent() {
-            if parent >= cluster {
-                return parent == cluster;
-            }
-            id = parent;
-        }
-        false
+    /// Whether `patch` is in the contents of `cluster`, at any depth: a range test on the position of its
+    /// root ([`Hierarchy::cluster_positions`]) rather than a walk up its root's parents, each a fetch
+    /// from the element records (the final gather asks it of every surface a dim cluster's rays hit).
+    pub fn cluster_holds_patch(&self, cluster: &Cluster, patch: u32) -> bool {
+        self.cluster_positions
+            .get(patch as usize)
+            .is_some_and(|position| cluster.contents.contains(position))
     }
 
     /// The patch roots inside cluster `id`.
@@ -1482,6 +1489,54 @@ mod tests {
 
     /// An expansion that undershoots (mean 0.25, a steep first-order term) reads its own values in the
     /// solver's `radiance_at` and zero where they are negative in what outputs report.
+    /// The range test of [`Hierarchy::cluster_holds_patch`] says what the tree says: a cluster holds a
+    /// patch exactly when it is an ancestor of the patch's root, for every cluster, patch and kind of
+    /// cluster tree (a furnished hall, whose trees are several levels deep).
+    #[test]
+    fn clusters_hold_exactly_the_patches_below_them() {
+        let scene = crate::scene::generators::BoxHall::with_polygons(200).scene();
+        for kind in [
+            clusters::ClusterTreeKind::Grid,
+            clusters::ClusterTreeKind::Kdtree,
+            clusters::ClusterTreeKind::Octree,
+        ] {
+            let mut h = Hierarchy::new(&scene, BasisKind::Constant);
+            h.add_clusters(kind, clusters::ClusteringKind::Oriented);
+            let root = h.root_cluster.expect("a cluster tree");
+            let ancestors = |patch: usize| {
+                let mut chain = Vec::new();
+                let mut id = h.patches[patch].root;
+                while let Some(parent) = h.elements[id as usize].parent() {
+                    chain.push(parent);
+                    id = parent;
+                }
+                chain
+            };
+            let (mut held, mut depth) = (0, 0);
+            for patch in 0..h.patches.len() {
+                let chain = ancestors(patch);
+                depth = depth.max(chain.len());
+                for id in 0..=root {
+                    let Some(cluster) = h.cluster(id) else {
+                        continue;
+                    };
+                    let holds = h.cluster_holds_patch(cluster, patch as u32);
+                    assert_eq!(
+                        holds,
+                        chain.contains(&id),
+                        "{kind:?}: cluster {id}, patch {patch}"
+                    );
+                    held += usize::from(holds);
+                }
+            }
+            assert!(
+                depth >= 3,
+                "{kind:?}: a tree of {depth} levels tests little"
+            );
+            assert!(held >= h.patches.len() * depth / 2);
+        }
+    }
+
     #[test]
     fn outputs_never_report_negative_radiance() {
         let scene = crate::scene::generators::parallel_plates(1.0, 1.0, 0.5, 1.0);

@@ -206,6 +206,9 @@ struct WalkedCluster {
     error: f64,
     /// Its children: `cluster_children[children.0 .. children.1]`.
     children: (u32, u32),
+    /// Its patch roots, at any depth: `Hierarchy::cluster_surfaces[contents.0 .. contents.1]` (a
+    /// cluster's range holds its children's, in the order the tree was walked).
+    contents: (u32, u32),
 }
 
 impl<'a> IrradianceGather<'a> {
@@ -263,7 +266,8 @@ impl<'a> IrradianceGather<'a> {
                 };
                 (f64::max(l, cl), f64::max(e, ce))
             });
-            let bounds = hierarchy.cluster(id).expect("a cluster").bounds;
+            let cluster = hierarchy.cluster(id).expect("a cluster");
+            let bounds = cluster.bounds;
             let start = cluster_children.len() as u32;
             cluster_children.extend_from_slice(&element.children);
             clusters.push(WalkedCluster {
@@ -273,6 +277,7 @@ impl<'a> IrradianceGather<'a> {
                 brightest,
                 error,
                 children: (start, cluster_children.len() as u32),
+                contents: (cluster.contents.start, cluster.contents.end),
             });
         }
         IrradianceGather {
@@ -287,6 +292,13 @@ impl<'a> IrradianceGather<'a> {
             cluster_children,
             first_cluster,
         }
+    }
+
+    /// Whether the cluster `walked` (of the walk's list) holds `patch`, at any depth: what
+    /// [`Hierarchy::cluster_holds_patch`] answers, from the walk's own copy of the cluster's range.
+    fn holds(&self, walked: &WalkedCluster, patch: u32) -> bool {
+        (walked.contents.0..walked.contents.1)
+            .contains(&self.hierarchy.cluster_positions[patch as usize])
     }
 
     /// Uniform numbers for the sample of a piece or cluster `key` seen from `x`: a stream seeded by
@@ -519,7 +531,7 @@ impl<'a> IrradianceGather<'a> {
         }
         let strata = self.strata(cone.unoccluded);
         out.gather_error += cone.unoccluded / strata;
-        let error = self.clusters[(id - self.first_cluster) as usize].error;
+        let walked = &self.clusters[(id - self.first_cluster) as usize];
         // Division by one or four: exact, so the same weight as dividing each sample's.
         let solid_angle_per_ray = cone.solid_angle / (strata * strata);
         let (b, c) = cone.axis.any_orthonormal_pair();
@@ -540,14 +552,14 @@ impl<'a> IrradianceGather<'a> {
             let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
                 continue;
             };
-            if !h.cluster_holds(id, h.patches[patch as usize].root) {
+            if !self.holds(walked, patch) {
                 continue;
             }
             let y = x + ray.direction * hit.t;
             let (leaf, uv) = h.locate_with_parameters(patch, y);
             let weight = solid_angle_per_ray * cos_x;
             out.irradiance += h.exitant_radiance_at_parameters(leaf, uv) * weight;
-            out.solver_error += weight * error;
+            out.solver_error += weight * walked.error;
         }
     }
 
