@@ -946,9 +946,14 @@ impl Hierarchy {
     /// root ([`Hierarchy::cluster_positions`]) rather than a walk up its root's parents, each a fetch
     /// from the element records (the final gather asks it of every surface a dim cluster's rays hit).
     pub fn cluster_holds_patch(&self, cluster: &Cluster, patch: u32) -> bool {
+        self.contents_hold_patch(cluster.contents.clone(), patch)
+    }
+
+    /// Whether the range `contents` of `cluster_surfaces` (a cluster's contents) holds `patch`'s root.
+    pub fn contents_hold_patch(&self, contents: std::ops::Range<u32>, patch: u32) -> bool {
         self.cluster_positions
             .get(patch as usize)
-            .is_some_and(|position| cluster.contents.contains(position))
+            .is_some_and(|position| contents.contains(position))
     }
 
     /// The patch roots inside cluster `id`.
@@ -1487,8 +1492,6 @@ mod tests {
         assert_eq!(reduced.words, full.words);
     }
 
-    /// An expansion that undershoots (mean 0.25, a steep first-order term) reads its own values in the
-    /// solver's `radiance_at` and zero where they are negative in what outputs report.
     /// The range test of [`Hierarchy::cluster_holds_patch`] says what the tree says: a cluster holds a
     /// patch exactly when it is an ancestor of the patch's root, for every cluster, patch and kind of
     /// cluster tree (a furnished hall, whose trees are several levels deep).
@@ -1537,6 +1540,8 @@ mod tests {
         }
     }
 
+    /// An expansion that undershoots (mean 0.25, a steep first-order term) reads its own values in the
+    /// solver's `radiance_at` and zero where they are negative in what outputs report.
     #[test]
     fn outputs_never_report_negative_radiance() {
         let scene = crate::scene::generators::parallel_plates(1.0, 1.0, 0.5, 1.0);

@@ -294,13 +294,6 @@ impl<'a> IrradianceGather<'a> {
         }
     }
 
-    /// Whether the cluster `walked` (of the walk's list) holds `patch`, at any depth: what
-    /// [`Hierarchy::cluster_holds_patch`] answers, from the walk's own copy of the cluster's range.
-    fn holds(&self, walked: &WalkedCluster, patch: u32) -> bool {
-        (walked.contents.0..walked.contents.1)
-            .contains(&self.hierarchy.cluster_positions[patch as usize])
-    }
-
     /// Uniform numbers for the sample of a piece or cluster `key` seen from `x`: a stream seeded by
     /// the settings' seed, the point and the key.
     fn uniforms(&self, x: DVec3, key: DVec3) -> impl FnMut() -> f64 {
@@ -552,7 +545,7 @@ impl<'a> IrradianceGather<'a> {
             let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
                 continue;
             };
-            if !self.holds(walked, patch) {
+            if !h.contents_hold_patch(walked.contents.0..walked.contents.1, patch) {
                 continue;
             }
             let y = x + ray.direction * hit.t;
