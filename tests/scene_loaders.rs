@@ -498,6 +498,23 @@ fn garbage_line() -> impl Strategy<Value = String> {
     (keyword, prop::collection::vec(word, 0..7)).prop_map(|(k, ws)| format!("{k} {}", ws.join(" ")))
 }
 
+/// A solid whose size overflows the area (found by `mgf_garbage_never_panics`: a cone of radius
+/// 1e300 gave triangles of infinite area) is dropped with a warning, never kept with such an area.
+#[test]
+fn solids_too_large_for_their_area_are_dropped() {
+    let text = format!("{SQUARE}m w =\n rd 0.5\ncone a 1e300 b 0\nxf -s 1e200\nf a b c d\nxf\n");
+    let dir = temp_dir(&[("big.mgf", &text)]);
+    let scene = scene::load(&dir.join("big.mgf"), &LoadOptions::default()).expect("loads");
+    assert!(scene.polygons.iter().all(|p| p.shape.area().is_finite()));
+    let dropped = scene
+        .warnings
+        .iter()
+        .filter(|w| w.message.contains("too large"))
+        .count();
+    assert!(dropped >= 2, "{:?}", scene.warnings);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(200))]
     #[test]

@@ -26,6 +26,8 @@ pub enum PolygonError {
     TooFewVertices(usize),
     /// A coordinate is NaN or infinite.
     NotFinite,
+    /// So large that its area overflows (its extent squared is not a finite `f64`).
+    TooLarge,
     /// The polygon encloses no area (collinear or coincident vertices).
     ZeroArea,
     /// More than [`MAX_VERTICES`] vertices.
@@ -39,6 +41,7 @@ impl fmt::Display for PolygonError {
                 write!(f, "degenerate polygon: only {n} distinct vertices")
             }
             PolygonError::NotFinite => write!(f, "polygon has a non-finite coordinate"),
+            PolygonError::TooLarge => write!(f, "polygon too large: its area overflows"),
             PolygonError::ZeroArea => write!(f, "degenerate polygon: zero area"),
             PolygonError::TooManyVertices(n) => {
                 write!(f, "polygon has {n} vertices, more than {MAX_VERTICES}")
@@ -64,6 +67,9 @@ pub fn polygonize(points: &[DVec3]) -> Result<Polygonized, PolygonError> {
         return Err(PolygonError::NotFinite);
     }
     let size = extent(points);
+    if !(size * size).is_finite() {
+        return Err(PolygonError::TooLarge);
+    }
     let mut pts = merge_repeats(points, MERGE_TOLERANCE * size);
     if pts.len() < 3 {
         return Err(PolygonError::TooFewVertices(pts.len()));
@@ -456,6 +462,10 @@ mod tests {
         assert_eq!(
             polygonize(&[v(0.0, 0.0), v(f64::NAN, 0.0), v(1.0, 1.0)]),
             Err(PolygonError::NotFinite)
+        );
+        assert_eq!(
+            polygonize(&[v(0.0, 0.0), v(1e300, 0.0), v(0.0, 1e300)]),
+            Err(PolygonError::TooLarge)
         );
         let bent = [
             v(0.0, 0.0),
