@@ -2,6 +2,8 @@
 //! near-degenerate) without panicking, and returns finite results (non-negative where that is the
 //! contract). The polygon splitter takes any polygon, NaN included.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 use proptest::prelude::*;
 use radiosity::geometry::cubature::gauss_nodes;
 use radiosity::geometry::form_factor::{point_to_point, point_to_polygon};
@@ -43,7 +45,7 @@ fn finite(p: DVec3) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(2000))]
+    #![proptest_config(common::proptest_config(2000))]
 
     #[test]
     fn shape_measures_are_finite(s in shape(), uv in unit()) {

@@ -1,5 +1,7 @@
 //! Scene loaders against real RenderPark scenes, hand-made MGF/OBJ snippets and random garbage.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 use proptest::prelude::*;
 use radiosity::geometry::DVec3;
 use radiosity::scene::{self, cornell, LoadOptions, Scene, SceneError};
@@ -516,7 +518,7 @@ fn solids_too_large_for_their_area_are_dropped() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(200))]
+    #![proptest_config(common::proptest_config(200))]
     #[test]
     fn mgf_garbage_never_panics(lines in prop::collection::vec(garbage_line(), 0..40)) {
         let text = format!("{SQUARE}v c =\n p 0 0 1\n n 0 0 1\n{}\n", lines.join("\n"));

@@ -1,5 +1,7 @@
 //! The BVH (and Embree, with the `embree` feature) against the exhaustive double-precision reference.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
 use radiosity::geometry::{DVec2, DVec3, Ray, Shape};
 use radiosity::visibility::bench::random_segments;
 use radiosity::visibility::brute_force::BruteForce;
@@ -378,7 +380,7 @@ fn height_field(n: usize, corner: DVec3, seed: u64) -> (Vec<Shape>, Vec<DVec3>) 
 }
 
 proptest::proptest! {
-    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+    #![proptest_config(common::proptest_config(24))]
 
     /// Rays through shared vertices, along and across shared edges, and grazing the surface agree with the
     /// exhaustive reference, near the origin and far from it (where `f32` rounding is coarsest).

@@ -5,6 +5,19 @@ use radiosity::hierarchy::Hierarchy;
 use radiosity::progress::Progress;
 use radiosity::scene::{generators, Material, Object, Polygon, Scene};
 
+/// Proptest settings with `cases` cases whose failures are saved next to the test's source file
+/// (`tests/NAME.proptest-regressions`) and replayed first on every run. Proptest's default looks for a
+/// `lib.rs` or `main.rs` above the source file, which integration tests do not have: it then warns
+/// and neither saves nor replays anything.
+pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
+    proptest::test_runner::Config {
+        failure_persistence: Some(Box::new(
+            proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"),
+        )),
+        ..proptest::test_runner::Config::with_cases(cases)
+    }
+}
+
 pub fn quiet() -> Progress {
     Progress::new(true)
 }
