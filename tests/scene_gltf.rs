@@ -274,7 +274,7 @@ fn strips_fans_degenerates_and_points() {
         "{messages:?}"
     );
     assert!(
-        messages.iter().all(|m| m.contains("scene.gltf:0:")),
+        messages.iter().all(|m| m.contains("scene.gltf: ")),
         "{messages:?}"
     );
 }
@@ -477,7 +477,7 @@ fn binary_gltf_with_an_embedded_texture() {
     truncated.truncate(40);
     std::fs::write(&path, &truncated).unwrap();
     let e = try_load(&path).unwrap_err().to_string();
-    assert!(e.contains("scene.glb:0: invalid GLB"), "{e}");
+    assert!(e.contains("scene.glb: invalid GLB"), "{e}");
     let mut no_bin = Vec::new();
     let json_bytes = {
         let mut j = serde_json::to_vec(&doc).unwrap();
@@ -520,7 +520,7 @@ fn malformed_files_are_one_line_errors_naming_the_file() {
     let path = write_gltf(&dir, &doc);
     let e = try_load(&path).unwrap_err().to_string();
     assert!(
-        e.contains("scene.gltf:0: invalid glTF") && e.contains("nodes[0].mesh"),
+        e.contains("scene.gltf: invalid glTF") && e.contains("nodes[0].mesh"),
         "{e}"
     );
     let mut doc = embedded_quad();
@@ -563,7 +563,7 @@ fn missing_or_short_buffers_are_errors() {
     let e = try_load(&path).unwrap_err().to_string();
     assert!(!e.contains('\n'), "{e}");
     assert!(
-        e.starts_with(&format!("{}:0: buffer 0: 'missing.bin'", path.display())),
+        e.starts_with(&format!("{}: buffer 0: 'missing.bin'", path.display())),
         "{e}"
     );
     // Present as a file beside the glTF, it loads.

@@ -485,7 +485,20 @@ fn malformed_obj_is_reported() {
         }
     }
     let e = load_text("scene.ply", "").unwrap_err();
-    assert!(e.0.message.contains("unknown scene format"));
+    assert!(e.0.message.contains("unknown scene format '.ply'"));
+    // A file that cannot be read, or the wrong kind of path, is named without a line.
+    let missing = std::env::temp_dir().join("radiosity-no-such-scene.mgf");
+    let e = scene::load(&missing, &LoadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(&format!("{}: cannot read file", missing.display())),
+        "{e}"
+    );
+    let e = scene::load(&std::env::temp_dir(), &LoadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(": a directory, not a scene file"), "{e}");
 }
 
 fn garbage_line() -> impl Strategy<Value = String> {

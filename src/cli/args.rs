@@ -49,10 +49,12 @@ pub struct SceneArgs {
     /// Split surfaces along the outlines of objects that touch or nearly touch them, so that no
     /// element straddles a contact and light cannot leak through it. auto (the default): only along
     /// emitters that shine into the gap between them and a surface (a two-sided lamp hung just under a
-    /// ceiling, as in cube.mgf, however tessellated; an IES luminaire's opening that shines up); on: every lying object and footprint (blocks on a floor, furniture),
-    /// which multiplies the polygons of furnished rooms (classroom 5.8k → 15k); off: none.
+    /// ceiling, as in cube.mgf, however tessellated; an IES luminaire's opening that shines up); gaps:
+    /// also along reflecting lids across a gap (lamp housings under a ceiling); on: every lying object
+    /// and footprint (blocks on a floor, furniture), which multiplies the polygons of furnished rooms
+    /// (classroom 6.2k → 20k); off: none.
     #[arg(long, value_enum, default_value_t = scene::contacts::SplitContacts::Auto,
-          value_name = "auto|on|off")]
+          value_name = "auto|gaps|on|off")]
     pub split_contacts: scene::contacts::SplitContacts,
     /// Largest gap that still counts as a contact, relative to the smaller polygon's diameter (an
     /// emitter with nothing between it and the surface: five times that).

@@ -30,13 +30,17 @@ pub enum Shading {
     /// The leaf's basis expansion evaluated at the point (Bekaert–Willems §2): exactly the computed
     /// solution, smooth within elements for non-constant bases.
     Basis,
-    /// The basis expansion with its jumps at element edges removed and each element's mean kept
-    /// ([`VertexRadiosity::evaluate_continuous`]): continuous across edges for linear and bilinear
-    /// bases, no steps between leaves of different sizes, except along contact outlines.
+    /// The basis expansion with its jumps at element edges removed and each element's mean kept:
+    /// continuous across edges for linear and bilinear bases, no steps between leaves of different
+    /// sizes, except along contact outlines.
+    ///
+    /// Computed by [`VertexRadiosity::evaluate_continuous`].
     Continuous,
-    /// The basis expansion with its small jumps at element edges removed, the large ones kept
-    /// ([`SEAMLESS_STEP`]): no banding where the light is smooth, no smearing of a steep change the
-    /// solution resolved (a lamp's outline, a shadow's edge).
+    /// The basis expansion with its small jumps at element edges removed, the large ones kept: no
+    /// banding where the light is smooth, no smearing of a steep change the solution resolved (a
+    /// lamp's outline, a shadow's edge).
+    ///
+    /// The step between small and large is [`SEAMLESS_STEP`].
     Seamless,
 }
 

@@ -91,6 +91,7 @@ pub struct CameraSpec {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Diagnostic {
     pub file: PathBuf,
+    /// 1-based; 0 for the file as a whole (it cannot be read, or its format has no lines: glTF).
     pub line: usize,
     pub message: String,
 }
@@ -98,7 +99,11 @@ pub struct Diagnostic {
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let file = sanitise(&self.file.display().to_string(), MAX_SHOWN_CHARS);
-        write!(f, "{file}:{}: ", self.line)?;
+        if self.line == 0 {
+            write!(f, "{file}: ")?;
+        } else {
+            write!(f, "{file}:{}: ", self.line)?;
+        }
         f.write_str(&sanitise(&self.message, MAX_SHOWN_CHARS))
     }
 }
@@ -386,11 +391,18 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         "obj" => obj::load(path, options)?,
         "gltf" | "glb" => gltf::load(path, options)?,
         other => {
+            let what = if path.is_dir() {
+                "a directory, not a scene file".to_string()
+            } else if other.is_empty() {
+                "no file extension to tell its format".to_string()
+            } else {
+                format!("unknown scene format '.{other}'")
+            };
             return Err(SceneError::new(
                 path,
                 0,
-                format!("unknown scene format '.{other}' (expected .mgf, .obj, .gltf or .glb)"),
-            ))
+                format!("{what} (expected .mgf, .obj, .gltf or .glb)"),
+            ));
         }
     };
     if options.force_two_sided || options.force_one_sided {

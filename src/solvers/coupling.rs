@@ -76,11 +76,13 @@ pub enum SourceRule {
     /// receiver.
     #[default]
     Fixed,
-    /// At random nodes per receiver node, one in each cell of a regular partition of the source
-    /// ([`jittered_nodes`]; the command line's default): unbiased over a shadow boundary across the
-    /// source, at the price of noise (BENCHMARKS.md, "Shadow boundaries across sources" and "Partly
-    /// visible sources by jittered strata"). `shifted` names it too: a random shift of the fixed
-    /// nodes, which it replaced.
+    /// At random nodes per receiver node, one in each cell of a regular partition of the source (the
+    /// command line's default): unbiased over a shadow boundary across the source, at the price of
+    /// noise (BENCHMARKS.md, "Shadow boundaries across sources" and "Partly visible sources by
+    /// jittered strata"). `shifted` names it too: a random shift of the fixed nodes, which it
+    /// replaced.
+    ///
+    /// The nodes are [`jittered_nodes`].
     #[value(alias = "shifted")]
     Jittered,
 }
