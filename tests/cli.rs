@@ -112,9 +112,45 @@ fn render_writes_png_exr_models_and_stats() {
     );
     let png = image::open(file("c.png")).expect("png").to_rgb8();
     assert_eq!(png.dimensions(), (48, 40));
-    let exr = radiosity::output::image::Image::read_exr(&dir.join("c.exr")).expect("exr");
+    let exr = radiosity::output::image::Image::read_linear(&dir.join("c.exr")).expect("exr");
     assert_eq!((exr.width, exr.height), (48, 40));
     assert!(exr.pixels.iter().any(|p| p.luminance() > 0.0));
+    // The same render as Radiance HDR: the same pixels within RGBE's half step (2^-8 of a pixel's
+    // brightest channel).
+    let out = radiosity(&[
+        "render",
+        "-q",
+        "--width",
+        "48",
+        "--height",
+        "40",
+        "--eps",
+        "2e-3",
+        "--mesh",
+        "-o",
+        &file("d.png"),
+        "--hdr",
+        &file("d.hdr"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(std::fs::read(file("d.hdr"))
+        .unwrap()
+        .starts_with(b"#?RADIANCE"));
+    let hdr = radiosity::output::image::Image::read_linear(&dir.join("d.hdr")).expect("hdr");
+    for (a, b) in exr.pixels.iter().zip(&hdr.pixels) {
+        let half_step = a.max_channel() / 256.0;
+        assert!(
+            (a.r - b.r)
+                .abs()
+                .max((a.g - b.g).abs())
+                .max((a.b - b.b).abs())
+                <= half_step
+        );
+    }
     assert!(std::fs::read(file("c.ply")).unwrap().starts_with(b"ply"));
     assert!(std::fs::read(file("c.glb")).unwrap().starts_with(b"glTF"));
     let stats: serde_json::Value =

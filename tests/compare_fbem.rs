@@ -198,11 +198,11 @@ fn compare_command_reports_the_fbem() {
     assert_eq!(json["fbem_mask"], "shadow");
     // The EXR files hold f32: compare with the library on the same rounded images.
     let (approx, reference) = (
-        Image::read_exr(&paths[0]).unwrap(),
-        Image::read_exr(&paths[1]).unwrap(),
+        Image::read_linear(&paths[0]).unwrap(),
+        Image::read_linear(&paths[1]).unwrap(),
     );
     let features =
-        fbem::shadow_mask(&reference, &Image::read_exr(&paths[2]).unwrap(), 0.1).unwrap();
+        fbem::shadow_mask(&reference, &Image::read_linear(&paths[2]).unwrap(), 0.1).unwrap();
     for (entry, s) in json["fbem"].as_array().unwrap().iter().zip([4, 16]) {
         assert_eq!(entry["size"].as_u64().unwrap(), s as u64);
         let expected = fbem_value(&approx, &reference, &features, s);

@@ -12,9 +12,9 @@ use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct CompareCommand {
-    /// Approximation (linear OpenEXR).
+    /// Approximation (linear: OpenEXR or Radiance HDR).
     pub a: PathBuf,
-    /// Reference (linear OpenEXR); relative errors are relative to it.
+    /// Reference (linear: OpenEXR or Radiance HDR); relative errors are relative to it.
     pub b: PathBuf,
     /// The reference's standard-error image (`radiosity reference --stderr`): reports the reference's own
     /// noise and the luminance error with that noise removed in quadrature.
@@ -86,8 +86,8 @@ impl CompareCommand {
             "--mask-out needs --fbem SIZE"
         );
         self.check_outputs()?;
-        let a = Image::read_exr(&self.a)?;
-        let b = Image::read_exr(&self.b)?;
+        let a = Image::read_linear(&self.a)?;
+        let b = Image::read_linear(&self.b)?;
         image_metrics::ensure_same_size(&a, &b)
             .with_context(|| format!("comparing {} with {}", self.a.display(), self.b.display()))?;
         let ignore = self.ignore_mask(&b)?;
@@ -95,7 +95,7 @@ impl CompareCommand {
         let errors = image_metrics::compare(&a, &b, ignore)?;
         let reference_noise = match &self.reference_stderr {
             Some(path) => Some(
-                image_metrics::reference_noise(&errors, &Image::read_exr(path)?, ignore)
+                image_metrics::reference_noise(&errors, &Image::read_linear(path)?, ignore)
                     .with_context(|| format!("reference noise from {}", path.display()))?,
             ),
             None => None,
@@ -174,7 +174,7 @@ impl CompareCommand {
     fn features(&self, b: &Image, ignore: Option<&[bool]>) -> Result<(Mask, &'static str)> {
         match &self.unoccluded {
             Some(path) => {
-                let u = Image::read_exr(path)?;
+                let u = Image::read_linear(path)?;
                 let m = fbem::shadow_mask(b, &u, self.shadow_threshold)
                     .with_context(|| format!("shadow mask from {}", path.display()))?;
                 Ok((m, "shadow"))

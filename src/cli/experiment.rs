@@ -261,7 +261,7 @@ impl OraclesExperiment {
             .clone()
             .unwrap_or_else(|| self.out.join("reference.exr"));
         if path.exists() {
-            let image = Image::read_exr(&path)?;
+            let image = Image::read_linear(&path)?;
             anyhow::ensure!(
                 image.width == camera.width && image.height == camera.height,
                 "{} is {}x{}, not the requested {}x{}",

@@ -18,14 +18,15 @@ pub struct ReferenceCommand {
     pub scene: SceneArgs,
     #[command(flatten)]
     pub camera: CameraArgs,
-    /// Output OpenEXR file of the mean radiance (linear).
+    /// Output file of the mean radiance (linear): Radiance HDR for .hdr or .pic, else OpenEXR.
     #[arg(long, value_name = "FILE")]
     pub hdr: PathBuf,
     /// Paths per pixel (at least 2; rounded up to a multiple of 16, the independent batches the standard
     /// error is estimated from).
     #[arg(long, default_value_t = 64, value_name = "N", value_parser = super::args::count(0, 1 << 24))]
     pub spp: usize,
-    /// Output OpenEXR file of the per-pixel standard error of the mean (linear radiance).
+    /// Output file of the per-pixel standard error of the mean (linear radiance), in the same
+    /// formats as --hdr.
     #[arg(long, value_name = "FILE")]
     pub stderr: Option<PathBuf>,
     /// Bounces before Russian roulette may end a path.
@@ -66,9 +67,9 @@ impl ReferenceCommand {
         let visibility = build_visibility(&scene, self.visibility)?;
         let image = render_reference(&scene, visibility.as_ref(), &camera, &settings, progress);
         let seconds = start.elapsed().as_secs_f64();
-        image.mean.write_exr(&self.hdr)?;
+        image.mean.write_linear(&self.hdr)?;
         if let Some(path) = &self.stderr {
-            image.stderr.write_exr(path)?;
+            image.stderr.write_linear(path)?;
         }
         if !progress.quiet {
             let relative = image

@@ -79,8 +79,9 @@ pub struct RenderCommand {
     pub gather: super::args::GatherArgs,
     #[command(flatten)]
     pub tone: ToneArgs,
-    /// Also write linear radiance as OpenEXR.
-    #[arg(long, value_name = "FILE.exr")]
+    /// Also write linear radiance: Radiance HDR (RGBE) when FILE ends in .hdr or .pic, else 32-bit
+    /// float OpenEXR (exact; what `compare` measures best).
+    #[arg(long, value_name = "FILE.exr|FILE.hdr")]
     pub hdr: Option<PathBuf>,
     /// Write the illuminated mesh (.ply or .glb; repeatable), or the interactive viewer (.html: one
     /// self-contained page, the same view and tone mapping as the PNG).
@@ -213,7 +214,7 @@ impl RenderCommand {
                 .pixels
                 .iter_mut()
                 .for_each(|c| *c *= self.units.scale());
-            scaled.write_exr(path)?;
+            scaled.write_linear(path)?;
         }
         for path in &self.export {
             let vertices = vertices.as_ref().context("vertex radiosity")?;
@@ -423,7 +424,7 @@ impl RenderCommand {
         if !is_png {
             anyhow::bail!(
                 "--output {}: the rendered image is written as PNG, so name it .png (for linear \
-                 radiance in OpenEXR add --hdr FILE.exr)",
+                 radiance add --hdr FILE.exr or FILE.hdr)",
                 self.output.display()
             );
         }
