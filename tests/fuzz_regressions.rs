@@ -22,6 +22,7 @@ fn run(target: &str, data: &[u8]) {
         }
         "gltf" => drop(gltf::parse_bytes(data, nowhere)),
         "exr" => drop(Image::from_exr_bytes(data)),
+        "radiance" => drop(Image::from_radiance_bytes(data)),
         "ies" => {
             if let Ok(p) = ies::parse(nowhere, &String::from_utf8_lossy(data)) {
                 assert!(p.flux().is_finite() && p.intensity(45.0, 30.0).is_finite());

@@ -76,18 +76,24 @@ impl Image {
 
     /// Writes linear radiance as a run-length encoded Radiance HDR (RGBE) file.
     pub fn write_radiance(&self, path: &Path) -> Result<()> {
+        let bytes = self
+            .radiance_bytes()
+            .with_context(|| format!("encoding {}", path.display()))?;
+        super::write_atomically(path, |to| {
+            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
+        })
+    }
+
+    /// The Radiance HDR file's bytes (negative channels clamped to 0: RGBE has no sign).
+    fn radiance_bytes(&self) -> Result<Vec<u8>> {
         let pixels: Vec<image::Rgb<f32>> = self
             .pixels
             .iter()
             .map(|c| image::Rgb(c.to_f32().map(|v| v.max(0.0))))
             .collect();
         let mut bytes = Vec::new();
-        image::codecs::hdr::HdrEncoder::new(&mut bytes)
-            .encode(&pixels, self.width, self.height)
-            .with_context(|| format!("encoding {}", path.display()))?;
-        super::write_atomically(path, |to| {
-            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
-        })
+        image::codecs::hdr::HdrEncoder::new(&mut bytes).encode(&pixels, self.width, self.height)?;
+        Ok(bytes)
     }
 
     /// Reads a linear image of at most [`MAX_FILE_BYTES`](crate::scene::MAX_FILE_BYTES), OpenEXR (its
@@ -274,6 +280,45 @@ mod tests {
             "{error}"
         );
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Damaged Radiance files (bytes changed, cut short, headers claiming huge sizes) are errors or
+    /// images of the size they claim, never a panic or an allocation past [`MAX_PIXELS`]; the fuzz
+    /// target `radiance` explores further.
+    #[test]
+    fn damaged_radiance_files_are_errors_not_panics() {
+        use rand::{Rng, SeedableRng};
+        let mut img = Image::new(40, 9);
+        for (i, p) in img.pixels.iter_mut().enumerate() {
+            *p = Rgb::new(i as f64, 0.5, (i % 7) as f64 * 1e-3);
+        }
+        let good = img.radiance_bytes().unwrap();
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        for case in 0..3000 {
+            let mut bytes = good.clone();
+            match case % 3 {
+                0 => {
+                    for _ in 0..rng.random_range(1..8) {
+                        let at = rng.random_range(0..bytes.len());
+                        bytes[at] = rng.random();
+                    }
+                }
+                1 => bytes.truncate(rng.random_range(0..bytes.len())),
+                _ => {
+                    let header = format!(
+                        "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {} +X {}\n",
+                        rng.random_range(0..1u64 << 20),
+                        rng.random_range(0..1u64 << 20)
+                    );
+                    bytes = header.into_bytes();
+                    bytes.extend((0..rng.random_range(0..64)).map(|_| rng.random::<u8>()));
+                }
+            }
+            if let Ok(image) = Image::from_radiance_bytes(&bytes) {
+                assert_eq!(image.pixels.len(), image.width * image.height);
+                assert!(image.pixels.len() <= MAX_PIXELS);
+            }
+        }
     }
 
     /// exr compresses tiles on its own threads; stored in the order they finish, the same pixels
