@@ -1,6 +1,9 @@
 //! glTF 2.0 reader against small files built here: JSON with data-URI and file buffers, and a GLB
 //! assembled by hand.
 
+#[allow(dead_code)] // each test file uses part of the shared module
+mod common;
+use common::{png, srgb_to_linear};
 use radiosity::geometry::{DVec3, Shape};
 use radiosity::scene::{self, LoadOptions, Scene, SceneError};
 use serde_json::{json, Value};
@@ -107,28 +110,6 @@ fn close(a: f64, b: f64) -> bool {
 
 fn close_vec(a: DVec3, b: DVec3) -> bool {
     (a - b).length() <= 1e-6 * (1.0 + b.length())
-}
-
-/// A 2×2 RGB PNG.
-fn png(pixels: [[u8; 3]; 4]) -> Vec<u8> {
-    let image = image::RgbImage::from_fn(2, 2, |x, y| image::Rgb(pixels[(2 * y + x) as usize]));
-    let mut bytes = Vec::new();
-    image
-        .write_to(
-            &mut std::io::Cursor::new(&mut bytes),
-            image::ImageFormat::Png,
-        )
-        .unwrap();
-    bytes
-}
-
-fn srgb_to_linear(v: u8) -> f64 {
-    let c = v as f64 / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 const TEXTURE: [[u8; 3]; 4] = [[255, 128, 0], [0, 128, 255], [255, 255, 255], [0, 0, 0]];

@@ -2,6 +2,7 @@
 
 #[allow(dead_code)] // each test file uses part of the shared module
 mod common;
+use common::{png, srgb_to_linear};
 use proptest::prelude::*;
 use radiosity::geometry::DVec3;
 use radiosity::scene::{self, cornell, LoadOptions, Scene, SceneError};
@@ -387,6 +388,75 @@ const CUBE_OBJ: &str = "mtllib box.mtl\n\
 v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\n\
 o floor\nusemtl white\nf 1 2 3 4\n\
 o ell\nusemtl lamp\nf 2 5 6 7 4 3\n";
+
+/// `map_Kd` multiplies `Kd` by its texture's mean linear colour (a texture without `Kd` is the colour
+/// itself); a texture that cannot be read leaves `Kd` alone with a warning naming it; `Ks` and `d`
+/// are named as not simulated; a texture read is one of the scene's sources (no output may replace it).
+#[test]
+fn obj_textures_enter_as_their_mean_colour() {
+    let texels = [[255, 128, 0], [0, 128, 255], [255, 255, 255], [0, 0, 0]];
+    let mean = |channel: usize| {
+        texels
+            .iter()
+            .map(|t| srgb_to_linear(t[channel]))
+            .sum::<f64>()
+            / 4.0
+    };
+    let mtl = "newmtl white\nKd 0.5 0.4 0.3\nmap_Kd -bm 1 tex/wood.png\nKs 0.5 0.5 0.5\n\
+               newmtl lamp\nmap_Kd tex/wood.png\nKe 1 1 1\nd 0.5\n";
+    let dir = temp_dir(&[("box.obj", CUBE_OBJ), ("box.mtl", mtl)]);
+    std::fs::create_dir_all(dir.join("tex")).unwrap();
+    std::fs::write(dir.join("tex/wood.png"), png(texels)).unwrap();
+    let scene = scene::load(&dir.join("box.obj"), &LoadOptions::default()).unwrap();
+    let white = scene.materials.iter().find(|m| m.name == "white").unwrap();
+    let expected = [0.5 * mean(0), 0.4 * mean(1), 0.3 * mean(2)];
+    for (got, want) in white.reflectance.to_array().iter().zip(expected) {
+        // MTL numbers are read as f32.
+        assert!(
+            (got - want).abs() < 1e-7,
+            "{:?} against {expected:?}",
+            white.reflectance
+        );
+    }
+    let lamp = scene.materials.iter().find(|m| m.name == "lamp").unwrap();
+    assert!(
+        (lamp.reflectance.g - mean(1)).abs() < 1e-12,
+        "{:?}",
+        lamp.reflectance
+    );
+    let warned = |what: &str| scene.warnings.iter().any(|w| w.message.contains(what));
+    assert!(
+        warned("'white': Ks (specular reflection) ignored"),
+        "{:?}",
+        scene.warnings
+    );
+    assert!(
+        warned("'lamp': d/Tr (transparency) ignored"),
+        "{:?}",
+        scene.warnings
+    );
+    assert!(
+        scene.sources.iter().any(|s| s.ends_with("tex/wood.png")),
+        "{:?}",
+        scene.sources
+    );
+    // Without the image: Kd alone, and a warning naming the texture.
+    std::fs::remove_file(dir.join("tex/wood.png")).unwrap();
+    let scene = scene::load(&dir.join("box.obj"), &LoadOptions::default()).unwrap();
+    let white = scene.materials.iter().find(|m| m.name == "white").unwrap();
+    assert_eq!(
+        white.reflectance.to_array(),
+        [0.5, 0.4f32 as f64, 0.3f32 as f64]
+    );
+    assert!(
+        scene.warnings.iter().any(|w| w
+            .message
+            .contains("map_Kd tex/wood.png not found: Kd alone")),
+        "{:?}",
+        scene.warnings
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
 
 #[test]
 fn obj_with_mtl() {

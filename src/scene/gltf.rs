@@ -9,8 +9,8 @@
 //!   warning counting them. Skins, morph targets and instancing extensions are not applied.
 //! - **Materials**: reflectance ρ = `baseColorFactor` (rgb) × the mean colour of the base colour
 //!   texture when there is one (embedded in a buffer view, a data URI or a file beside the glTF; PNG is
-//!   decoded, other formats give a warning and the factor alone). Texture coordinates and transforms
-//!   are ignored: the mean is over the whole image. Reflectance is clamped below 1 with a warning.
+//!   decoded, other formats give a warning and the factor alone; [`super::texture`]). Texture
+//!   coordinates and transforms are ignored: the mean is over the whole image. Reflectance is clamped below 1 with a warning.
 //!   Metallic-roughness, transmission and alpha are ignored: every surface is Lambertian.
 //!   Emission L_e = `emissiveFactor` × `KHR_materials_emissive_strength` (1 without it);
 //!   `emissiveTexture` is ignored with a warning. `doubleSided` makes two-sided surfaces.
@@ -29,12 +29,14 @@
 //! [`MAX_LOADED_BYTES`], accessors are read with checked offsets (the crate's own readers can panic on
 //! bad strides or counts), the node graph is checked for shared children and cycles, node visits and
 //! instanced triangles are bounded (by [`MAX_NODE_VISITS`] and [`MAX_POLYGONS`]),
-//! and images larger than [`MAX_TEXTURE_SIDE`] pixels a side are not decoded.
+//! and images larger than [`MAX_TEXTURE_SIDE`](super::texture::MAX_TEXTURE_SIDE) pixels a side are
+//! not decoded.
 
 use super::polygonize::polygonize;
+use super::texture::mean_linear_colour;
 use super::{
     read_bounded, sanitise, CameraSpec, Diagnostic, LoadOptions, Material, Object, Polygon, Scene,
-    SceneError, MAX_FILE_BYTES, MAX_POLYGONS,
+    SceneError, DEFAULT_GREY, MAX_FILE_BYTES, MAX_POLYGONS, MAX_REFLECTANCE,
 };
 use crate::color::Rgb;
 use ::gltf::accessor::{DataType, Dimensions};
@@ -46,17 +48,12 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::rc::Rc;
 
-/// Reflectance of primitives without a material.
-const DEFAULT_GREY: f64 = 0.5;
-const MAX_REFLECTANCE: f64 = 0.999;
 /// Most bytes of buffers and images loaded for one scene, in all.
 pub const MAX_LOADED_BYTES: u64 = 4 * MAX_FILE_BYTES;
 /// Most node visits while walking the scene graph (a scene may list a big subtree many times).
 pub const MAX_NODE_VISITS: usize = 1_000_000;
 /// Most elements of one accessor.
 const MAX_ACCESSOR_ELEMENTS: usize = 1 << 26;
-/// Widest and tallest texture decoded (pixels).
-pub const MAX_TEXTURE_SIDE: u32 = 8192;
 /// Longest URI echoed in a message.
 const MAX_SHOWN_URI: usize = 80;
 
@@ -261,45 +258,6 @@ fn percent_decode(uri: &str) -> Result<String, String> {
         }
     }
     String::from_utf8(out).map_err(|_| "URI is not UTF-8 after %-decoding".to_string())
-}
-
-/// Mean colour of an sRGB-encoded image, linearised (alpha ignored).
-fn mean_linear_colour(bytes: &[u8]) -> Result<Rgb, String> {
-    use image::GenericImageView;
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| e.to_string())?;
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_TEXTURE_SIDE);
-    limits.max_image_height = Some(MAX_TEXTURE_SIDE);
-    limits.max_alloc = Some(MAX_LOADED_BYTES);
-    reader.limits(limits);
-    if reader.format().is_none() {
-        return Err("unknown image format".into());
-    }
-    let image = reader.decode().map_err(|e| e.to_string())?;
-    let (w, h) = image.dimensions();
-    if w == 0 || h == 0 {
-        return Err("empty image".into());
-    }
-    let table: Vec<f64> = (0..=255u32)
-        .map(|v| {
-            let c = v as f64 / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
-        .collect();
-    let mut sum = [0.0f64; 3];
-    for (_, _, pixel) in image.pixels() {
-        for (s, &v) in sum.iter_mut().zip(&pixel.0[..3]) {
-            *s += table[v as usize];
-        }
-    }
-    let n = w as f64 * h as f64;
-    Ok(Rgb::new(sum[0] / n, sum[1] / n, sum[2] / n))
 }
 
 /// Triangles of one primitive in mesh coordinates.
@@ -820,7 +778,7 @@ impl Reader<'_> {
             }
             ::gltf::image::Source::Uri { uri, .. } => self.resolve_uri(uri).map(Cow::Owned),
         };
-        let mean = bytes.and_then(|b| mean_linear_colour(&b));
+        let mean = bytes.and_then(|b| mean_linear_colour(&b, MAX_LOADED_BYTES));
         let mean = match mean {
             Ok(mean) if mean.is_finite() => Some(mean),
             Ok(_) => None,

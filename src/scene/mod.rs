@@ -15,6 +15,7 @@ pub mod luminaire;
 pub mod mgf;
 pub mod obj;
 pub mod polygonize;
+pub mod texture;
 
 use crate::color::Rgb;
 use crate::geometry::{Aabb, DVec3, Shape};
@@ -175,6 +176,12 @@ pub fn sanitise(text: &str, max: usize) -> String {
     }
     out
 }
+
+/// Reflectance of surfaces without a usable material (OBJ faces, glTF primitives).
+pub const DEFAULT_GREY: f64 = 0.5;
+/// Largest reflectance kept (the readers clamp above it with a warning): a reflectance of 1 or more
+/// makes a closed room's light grow without bound.
+pub const MAX_REFLECTANCE: f64 = 0.999;
 
 /// Most polygons one scene may have (a few hundred bytes each before meshing).
 pub const MAX_POLYGONS: usize = 1_000_000;

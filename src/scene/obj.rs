@@ -1,5 +1,8 @@
-//! OBJ/MTL reader through `tobj`: `Kd` is the diffuse reflectance, `Ke` the emitted radiance in
-//! W/(m² sr); faces are one-sided, front by counter-clockwise winding. Polygons are kept (no `tobj`
+//! OBJ/MTL reader through `tobj`: `Kd` is the diffuse reflectance, times the mean colour of its
+//! `map_Kd` texture when there is one ([`super::texture`]; named relative to the OBJ file, a texture
+//! that cannot be read leaves `Kd` alone, with a warning), `Ke` the emitted radiance in W/(m² sr).
+//! What MTL says beyond that (`Ks`, `d`/`Tr`) is not simulated and is named in a warning. Faces are
+//! one-sided, front by counter-clockwise winding. Polygons are kept (no `tobj`
 //! triangulation) and split by [`polygonize`](super::polygonize). Objects are named after OBJ `o`/`g`.
 //!
 //! `tobj` reports errors without line numbers (and panics on short MTL colours), so the OBJ and its MTL
@@ -8,17 +11,18 @@
 //! the size limit of [`read_bounded`](super::read_bounded).
 
 use super::polygonize::{polygonize, PolygonError};
-use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError};
+use super::texture::mean_linear_colour;
+use super::{
+    Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError, DEFAULT_GREY,
+    MAX_REFLECTANCE,
+};
 use crate::color::Rgb;
 use glam::DVec3;
 use std::collections::HashMap;
 use std::path::Path;
 
-/// Reflectance of faces without a usable material.
-const DEFAULT_GREY: f64 = 0.5;
-const MAX_REFLECTANCE: f64 = 0.999;
-
-/// Reads an OBJ file and its MTL libraries (named relative to it; an absent one gives a warning).
+/// Reads an OBJ file, its MTL libraries and their `map_Kd` textures (named relative to it; an absent
+/// one gives a warning).
 pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     let text = super::read_bounded(path).map_err(|e| SceneError::new(path, 0, e))?;
     let mut scene = parse_bytes(&text, path, |mtl_path| {
@@ -33,8 +37,9 @@ pub fn load(path: &Path, _options: &LoadOptions) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
-/// Reads OBJ text held in memory: `path` names it in messages and anchors `mtllib` names, whose bytes
-/// `library` returns (`Ok(None)`: absent, the faces get a default grey with a warning).
+/// Reads OBJ text held in memory: `path` names it in messages and anchors `mtllib` and `map_Kd`
+/// names, whose bytes `library` returns (`Ok(None)`: absent; a library's faces then get a default
+/// grey, a texture's material its `Kd` alone, with a warning).
 pub fn parse_bytes(
     text: &[u8],
     path: &Path,
@@ -114,10 +119,50 @@ pub fn parse_bytes(
         }
     };
     // Scene materials: one per MTL material, plus the default grey on demand.
+    let mut textures = Textures::default();
     for m in &mtl {
-        let kd = m.diffuse.map_or(Rgb::splat(DEFAULT_GREY), |d| {
-            Rgb::new(d[0] as f64, d[1] as f64, d[2] as f64)
+        let texture = m.diffuse_texture.as_deref().and_then(|name| {
+            textures
+                .mean(path, name, &library, &mut scene.sources)
+                .map_or_else(
+                    |e| {
+                        warn(
+                            &mut scene,
+                            0,
+                            format!("material '{}': map_Kd {e}: Kd alone", m.name),
+                        );
+                        None
+                    },
+                    Some,
+                )
         });
+        // MTL's Kd multiplies its texture; a texture without Kd is the colour itself.
+        let kd = match (m.diffuse, texture) {
+            (Some(d), _) => Rgb::new(d[0] as f64, d[1] as f64, d[2] as f64),
+            (None, Some(_)) => Rgb::splat(1.0),
+            (None, None) => Rgb::splat(DEFAULT_GREY),
+        } * texture.unwrap_or(Rgb::splat(1.0));
+        if m.specular.is_some_and(|k| k.iter().any(|&c| c > 0.0)) {
+            warn(
+                &mut scene,
+                0,
+                format!(
+                    "material '{}': Ks (specular reflection) ignored, only diffuse reflection and \
+                     emission are simulated",
+                    m.name
+                ),
+            );
+        }
+        if m.dissolve.is_some_and(|d| d < 1.0) {
+            warn(
+                &mut scene,
+                0,
+                format!(
+                    "material '{}': d/Tr (transparency) ignored, the surface is opaque",
+                    m.name
+                ),
+            );
+        }
         let reflectance = kd.map(|c| c.clamp(0.0, MAX_REFLECTANCE));
         if reflectance != kd {
             warn(
@@ -361,4 +406,55 @@ fn check(path: &Path, bytes: &[u8]) -> Result<Vec<usize>, SceneError> {
         }
     }
     Ok(faces)
+}
+
+/// The `map_Kd` textures read for one OBJ file: each file's mean colour once, and the bytes read in
+/// all bounded by [`MAX_LOADED_BYTES`](super::gltf::MAX_LOADED_BYTES), as for a glTF's images.
+#[derive(Default)]
+struct Textures {
+    means: HashMap<std::path::PathBuf, Result<Rgb, String>>,
+    loaded_bytes: u64,
+}
+
+impl Textures {
+    /// The mean linear colour of the texture `name` (its last word: `map_Kd` options such as `-bm 1`
+    /// come first), read through `library` beside `obj`; the reason when it cannot be used.
+    fn mean(
+        &mut self,
+        obj: &Path,
+        name: &str,
+        library: &impl Fn(&Path) -> Result<Option<Vec<u8>>, String>,
+        sources: &mut Vec<std::path::PathBuf>,
+    ) -> Result<Rgb, String> {
+        let file = name.split_whitespace().last().unwrap_or(name);
+        let texture = obj.parent().map_or(file.into(), |dir| dir.join(file));
+        if let Some(mean) = self.means.get(&texture) {
+            return mean.clone();
+        }
+        let shown = super::sanitise(file, 80);
+        let mean = match library(&texture) {
+            Ok(None) => Err(format!("{shown} not found")),
+            Err(e) => Err(format!("{shown}: {e}")),
+            Ok(Some(bytes)) => {
+                sources.push(texture.clone());
+                self.loaded_bytes += bytes.len() as u64;
+                if self.loaded_bytes > super::gltf::MAX_LOADED_BYTES {
+                    Err(format!(
+                        "{shown}: textures of more than {} MiB in all are not read",
+                        super::gltf::MAX_LOADED_BYTES >> 20
+                    ))
+                } else {
+                    mean_linear_colour(&bytes, super::gltf::MAX_LOADED_BYTES)
+                        .map_err(|e| format!("{shown} not used ({e})"))
+                        .and_then(|mean| {
+                            mean.is_finite()
+                                .then_some(mean)
+                                .ok_or_else(|| format!("{shown}: no finite mean colour"))
+                        })
+                }
+            }
+        };
+        self.means.insert(texture, mean.clone());
+        mean
+    }
 }

@@ -182,3 +182,26 @@ pub fn probe_with_reference(
     )
     .expect("points on surfaces")
 }
+
+/// A 2×2 RGB PNG.
+pub fn png(pixels: [[u8; 3]; 4]) -> Vec<u8> {
+    let image = image::RgbImage::from_fn(2, 2, |x, y| image::Rgb(pixels[(2 * y + x) as usize]));
+    let mut bytes = Vec::new();
+    image
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+    bytes
+}
+
+/// The linear value of an 8-bit sRGB-encoded channel.
+pub fn srgb_to_linear(v: u8) -> f64 {
+    let c = v as f64 / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}

@@ -29,15 +29,16 @@ use self::color::Xyz;
 use self::transform::XfSpec;
 use super::luminaire::MAX_LUMINAIRES;
 use super::polygonize::{polygonize, PolygonError};
-use super::{Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError, MAX_POLYGONS};
+use super::{
+    Diagnostic, LoadOptions, Material, Object, Polygon, Scene, SceneError, MAX_POLYGONS,
+    MAX_REFLECTANCE,
+};
 use glam::{DAffine3, DVec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
 pub use crate::color::WHITE_EFFICACY;
-/// Largest reflectance channel; larger values are clamped with a warning.
-const MAX_REFLECTANCE: f64 = 0.999;
 /// Deepest include nesting (guards against recursive includes).
 const MAX_INCLUDE_DEPTH: usize = 32;
 /// Most entities one load may run, counting array replays (guards against runaway nested arrays).
