@@ -15,6 +15,13 @@
 //!   Emission L_e = `emissiveFactor` × `KHR_materials_emissive_strength` (1 without it);
 //!   `emissiveTexture` is ignored with a warning. `doubleSided` makes two-sided surfaces.
 //!   Primitives without a material get a grey of reflectance 0.5 (as OBJ faces without one do).
+//! - **Lights** (`KHR_lights_punctual`): point and spot lights become point luminaires
+//!   ([`super::luminaire`], as IES luminaires are) at their node's origin, aimed down its −Z (its
+//!   scale ignored, as the extension says); the intensity is candela, as the extension defines it, so
+//!   a light of `intensity` I and `color` c sends c × I / 179 W/sr (the luminaires' white efficacy).
+//!   A spot light keeps I within its inner cone, none beyond its outer cone, and in between the
+//!   extension's recommended smooth falloff (see [`punctual_photometry`]). `range` is not applied
+//!   (the inverse-square law is physical). Directional lights are left out with a warning.
 //! - **Camera**: the first perspective camera reached through the node graph (depth first, children
 //!   in order) becomes the scene camera; it looks down −Z of its node with +Y up, and `yfov` (radians)
 //!   becomes the vertical field of view in degrees. The aspect ratio is not kept.
@@ -22,7 +29,10 @@
 //! Units: glTF colours are linear, so factors are used as they are; texels of a base colour texture
 //! are sRGB-encoded and are linearised before averaging. Emission is taken as emitted *radiance* in the
 //! scene's units, W/(m² sr), as MGF and OBJ emission are here (glTF's own "nits" are cd/m², a
-//! photometric radiance: the numbers are used unconverted). Lengths are glTF metres, unscaled.
+//! photometric radiance: the numbers are used unconverted). Punctual lights are the one place glTF
+//! fixes a unit (candela), so they alone are converted: a scene lit by them reads in physical units
+//! (`grid` in lux), and in a file that mixes them with emissive materials the emission counts 179
+//! times what a photometric reading of it would. Lengths are glTF metres, unscaled.
 //!
 //! Safety: the file and every external buffer or image is read with the size limit of
 //! [`read_bounded`], all loaded buffers and images together are bounded by
@@ -32,6 +42,8 @@
 //! and images larger than [`MAX_TEXTURE_SIDE`](super::texture::MAX_TEXTURE_SIDE) pixels a side are
 //! not decoded.
 
+use super::ies::{Opening, Photometry, Symmetry};
+use super::luminaire::Luminaire;
 use super::polygonize::polygonize;
 use super::texture::mean_linear_colour;
 use super::{
@@ -45,7 +57,7 @@ use ::gltf::mesh::Mode;
 use glam::{DMat4, DQuat, DVec3};
 use std::borrow::Cow;
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
 /// Most bytes of buffers and images loaded for one scene, in all.
@@ -260,6 +272,60 @@ fn percent_decode(uri: &str) -> Result<String, String> {
     String::from_utf8(out).map_err(|_| "URI is not UTF-8 after %-decoding".to_string())
 }
 
+/// Vertical angles (degrees) between a spot light's inner and outer cones in its table: its falloff
+/// is smooth, and the table is interpolated linearly between them.
+const SPOT_FALLOFF_STEPS: usize = 64;
+
+/// The candela table of a punctual light: `candela` in every direction for a point light; for a spot
+/// light with cones `(inner, outer)` (radians from its axis, the nadir of the table), `candela` within
+/// the inner cone, none outside the outer one, and in between `candela` times the square of
+/// `(cos θ − cos outer) / (cos inner − cos outer)`, the falloff `KHR_lights_punctual` recommends.
+fn punctual_photometry(
+    path: &Path,
+    name: &str,
+    candela: f64,
+    cones: Option<(f64, f64)>,
+) -> Photometry {
+    let (vertical, values): (Vec<f64>, Vec<f64>) = match cones {
+        None => (vec![0.0, 180.0], vec![candela, candela]),
+        Some((inner, outer)) => {
+            let mut table = vec![(0.0, candela)];
+            let width = (outer - inner).max(1e-6);
+            for k in 0..=SPOT_FALLOFF_STEPS {
+                let theta = inner + width * k as f64 / SPOT_FALLOFF_STEPS as f64;
+                let t = ((theta.cos() - (inner + width).cos())
+                    / (inner.cos() - (inner + width).cos()))
+                .clamp(0.0, 1.0);
+                table.push((theta.to_degrees(), candela * t * t));
+            }
+            table.push((180.0, 0.0));
+            table.dedup_by(|b, a| b.0 <= a.0);
+            table.into_iter().unzip()
+        }
+    };
+    Photometry {
+        file: PathBuf::from(format!("{} {name}", path.display())),
+        version: "glTF KHR_lights_punctual".into(),
+        keywords: Vec::new(),
+        lamps: 1.0,
+        lumens_per_lamp: None,
+        multiplier: 1.0,
+        flux_precision: 0.0,
+        input_watts: 0.0,
+        opening: Opening {
+            length: 0.0,
+            width: 0.0,
+            height: 0.0,
+            round: false,
+        },
+        vertical,
+        horizontal: vec![0.0],
+        symmetry: Symmetry::Rotational,
+        candela: values,
+        warnings: Vec::new(),
+    }
+}
+
 /// Triangles of one primitive in mesh coordinates.
 struct PrimitiveTriangles {
     material: Option<usize>,
@@ -414,6 +480,9 @@ impl Reader<'_> {
             if let Some(mesh) = node.mesh() {
                 self.instance(&node, mesh, &world)?;
             }
+            if let Some(light) = node.light() {
+                self.place_light(&node, &light, &world);
+            }
             let children: Vec<::gltf::Node> = node.children().collect();
             stack.extend(children.into_iter().rev().map(|c| (c, world)));
         }
@@ -445,6 +514,71 @@ impl Reader<'_> {
                 node.index()
             ));
         }
+    }
+
+    /// Places a `KHR_lights_punctual` point or spot light as a point luminaire (see the module
+    /// documentation); a directional light, or one whose numbers or node cannot place it, is named
+    /// in a warning and left out.
+    fn place_light(
+        &mut self,
+        node: &::gltf::Node,
+        light: &::gltf::khr_lights_punctual::Light,
+        world: &DMat4,
+    ) {
+        use ::gltf::khr_lights_punctual::Kind;
+        let name = light.name().map_or_else(
+            || format!("light {}", light.index()),
+            |n| format!("light '{n}'"),
+        );
+        let name = sanitise(&name, MAX_SHOWN_URI);
+        let c = light.color();
+        let colour = Rgb::new(c[0] as f64, c[1] as f64, c[2] as f64);
+        let candela = light.intensity() as f64;
+        let position = world.transform_point3(DVec3::ZERO);
+        // Scale does not shape the light: the frame is the node's rotation alone.
+        let axes =
+            [DVec3::X, DVec3::Y, DVec3::Z].map(|a| world.transform_vector3(a).normalize_or_zero());
+        let cones = match light.kind() {
+            Kind::Directional => {
+                self.warn(format!(
+                    "{name} of node {} ignored: a directional light (at infinite distance) is not \
+                     simulated; an emitting polygon or an IES luminaire can stand for the sun",
+                    node.index()
+                ));
+                return;
+            }
+            Kind::Point => None,
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => Some((inner_cone_angle as f64, outer_cone_angle as f64)),
+        };
+        let usable = colour.is_finite()
+            && colour.min_channel() >= 0.0
+            && candela.is_finite()
+            && candela >= 0.0
+            && position.is_finite()
+            && axes.iter().all(|a| *a != DVec3::ZERO)
+            && cones.is_none_or(|(inner, outer)| {
+                (0.0..=std::f64::consts::FRAC_PI_2).contains(&outer)
+                    && (0.0..=outer).contains(&inner)
+            });
+        if !usable {
+            self.warn(format!(
+                "{name} of node {} ignored: negative or non-finite colour or intensity, cone angles \
+                 outside 0 <= inner <= outer <= π/2, or a degenerate transform",
+                node.index()
+            ));
+            return;
+        }
+        let photometry = punctual_photometry(self.path, &name, candela, cones);
+        let transform = glam::DAffine3::from_cols(axes[0], axes[1], axes[2], position);
+        self.scene.add_luminaire(Luminaire::place(
+            std::sync::Arc::new(photometry),
+            transform,
+            colour,
+            1.0,
+        ));
     }
 
     /// Adds the triangles of `mesh` placed by `world` as one object.

@@ -372,18 +372,10 @@ impl Photometry {
     /// `phi` (degrees), bilinear in the table after folding φ by the symmetry; zero outside the vertical
     /// range.
     pub fn intensity(&self, theta: f64, phi: f64) -> f64 {
-        let nv = self.vertical.len();
         let Some((v, tv)) = bracket(&self.vertical, theta) else {
             return 0.0;
         };
-        let column = |h: usize| {
-            let c = &self.candela[h * nv..(h + 1) * nv];
-            if tv == 0.0 {
-                c[v]
-            } else {
-                c[v] * (1.0 - tv) + c[v + 1] * tv
-            }
-        };
+        let column = |h: usize| self.column_at(h, v, tv);
         if self.symmetry == Symmetry::Rotational {
             return column(0);
         }
@@ -403,6 +395,51 @@ impl Photometry {
                 column(last) * (1.0 - t) + column(0) * t
             }
         }
+    }
+
+    /// Column `h` of the table interpolated at `tv` between vertical angles `v` and `v + 1`.
+    fn column_at(&self, h: usize, v: usize, tv: f64) -> f64 {
+        let nv = self.vertical.len();
+        let c = &self.candela[h * nv..(h + 1) * nv];
+        if tv == 0.0 {
+            c[v]
+        } else {
+            c[v] * (1.0 - tv) + c[v + 1] * tv
+        }
+    }
+
+    /// The least and the greatest intensity (cd) toward any direction whose vertical angle lies in
+    /// `[theta_lo, theta_hi]` (degrees), whatever its horizontal angle: exact bounds of the bilinear
+    /// interpolant (linear in φ between columns, so its extremes over φ are the columns'; linear in θ
+    /// between table angles, so a column's are at the range's ends or its table angles within), with
+    /// the zero outside the table's vertical range when the range reaches past it.
+    pub fn intensity_bounds(&self, theta_lo: f64, theta_hi: f64) -> (f64, f64) {
+        let nv = self.vertical.len();
+        let (first, last) = (self.vertical[0], self.vertical[nv - 1]);
+        let (mut low, mut high) = if theta_lo < first || theta_hi > last {
+            (0.0, 0.0)
+        } else {
+            (f64::INFINITY, f64::NEG_INFINITY)
+        };
+        let (lo, hi) = (theta_lo.max(first), theta_hi.min(last));
+        if lo > hi {
+            return (0.0, 0.0);
+        }
+        let inside = self
+            .vertical
+            .iter()
+            .enumerate()
+            .filter(|&(_, &a)| lo < a && a < hi);
+        for h in 0..self.candela.len() / nv {
+            let ends = [lo, hi].into_iter().filter_map(|theta| {
+                bracket(&self.vertical, theta).map(|(v, tv)| self.column_at(h, v, tv))
+            });
+            for value in ends.chain(inside.clone().map(|(v, _)| self.candela[h * nv + v])) {
+                low = low.min(value);
+                high = high.max(value);
+            }
+        }
+        (low, high)
     }
 
     /// Maps φ in [0, 360) into the range the table covers.

@@ -8,7 +8,9 @@
 //! Refinement: a leaf whose projected direct term misses its own node values (and its centroid's) by more than the threshold
 //! is split, max_k |E(x_k)/π − Ê(x_k)/π| × A against the power oracle's threshold (radiance × area), or
 //! that residual against the leaf's error-control threshold (algorithm 6.1), until the minimum area or
-//! the element budget stops it. The receiver's reflectance is left out (the leaf is judged as if white)
+//! the element budget stops it; a leaf over which a luminaire's intensity changes strongly is split
+//! until it subtends at most 10° from it, whatever its residual ([`beam_unresolved`]: a narrow beam
+//! can fall between the nodes). The receiver's reflectance is left out (the leaf is judged as if white)
 //! so that illuminance comes out accurate on black surfaces too. Elements never merge and luminaires do not move, so a leaf's
 //! coefficients are computed once and kept across passes.
 
@@ -80,7 +82,7 @@ impl FirstGather {
             // white: illuminance is wanted accurate on every surface, black ones included.
             for id in hierarchy.leaves() {
                 let e = hierarchy.element(id);
-                let error = self.residuals[id as usize];
+                let error = self.residuals[id as usize].max(missed_beam(hierarchy, id, degree));
                 let too_coarse = if radiance_thresholds {
                     error > e.threshold
                 } else {
@@ -113,6 +115,95 @@ impl FirstGather {
     }
 }
 
+/// Largest angle (degrees) a leaf may subtend from a luminaire whose intensity changes over it (see
+/// [`beam_unresolved`]).
+const BEAM_ANGLE: f64 = 10.0;
+
+/// A bound on the direct radiance (E/π, largest channel) that a luminaire's beam may put on the leaf
+/// between its nodes, 0 where none can. The residual test judges the light only at the nodes and
+/// the centroid: a spot 2 m over a 20 m floor of two triangles lit none of them, and the floor
+/// stayed dark. The directions from the luminaire to the leaf lie in a cone: toward its bounding
+/// sphere, or, when the luminaire is inside that sphere, toward its plane (around the normal, out to
+/// its farthest corner). Where the leaf faces the luminaire, the cone is wider than [`BEAM_ANGLE`]
+/// and the brightest intensity toward any node is under half the brightest in the cone (a spot
+/// light's edge, a narrow beam's peak), the bound is that brightest less the nodes', at the cone's
+/// nearest distance (the sphere's, or the plane's), with cos θ ≤ 1. A leaf that subtends at most
+/// 10° has nodes 5° apart or closer, so only beams narrower than that can still be missed; where the
+/// nodes see the cone's brightest (an isotropic source, a broad distribution) the residual alone
+/// decides.
+fn missed_beam(hierarchy: &Hierarchy, id: ElementId, degree: usize) -> f64 {
+    let shape = hierarchy.element(id).shape();
+    let normal = hierarchy.patch_of(id).normal;
+    let centre = shape.centroid();
+    let corners = shape.vertices();
+    let radius = corners
+        .iter()
+        .map(|&v| v.distance(centre))
+        .fold(0.0, f64::max);
+    let mut nodes = None;
+    hierarchy
+        .luminaires
+        .iter()
+        .map(|l| {
+            let height = normal.dot(l.position - centre);
+            if height <= 0.0 {
+                return 0.0;
+            }
+            let to = centre - l.position;
+            let distance = to.length();
+            let (axis, half, nearest) = if distance > radius {
+                (
+                    to,
+                    (radius / distance).asin().to_degrees(),
+                    distance - radius,
+                )
+            } else {
+                let farthest = corners
+                    .iter()
+                    .map(|&v| (v - l.position).reject_from_normalized(normal).length())
+                    .fold(0.0, f64::max);
+                (-normal, farthest.atan2(height).to_degrees(), height)
+            };
+            if 2.0 * half <= BEAM_ANGLE {
+                return 0.0;
+            }
+            let (theta, _) = l.angles(axis);
+            let (_, brightest) = l.photometry.intensity_bounds(theta - half, theta + half);
+            let brightest = brightest * l.scale.max_channel();
+            let seen = nodes
+                .get_or_insert_with(|| judged_nodes(shape, degree))
+                .iter()
+                .map(|node: &Node| l.intensity(node.point - l.position).max_channel())
+                .fold(0.0, f64::max);
+            if seen >= 0.5 * brightest {
+                return 0.0;
+            }
+            (brightest - seen) / (nearest * nearest) / PI
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The points at which a leaf's direct light is computed and judged: its cubature nodes, and its
+/// centroid with weight 0 (judged, not integrated): the nodes of a symmetric rule can all see the
+/// same value of a peak centred on the leaf (a luminaire straight above its middle), which a
+/// constant then fits exactly at every node.
+fn judged_nodes(shape: &crate::geometry::Shape, degree: usize) -> Vec<Node> {
+    let centre_uv = shape
+        .parameter_corners()
+        .iter()
+        .copied()
+        .sum::<crate::geometry::DVec2>()
+        / shape.vertex_count() as f64;
+    nodes_on(shape, rule(shape.domain(), degree))
+        .into_iter()
+        .chain(std::iter::once(Node {
+            point: shape.point_at(centre_uv),
+            uv: centre_uv,
+            weight: 0.0,
+        }))
+        .collect()
+}
+
 /// A leaf's direct coefficients, its projection residual and the rays cast.
 fn leaf_direct(
     hierarchy: &Hierarchy,
@@ -126,26 +217,7 @@ fn leaf_direct(
     let shape = e.shape();
     let patch = hierarchy.patch_of(id);
     let (normal, polygon) = (patch.normal, patch.polygon);
-    let nodes = nodes_on(shape, rule(shape.domain(), degree));
-    // The centroid too (weight 0: judged, not integrated): the nodes of a symmetric rule can all see
-    // the same value of a peak centred on the leaf (a luminaire straight above its middle), which a
-    // constant then fits exactly at every node.
-    let centre_uv = shape
-        .parameter_corners()
-        .iter()
-        .copied()
-        .sum::<crate::geometry::DVec2>()
-        / shape.vertex_count() as f64;
-    let judged: Vec<Node> = nodes
-        .iter()
-        .copied()
-        .chain(std::iter::once(Node {
-            point: shape.point_at(centre_uv),
-            uv: centre_uv,
-            weight: 0.0,
-        }))
-        .collect();
-    let nodes = judged;
+    let nodes = judged_nodes(shape, degree);
     let phi = super::coupling::basis_values(basis, shape, &nodes);
     let mut rays = 0u64;
     let values: Vec<Rgb> = nodes
