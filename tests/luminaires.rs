@@ -1065,3 +1065,42 @@ fn directional_box() -> Arc<Photometry> {
     );
     Arc::new(parse(Path::new("box.ies"), &text).unwrap())
 }
+
+/// `intensity_bounds` holds every intensity toward the vertical range, whatever the horizontal
+/// angle, and is attained (the table's bilinear interpolant has its extremes at the range's ends or
+/// at table angles); a range reaching past the table's vertical angles includes the zero there.
+#[test]
+fn intensity_bounds_hold_and_are_attained() {
+    let table = directional_point_source();
+    for (lo, hi) in [
+        (0.0, 5.0),
+        (12.0, 37.0),
+        (25.0, 70.0),
+        (55.0, 80.0),
+        (-10.0, 15.0),
+        (80.0, 200.0),
+    ] {
+        let (low, high) = table.intensity_bounds(lo, hi);
+        let (mut seen_low, mut seen_high) = (f64::INFINITY, f64::NEG_INFINITY);
+        for i in 0..=200 {
+            let theta = lo + (hi - lo) * i as f64 / 200.0;
+            for j in 0..72 {
+                let v = if (0.0..=180.0).contains(&theta) {
+                    table.intensity(theta, 5.0 * j as f64)
+                } else {
+                    0.0
+                };
+                assert!(
+                    low - 1e-9 <= v && v <= high + 1e-9,
+                    "[{lo}, {hi}]: {v} outside [{low}, {high}]"
+                );
+                seen_low = seen_low.min(v);
+                seen_high = seen_high.max(v);
+            }
+        }
+        assert!(
+            (seen_low - low).abs() < 1e-9 && (seen_high - high).abs() < 1e-9,
+            "[{lo}, {hi}]: sampled [{seen_low}, {seen_high}] against [{low}, {high}]"
+        );
+    }
+}
