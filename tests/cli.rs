@@ -84,27 +84,27 @@ fn missing_files_and_bad_options_are_errors_not_panics() {
 fn render_writes_png_exr_models_and_stats() {
     let dir = temp_dir("render");
     let file = |name: &str| dir.join(name).to_str().unwrap().to_string();
-    let out = radiosity(&[
-        "render",
-        "-q",
-        "--width",
-        "48",
-        "--height",
-        "40",
-        "--eps",
-        "2e-3",
-        "--mesh",
-        "-o",
-        &file("c.png"),
-        "--hdr",
-        &file("c.exr"),
-        "--export",
-        &file("c.ply"),
-        "--export",
-        &file("c.glb"),
-        "--stats",
-        &file("s.json"),
-    ]);
+    let small = [
+        "render", "-q", "--width", "48", "--height", "40", "--eps", "2e-3", "--mesh",
+    ];
+    let out = radiosity(
+        &[
+            &small[..],
+            &[
+                "-o",
+                &file("c.png"),
+                "--hdr",
+                &file("c.exr"),
+                "--export",
+                &file("c.ply"),
+                "--export",
+                &file("c.glb"),
+                "--stats",
+                &file("s.json"),
+            ],
+        ]
+        .concat(),
+    );
     assert!(
         out.status.success(),
         "{}",
@@ -117,21 +117,7 @@ fn render_writes_png_exr_models_and_stats() {
     assert!(exr.pixels.iter().any(|p| p.luminance() > 0.0));
     // The same render as Radiance HDR: the same pixels within RGBE's half step (2^-8 of a pixel's
     // brightest channel).
-    let out = radiosity(&[
-        "render",
-        "-q",
-        "--width",
-        "48",
-        "--height",
-        "40",
-        "--eps",
-        "2e-3",
-        "--mesh",
-        "-o",
-        &file("d.png"),
-        "--hdr",
-        &file("d.hdr"),
-    ]);
+    let out = radiosity(&[&small[..], &["-o", &file("d.png"), "--hdr", &file("d.hdr")]].concat());
     assert!(
         out.status.success(),
         "{}",

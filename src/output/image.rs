@@ -32,12 +32,7 @@ impl Image {
 
     /// Writes linear radiance as 32-bit float OpenEXR.
     pub fn write_exr(&self, path: &Path) -> Result<()> {
-        let bytes = self
-            .exr_bytes()
-            .with_context(|| format!("encoding {}", path.display()))?;
-        super::write_atomically(path, |to| {
-            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
-        })
+        write_encoded(path, self.exr_bytes())
     }
 
     /// The OpenEXR file's bytes (RLE in 64² tiles, exr's default), encoded in memory: exr's `to_file`
@@ -76,12 +71,7 @@ impl Image {
 
     /// Writes linear radiance as a run-length encoded Radiance HDR (RGBE) file.
     pub fn write_radiance(&self, path: &Path) -> Result<()> {
-        let bytes = self
-            .radiance_bytes()
-            .with_context(|| format!("encoding {}", path.display()))?;
-        super::write_atomically(path, |to| {
-            std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
-        })
+        write_encoded(path, self.radiance_bytes())
     }
 
     /// The Radiance HDR file's bytes (negative channels clamped to 0: RGBE has no sign).
@@ -184,6 +174,15 @@ impl Image {
             .from_buffered(std::io::Cursor::new(bytes))?;
         Ok(image.layer_data.channel_data.pixels)
     }
+}
+
+/// Writes a file encoded in memory (so that an encoder never leaves a partial file behind), with
+/// the file's name in either error.
+fn write_encoded(path: &Path, bytes: Result<Vec<u8>>) -> Result<()> {
+    let bytes = bytes.with_context(|| format!("encoding {}", path.display()))?;
+    super::write_atomically(path, |to| {
+        std::fs::write(to, &bytes).with_context(|| format!("writing {}", path.display()))
+    })
 }
 
 /// An OpenEXR file's first four bytes.
