@@ -608,7 +608,7 @@ pub fn simulate_observed(
         // Goniometric luminaires light the leaves by the deterministic first gather; the Monte Carlo
         // iterations shoot that light onward with the emitters' (solvers::stochastic).
         let refine = deterministic_settings(settings, &hierarchy, &budget).refine;
-        crate::solvers::direct::FirstGather::default().refine_and_gather(
+        crate::solvers::direct::refine_and_gather(
             &mut hierarchy,
             visibility.as_ref(),
             &refine,

@@ -650,6 +650,10 @@ pub struct Hierarchy {
     /// Irradiance coefficients (divided by π, like gathered ones) from the luminaires, `basis size` per
     /// element, on leaves only; empty without luminaires ([`crate::solvers::direct`]).
     pub direct: Vec<Rgb>,
+    /// Per element, `max_k |E(x_k)/π − Ê(x_k)/π|` (largest channel) over the nodes of a leaf whose
+    /// direct coefficients were computed: their projection's error, part of the leaf's a-posteriori
+    /// estimate ([`crate::solvers::error_estimate`]); empty without luminaires.
+    pub direct_residual: Vec<f64>,
     /// The root of the cluster tree over the patch roots, when clustering is on
     /// ([`Hierarchy::add_clusters`]).
     pub root_cluster: Option<ElementId>,
@@ -679,6 +683,7 @@ impl Hierarchy {
             luminaires: scene.luminaires.clone(),
             openings: scene.opening_luminaires(),
             direct: Vec::new(),
+            direct_residual: Vec::new(),
             root_cluster: None,
             cluster_surfaces: Vec::new(),
             cluster_positions: Vec::new(),

@@ -22,14 +22,7 @@ use crate::visibility::Visibility;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
-/// The first gather's state across solve passes: each computed element's projection residual.
-#[derive(Clone, Debug, Default)]
-pub struct FirstGather {
-    /// `max_k |H(x_k) − Ĥ(x_k)|` (largest channel, irradiance / π) per computed element id.
-    residuals: Vec<f64>,
-}
-
-/// What one call of [`FirstGather::refine_and_gather`] did.
+/// What one call of [`refine_and_gather`] did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct DirectOutcome {
     pub subdivisions: usize,
@@ -38,79 +31,81 @@ pub struct DirectOutcome {
     pub refused_by_budget: usize,
 }
 
-impl FirstGather {
-    /// Computes the direct coefficients of every leaf not yet computed and splits leaves whose direct
-    /// term the basis misses (see the module comment), repeating on the new leaves, against the leaf's
-    /// threshold ([`RefineSettings::threshold_into`]): a radiance when `radiance_thresholds` (the
-    /// link error oracle's, Bekaert–Willems algorithm 6.1), else radiance × area like eq. (1)'s.
-    pub fn refine_and_gather(
-        &mut self,
-        hierarchy: &mut Hierarchy,
-        visibility: &dyn Visibility,
-        settings: &RefineSettings,
-        radiance_thresholds: bool,
-    ) -> DirectOutcome {
-        let mut outcome = DirectOutcome::default();
-        if hierarchy.luminaires.is_empty() {
+/// Computes the direct coefficients (and projection residuals, [`Hierarchy::direct_residual`]) of
+/// every leaf not yet computed and splits leaves whose direct term the basis misses (see the module
+/// comment), repeating on the new leaves, against the leaf's threshold
+/// ([`RefineSettings::threshold_into`]): a radiance when `radiance_thresholds` (the link error
+/// oracle's, Bekaert–Willems algorithm 6.1), else radiance × area like eq. (1)'s. Elements never
+/// merge, so what earlier passes computed is kept.
+pub fn refine_and_gather(
+    hierarchy: &mut Hierarchy,
+    visibility: &dyn Visibility,
+    settings: &RefineSettings,
+    radiance_thresholds: bool,
+) -> DirectOutcome {
+    let mut outcome = DirectOutcome::default();
+    if hierarchy.luminaires.is_empty() {
+        return outcome;
+    }
+    let size = hierarchy.basis_size();
+    let degree = settings.coupling.cubature_degree;
+    loop {
+        let done = hierarchy.direct_residual.len();
+        let h = &*hierarchy;
+        let fresh: Vec<ElementId> = (done..h.elements.len())
+            .filter(|&id| h.elements[id].is_leaf())
+            .map(|id| id as ElementId)
+            .collect();
+        let results: Vec<(Vec<Rgb>, f64, u64)> = fresh
+            .par_iter()
+            .map(|&id| leaf_direct(h, visibility, id, degree))
+            .collect();
+        hierarchy
+            .direct
+            .resize(hierarchy.elements.len() * size, Rgb::BLACK);
+        hierarchy
+            .direct_residual
+            .resize(hierarchy.elements.len(), 0.0);
+        let mut split = Vec::new();
+        for (&id, (coefficients, residual, rays)) in fresh.iter().zip(results) {
+            let i = id as usize;
+            hierarchy.direct[i * size..(i + 1) * size].copy_from_slice(&coefficients);
+            hierarchy.direct_residual[i] = residual;
+            outcome.rays += rays;
+        }
+        // Judge every leaf (thresholds fall between passes under error control), as if it were
+        // white: illuminance is wanted accurate on every surface, black ones included.
+        for id in hierarchy.leaves() {
+            let e = hierarchy.element(id);
+            let error =
+                hierarchy.direct_residual[id as usize].max(missed_beam(hierarchy, id, degree));
+            let too_coarse = if radiance_thresholds {
+                error > e.threshold
+            } else {
+                error * e.area > settings.threshold_into(hierarchy, id)
+            };
+            if too_coarse && e.area > settings.min_area {
+                split.push(id);
+            }
+        }
+        if split.is_empty() {
             return outcome;
         }
-        let size = hierarchy.basis_size();
-        let degree = settings.coupling.cubature_degree;
-        loop {
-            let done = self.residuals.len();
-            let h = &*hierarchy;
-            let fresh: Vec<ElementId> = (done..h.elements.len())
-                .filter(|&id| h.elements[id].is_leaf())
-                .map(|id| id as ElementId)
-                .collect();
-            let results: Vec<(Vec<Rgb>, f64, u64)> = fresh
-                .par_iter()
-                .map(|&id| leaf_direct(h, visibility, id, degree))
-                .collect();
+        let before = outcome.subdivisions;
+        hierarchy.reserve_splits(split.len());
+        for id in split {
+            if hierarchy.elements.len() + 4 > settings.max_elements {
+                outcome.refused_by_budget += 1;
+                continue;
+            }
+            hierarchy.subdivide(id);
+            outcome.subdivisions += 1;
+        }
+        if outcome.subdivisions == before {
             hierarchy
                 .direct
                 .resize(hierarchy.elements.len() * size, Rgb::BLACK);
-            self.residuals.resize(hierarchy.elements.len(), 0.0);
-            let mut split = Vec::new();
-            for (&id, (coefficients, residual, rays)) in fresh.iter().zip(results) {
-                let i = id as usize;
-                hierarchy.direct[i * size..(i + 1) * size].copy_from_slice(&coefficients);
-                self.residuals[i] = residual;
-                outcome.rays += rays;
-            }
-            // Judge every leaf (thresholds fall between passes under error control), as if it were
-            // white: illuminance is wanted accurate on every surface, black ones included.
-            for id in hierarchy.leaves() {
-                let e = hierarchy.element(id);
-                let error = self.residuals[id as usize].max(missed_beam(hierarchy, id, degree));
-                let too_coarse = if radiance_thresholds {
-                    error > e.threshold
-                } else {
-                    error * e.area > settings.threshold_into(hierarchy, id)
-                };
-                if too_coarse && e.area > settings.min_area {
-                    split.push(id);
-                }
-            }
-            if split.is_empty() {
-                return outcome;
-            }
-            let before = outcome.subdivisions;
-            hierarchy.reserve_splits(split.len());
-            for id in split {
-                if hierarchy.elements.len() + 4 > settings.max_elements {
-                    outcome.refused_by_budget += 1;
-                    continue;
-                }
-                hierarchy.subdivide(id);
-                outcome.subdivisions += 1;
-            }
-            if outcome.subdivisions == before {
-                hierarchy
-                    .direct
-                    .resize(hierarchy.elements.len() * size, Rgb::BLACK);
-                return outcome;
-            }
+            return outcome;
         }
     }
 }

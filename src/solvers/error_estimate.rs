@@ -14,7 +14,9 @@
 //!   degree `n − 1` for `n` nodes per direction, the rule's resolution); the child adds its own sum
 //!   and passes the total on, and the leaf takes the maximum over its nodes of the total.
 //!
-//! Inner elements get the largest estimate below them (step 2e). Emission is constant per patch and so
+//! A leaf lit by luminaires adds its reflectance times the first gather's projection residual
+//! ([`Hierarchy::direct_residual`]: the direct term is one more received term whose projection
+//! misses its node values). Inner elements get the largest estimate below them (step 2e). Emission is constant per patch and so
 //! represented exactly by every basis: `δ_e = 0`. Links at clusters have no surface nodes (their one
 //! `δ` is taken at the receiver's visibility sample points, `solvers::clustering::couple_cluster`):
 //! their maximum is added to every element below, and to each patch what sharing a cluster's received
@@ -342,7 +344,11 @@ impl TreeWalk<'_> {
             }
         }
         let error = if e.is_leaf() {
-            sums.maximum() + above.total()
+            // The luminaires' direct term, projected on the leaf's basis, misses its node values by
+            // the first gather's residual (irradiance / π), reflected.
+            let direct = h.direct_residual.get(id as usize).copied().unwrap_or(0.0)
+                * h.reflectance_of(id).max_channel();
+            sums.maximum() + above.total() + direct
         } else {
             let domain = e.shape().domain();
             e.children

@@ -184,7 +184,6 @@ pub fn solve(
 ) -> SolveReport {
     let mut report = start_report(hierarchy, settings);
     report.error.stopped_by = "pass limit".into();
-    let mut first_gather = direct::FirstGather::default();
     // Passes that may be followed by another sweep to a looser tolerance: the refinement after them
     // (and error control's thresholds) needs the radiance to about a part in a thousand, and changes it
     // by more.
@@ -204,7 +203,6 @@ pub fn solve(
             oracle,
             settings,
             from,
-            &mut first_gather,
             &mut report,
             progress,
             &format!("pass {pass}"),
@@ -406,7 +404,6 @@ fn refine_pass(
     oracle: &dyn RefinementOracle,
     settings: &SolveSettings,
     from: refine::Start,
-    first_gather: &mut direct::FirstGather,
     report: &mut SolveReport,
     progress: &Progress,
     label: &str,
@@ -429,7 +426,7 @@ fn refine_pass(
     hierarchy.shrink_link_lists();
     crate::memory::return_free_pages();
     clustering::expose(hierarchy, visibility);
-    let direct = first_gather.refine_and_gather(
+    let direct = direct::refine_and_gather(
         hierarchy,
         visibility,
         &settings.refine,

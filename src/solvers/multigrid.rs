@@ -38,7 +38,6 @@ use crate::hierarchy::Hierarchy;
 use crate::measures::stats::cpu_seconds;
 use crate::oracles::RefinementOracle;
 use crate::progress::Progress;
-use crate::solvers::direct::FirstGather;
 use crate::solvers::gathering::GatheringSolver;
 use crate::visibility::Visibility;
 use serde::Serialize;
@@ -272,7 +271,6 @@ pub fn solve_progressive(
     );
     let mut report = start_report(hierarchy, settings);
     report.error.stopped_by = "step limit".into();
-    let mut first_gather = FirstGather::default();
     let mut schedule = StepSchedule {
         budget: multigrid.link_budget,
         coarse: true,
@@ -299,7 +297,6 @@ pub fn solve_progressive(
             oracle,
             settings,
             from,
-            &mut first_gather,
             &mut report,
             progress,
             &format!("step {step}"),
