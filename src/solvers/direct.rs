@@ -8,9 +8,9 @@
 //! Refinement: a leaf whose projected direct term misses its own node values (and its centroid's) by more than the threshold
 //! is split, max_k |E(x_k)/π − Ê(x_k)/π| × A against the power oracle's threshold (radiance × area), or
 //! that residual against the leaf's error-control threshold (algorithm 6.1), until the minimum area or
-//! the element budget stops it; a leaf over which a luminaire's intensity changes strongly is split
-//! until it subtends at most 10° from it, whatever its residual ([`beam_unresolved`]: a narrow beam
-//! can fall between the nodes). The receiver's reflectance is left out (the leaf is judged as if white)
+//! the element budget stops it; the residual is raised to what a luminaire's beam may put between the
+//! nodes where the cone toward the leaf holds over twice what the nodes see ([`missed_beam`]: a
+//! narrow beam can fall between them). The receiver's reflectance is left out (the leaf is judged as if white)
 //! so that illuminance comes out accurate on black surfaces too. Elements never merge and luminaires do not move, so a leaf's
 //! coefficients are computed once and kept across passes.
 
@@ -110,8 +110,8 @@ pub fn refine_and_gather(
     }
 }
 
-/// Largest angle (degrees) a leaf may subtend from a luminaire whose intensity changes over it (see
-/// [`beam_unresolved`]).
+/// Angle (degrees) a leaf may subtend from a luminaire before [`missed_beam`] asks whether a beam
+/// falls between its nodes.
 const BEAM_ANGLE: f64 = 10.0;
 
 /// A bound on the direct radiance (E/π, largest channel) that a luminaire's beam may put on the leaf
