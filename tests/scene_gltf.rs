@@ -868,14 +868,13 @@ fn a_spot_light_lights_the_floor_by_the_inverse_square_law() {
     let solution = radiosity::pipeline::simulate(&scene, &settings, &common::quiet()).unwrap();
     let h = &solution.hierarchy;
     let spot = &scene.luminaires[0];
-    let peak = 0.5 / std::f64::consts::PI * spot.intensity(DVec3::NEG_Z).r / 4.0;
-    for theta in [0.0f64, 0.25, 0.45, 0.55, 0.7] {
-        // Along +x, in the floor's first triangle (patch 0).
-        let point = DVec3::new(2.0 * theta.tan(), -1e-3, 0.0);
+    // ρ/π × I cos θ / d² at a floor point (the spot 2 m up), and the leaf holding the point.
+    let direct = |point: DVec3| {
         let to_point = point - spot.position;
         let d2 = to_point.length_squared();
-        let cos = 2.0 / d2.sqrt();
-        let want = 0.5 / std::f64::consts::PI * spot.intensity(to_point).r * cos / d2;
+        0.5 / std::f64::consts::PI * spot.intensity(to_point).r * (2.0 / d2.sqrt()) / d2
+    };
+    let leaf_under = |point: DVec3| {
         let patch = (0..h.patches.len() as u32)
             .find(|&p| {
                 let uv = scene.polygons[h.patches[p as usize].polygon]
@@ -884,7 +883,14 @@ fn a_spot_light_lights_the_floor_by_the_inverse_square_law() {
                 uv.x >= 0.0 && uv.y >= 0.0 && uv.x + uv.y <= 1.0
             })
             .expect("a patch under the point");
-        let got = h.radiance_at(h.locate(patch, point), point).r;
+        h.locate(patch, point)
+    };
+    let peak = direct(DVec3::ZERO);
+    for theta in [0.0f64, 0.25, 0.45, 0.55, 0.7] {
+        // Along +x, in the floor's first triangle (patch 0).
+        let point = DVec3::new(2.0 * theta.tan(), -1e-3, 0.0);
+        let want = direct(point);
+        let got = h.radiance_at(leaf_under(point), point).r;
         assert!(
             (got - want).abs() <= 0.01 * want.max(1e-3 * peak),
             "θ = {theta}: {got} against {want} ({} leaves)",
@@ -904,20 +910,9 @@ fn a_spot_light_lights_the_floor_by_the_inverse_square_law() {
             2.4 * k as f64,
         );
         let point = DVec3::new(r * a.cos(), r * a.sin(), 0.0);
-        let to_point = point - spot.position;
-        let d2 = to_point.length_squared();
-        let want = 0.5 / std::f64::consts::PI * spot.intensity(to_point).r * (2.0 / d2.sqrt()) / d2;
-        let patch = (0..h.patches.len() as u32)
-            .find(|&p| {
-                let uv = scene.polygons[h.patches[p as usize].polygon]
-                    .shape
-                    .parameters_of(point);
-                uv.x >= 0.0 && uv.y >= 0.0 && uv.x + uv.y <= 1.0
-            })
-            .unwrap();
-        let leaf = h.locate(patch, point);
+        let leaf = leaf_under(point);
         let got = h.radiance_at(leaf, point).r;
-        within += usize::from((got - want).abs() <= h.element(leaf).error);
+        within += usize::from((got - direct(point)).abs() <= h.element(leaf).error);
     }
     assert!(
         within as f64 >= (0.95 - 3.0 * (0.95f64 * 0.05 / total as f64).sqrt()) * total as f64,

@@ -48,7 +48,7 @@ use super::polygonize::polygonize;
 use super::texture::mean_linear_colour;
 use super::{
     read_bounded, sanitise, CameraSpec, Diagnostic, LoadOptions, Material, Object, Polygon, Scene,
-    SceneError, DEFAULT_GREY, MAX_FILE_BYTES, MAX_POLYGONS, MAX_REFLECTANCE,
+    SceneError, DEFAULT_GREY, MAX_LOADED_BYTES, MAX_POLYGONS, MAX_REFLECTANCE,
 };
 use crate::color::Rgb;
 use ::gltf::accessor::{DataType, Dimensions};
@@ -60,8 +60,6 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
-/// Most bytes of buffers and images loaded for one scene, in all.
-pub const MAX_LOADED_BYTES: u64 = 4 * MAX_FILE_BYTES;
 /// Most node visits while walking the scene graph (a scene may list a big subtree many times).
 pub const MAX_NODE_VISITS: usize = 1_000_000;
 /// Most elements of one accessor.
@@ -290,12 +288,11 @@ fn punctual_photometry(
         None => (vec![0.0, 180.0], vec![candela, candela]),
         Some((inner, outer)) => {
             let mut table = vec![(0.0, candela)];
-            let width = (outer - inner).max(1e-6);
+            // Equal cones make a hard edge, kept a hair wide so that the angles increase.
+            let outer = inner + (outer - inner).max(1e-6);
             for k in 0..=SPOT_FALLOFF_STEPS {
-                let theta = inner + width * k as f64 / SPOT_FALLOFF_STEPS as f64;
-                let t = ((theta.cos() - (inner + width).cos())
-                    / (inner.cos() - (inner + width).cos()))
-                .clamp(0.0, 1.0);
+                let theta = inner + (outer - inner) * k as f64 / SPOT_FALLOFF_STEPS as f64;
+                let t = ((theta.cos() - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0);
                 table.push((theta.to_degrees(), candela * t * t));
             }
             table.push((180.0, 0.0));

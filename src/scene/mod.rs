@@ -177,6 +177,10 @@ pub fn sanitise(text: &str, max: usize) -> String {
     out
 }
 
+/// Most bytes of buffers and images (glTF's buffers and textures, OBJ's `map_Kd` textures) loaded for
+/// one scene, in all.
+pub const MAX_LOADED_BYTES: u64 = 4 * MAX_FILE_BYTES;
+
 /// Reflectance of surfaces without a usable material (OBJ faces, glTF primitives).
 pub const DEFAULT_GREY: f64 = 0.5;
 /// Largest reflectance kept (the readers clamp above it with a warning): a reflectance of 1 or more

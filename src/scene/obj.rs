@@ -409,7 +409,7 @@ fn check(path: &Path, bytes: &[u8]) -> Result<Vec<usize>, SceneError> {
 }
 
 /// The `map_Kd` textures read for one OBJ file: each file's mean colour once, and the bytes read in
-/// all bounded by [`MAX_LOADED_BYTES`](super::gltf::MAX_LOADED_BYTES), as for a glTF's images.
+/// all bounded by [`MAX_LOADED_BYTES`](super::MAX_LOADED_BYTES), as for a glTF's images.
 #[derive(Default)]
 struct Textures {
     means: HashMap<std::path::PathBuf, Result<Rgb, String>>,
@@ -438,13 +438,13 @@ impl Textures {
             Ok(Some(bytes)) => {
                 sources.push(texture.clone());
                 self.loaded_bytes += bytes.len() as u64;
-                if self.loaded_bytes > super::gltf::MAX_LOADED_BYTES {
+                if self.loaded_bytes > super::MAX_LOADED_BYTES {
                     Err(format!(
                         "{shown}: textures of more than {} MiB in all are not read",
-                        super::gltf::MAX_LOADED_BYTES >> 20
+                        super::MAX_LOADED_BYTES >> 20
                     ))
                 } else {
-                    mean_linear_colour(&bytes, super::gltf::MAX_LOADED_BYTES)
+                    mean_linear_colour(&bytes, super::MAX_LOADED_BYTES)
                         .map_err(|e| format!("{shown} not used ({e})"))
                         .and_then(|mean| {
                             mean.is_finite()
