@@ -128,6 +128,9 @@ pub struct MemoryBudget {
     pub fixed: usize,
     /// Most bytes the item-buffer cache may hold (0 without item buffers).
     pub item_buffer_cache: usize,
+    /// Whether the scene has goniometric luminaires, whose direct light every element keeps too
+    /// ([`element_bytes`]).
+    pub luminaires: bool,
 }
 
 impl MemoryBudget {
@@ -168,6 +171,7 @@ impl MemoryBudget {
             total: max_memory,
             fixed: fixed + item_buffer_cache,
             item_buffer_cache,
+            luminaires: !hierarchy.luminaires.is_empty(),
         })
     }
 
@@ -178,6 +182,7 @@ impl MemoryBudget {
             total: max_memory,
             fixed: 0,
             item_buffer_cache: 0,
+            luminaires: false,
         }
     }
 
@@ -199,7 +204,7 @@ impl MemoryBudget {
 
     /// Most elements refinement may create, at [`element_bytes`] each.
     pub fn max_elements(&self, basis: BasisKind) -> usize {
-        self.refinement() / ELEMENT_SHARE / element_bytes(basis)
+        self.refinement() / ELEMENT_SHARE / element_bytes(basis, self.luminaires)
     }
 }
 
@@ -227,11 +232,18 @@ pub fn link_peak_bytes(basis: BasisKind, cubature_degree: usize, storage: ErrorS
         + VERDICT_BYTES
 }
 
-/// Bytes of one element: the struct and its radiance coefficients (twice each, for the growth slack
-/// of the two lists), and its list of four children.
-pub fn element_bytes(basis: BasisKind) -> usize {
-    2 * (std::mem::size_of::<Element>() + basis.size() * std::mem::size_of::<crate::color::Rgb>())
-        + allocated_bytes(4 * 4)
+/// Bytes of one element: the struct and its radiance coefficients, with `luminaires` also its
+/// direct irradiance coefficients and their projection's residual (`Hierarchy::direct`,
+/// `Hierarchy::direct_residual`), twice each for the growth slack of the lists; and its list of
+/// four children.
+pub fn element_bytes(basis: BasisKind, luminaires: bool) -> usize {
+    let coefficients = basis.size() * std::mem::size_of::<crate::color::Rgb>();
+    let direct = if luminaires {
+        coefficients + std::mem::size_of::<f64>()
+    } else {
+        0
+    };
+    2 * (std::mem::size_of::<Element>() + coefficients + direct) + allocated_bytes(4 * 4)
 }
 
 /// `1.5 GiB`, `640 MiB`, `12 KiB`, `500 B` (binary units, like `--max-memory`'s suffixes; under a
@@ -309,7 +321,8 @@ mod tests {
         assert!(
             budget.max_links(BasisKind::Linear, 2, ErrorStorage::Full)
                 * link_peak_bytes(BasisKind::Linear, 2, ErrorStorage::Full)
-                + budget.max_elements(BasisKind::Linear) * element_bytes(BasisKind::Linear)
+                + budget.max_elements(BasisKind::Linear)
+                    * element_bytes(BasisKind::Linear, budget.luminaires)
                 <= budget.refinement()
         );
         let refused = MemoryBudget::new(RUNTIME_RESERVE, &scene, &bvh, &hierarchy, true);

@@ -1104,3 +1104,40 @@ fn intensity_bounds_hold_and_are_attained() {
         );
     }
 }
+
+/// The luminaires' direct light is kept per element (`Hierarchy::direct`, `direct_residual`): the
+/// hierarchy's byte count holds it, and `--max-memory`'s bytes per element (`element_bytes`) leave
+/// room for it in a lit scene, as the lists' growth slack allows (twice the coefficients).
+#[test]
+fn direct_light_is_counted_in_the_memory_of_elements() {
+    use radiosity::memory::element_bytes;
+    let isotropic = photometry(&[0.0], &[[1000.0; 10]], 0.0);
+    let luminaire = Luminaire::place(
+        isotropic,
+        DAffine3::from_translation(DVec3::new(0.0, 0.0, 2.0)),
+        Rgb::WHITE,
+        1.0,
+    );
+    let scene = floor_scene(3.0, 0.5, luminaire);
+    let settings = SimulationSettings {
+        eps: 1e-5,
+        ..Default::default()
+    };
+    let solution = simulate(&scene, &settings, &quiet()).unwrap();
+    let h = &solution.hierarchy;
+    let direct = h.direct.capacity() * std::mem::size_of::<Rgb>()
+        + h.direct_residual.capacity() * std::mem::size_of::<f64>();
+    assert!(h.direct.len() >= h.elements.len() && direct > 0);
+    let per_element = element_bytes(settings.basis, true) - element_bytes(settings.basis, false);
+    assert!(
+        direct <= h.elements.len() * per_element,
+        "{direct} bytes of direct light for {} elements at {per_element} each",
+        h.elements.len()
+    );
+    let links: usize = h
+        .elements
+        .iter()
+        .map(|e| e.links.capacity() * std::mem::size_of::<radiosity::hierarchy::Link>())
+        .sum();
+    assert!(h.memory_bytes() >= direct + links);
+}

@@ -1271,6 +1271,8 @@ impl Hierarchy {
     pub fn memory_bytes(&self) -> usize {
         self.elements.capacity() * std::mem::size_of::<Element>()
             + self.radiance.capacity() * std::mem::size_of::<Rgb>()
+            + self.direct.capacity() * std::mem::size_of::<Rgb>()
+            + self.direct_residual.capacity() * std::mem::size_of::<f64>()
             + self
                 .elements
                 .iter()

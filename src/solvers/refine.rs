@@ -234,10 +234,36 @@ pub fn straddles_outline(h: &Hierarchy, visibility: &dyn Visibility, id: Element
     let (near, far) = (1e-9 * size, OUTLINE_REACH * size);
     let covered = |p: DVec3| visibility.occluded(&Ray::new(p, normal), near, far);
     let first = covered(centre);
+    inset_corners(shape).any(|p| covered(p) != first)
+}
+
+/// The corners of `shape`, each moved [`PROBE_INSET`] of the way toward its centroid.
+fn inset_corners(shape: &Shape) -> impl Iterator<Item = DVec3> + '_ {
+    let centre = shape.centroid();
     shape
         .vertices()
         .iter()
-        .any(|&v| covered(v + (centre - v) * PROBE_INSET) != first)
+        .map(move |&v| v + (centre - v) * PROBE_INSET)
+}
+
+/// Whether a corner of the receiver ([`inset_corners`]) sees the source's centroid otherwise than
+/// the link's cubature nodes saw the source: `lit` when their rays found it wholly visible, not when
+/// wholly hidden. Why: a shadow edge that crosses the receiver between its outer nodes and its edge
+/// (the lit sliver beside a slab standing on a floor, within the outer third of an element the
+/// Gauss nodes leave unsampled) gives every node the same verdict, so the visibility term of
+/// Sillion–Drettakis Appendix A eq. (5) reads 0 and the element stays whole and wrongly dark or lit.
+/// Four rays per link find the edge that the nodes straddle not.
+fn corners_disagree(
+    h: &Hierarchy,
+    visibility: &dyn Visibility,
+    receiver: ElementId,
+    source: ElementId,
+    lit: bool,
+) -> bool {
+    let target = h.element(source).shape().centroid();
+    let polygon = h.patch_of(receiver).polygon;
+    inset_corners(h.element(receiver).shape())
+        .any(|p| (visibility.transmittance_onto(p, target, polygon) >= 0.5) != lit)
 }
 
 /// What one refinement pass did.
@@ -1403,6 +1429,28 @@ fn with_visibility(
         .or(c.coupling)
         .expect("a coupling, cached or just computed");
     if coupling.visibility <= 0.0 || coupling.visibility >= 1.0 {
+        // Whole by a Clear or Blocked shaft, or by rays that may have missed an edge near the
+        // receiver's boundary: then eq. (5) at v = ½, as for a boundary the nodes straddle.
+        let by_rays = coupling.shaft.and_then(ShaftVerdict::inherited).is_none();
+        if by_rays {
+            // Counted among the oracle's rays: one per corner, as if none agreed before the last.
+            let corners = h.element(c.receiver).shape().vertices().len() as u32;
+            verdict.rays = verdict.rays.saturating_add(corners);
+        }
+        if by_rays
+            && corners_disagree(
+                h,
+                context.visibility,
+                c.receiver,
+                c.source,
+                coupling.visibility >= 1.0,
+            )
+        {
+            return Seen {
+                error: across_boundary,
+                under_outline: false,
+            };
+        }
         return plain;
     }
     let spread = visibility_spread(
