@@ -248,11 +248,11 @@ fn inset_corners(shape: &Shape) -> impl Iterator<Item = DVec3> + '_ {
 
 /// Whether a corner of the receiver ([`inset_corners`]) sees the source's centroid otherwise than
 /// the link's cubature nodes saw the source: `lit` when their rays found it wholly visible, not when
-/// wholly hidden. Why: a shadow edge that crosses the receiver between its outer nodes and its edge
-/// (the lit sliver beside a slab standing on a floor, within the outer third of an element the
-/// Gauss nodes leave unsampled) gives every node the same verdict, so the visibility term of
+/// wholly hidden. Why: a shadow edge that crosses the receiver between its outermost nodes and its
+/// side (the lit sliver beside a slab standing on a floor: a three-point Gauss rule leaves the outer
+/// 11% of the element unsampled) gives every node the same verdict, so the visibility term of
 /// Sillion–Drettakis Appendix A eq. (5) reads 0 and the element stays whole and wrongly dark or lit.
-/// Four rays per link find the edge that the nodes straddle not.
+/// One ray per corner finds such an edge where it runs past a corner's side of the nodes.
 fn corners_disagree(
     h: &Hierarchy,
     visibility: &dyn Visibility,
@@ -1431,25 +1431,17 @@ fn with_visibility(
     if coupling.visibility <= 0.0 || coupling.visibility >= 1.0 {
         // Whole by a Clear or Blocked shaft, or by rays that may have missed an edge near the
         // receiver's boundary: then eq. (5) at v = ½, as for a boundary the nodes straddle.
-        let by_rays = coupling.shaft.and_then(ShaftVerdict::inherited).is_none();
-        if by_rays {
+        if coupling.shaft.and_then(ShaftVerdict::inherited).is_none() {
             // Counted among the oracle's rays: one per corner, as if none agreed before the last.
             let corners = h.element(c.receiver).shape().vertices().len() as u32;
             verdict.rays = verdict.rays.saturating_add(corners);
-        }
-        if by_rays
-            && corners_disagree(
-                h,
-                context.visibility,
-                c.receiver,
-                c.source,
-                coupling.visibility >= 1.0,
-            )
-        {
-            return Seen {
-                error: across_boundary,
-                under_outline: false,
-            };
+            let lit = coupling.visibility >= 1.0;
+            if corners_disagree(h, context.visibility, c.receiver, c.source, lit) {
+                return Seen {
+                    error: across_boundary,
+                    under_outline: false,
+                };
+            }
         }
         return plain;
     }
