@@ -85,8 +85,8 @@ use super::link_rng;
 use crate::color::Rgb;
 use crate::geometry::cubature::{nodes_on, rule};
 use crate::geometry::form_factor::point_to_polygon;
-use crate::geometry::Shape;
 use crate::geometry::{DVec2, DVec3};
+use crate::geometry::{Domain, Shape};
 use crate::hierarchy::clusters::{ClusteringKind, Orientation, VisibleAreas};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
 use crate::visibility::item_buffer::{
@@ -1316,7 +1316,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let clusters: Vec<ElementId> = (h.patches.len() as ElementId..=root)
         .filter(|&id| h.is_cluster(id) && !h.element(id).links.is_empty())
         .collect();
-    let gradients = Gradient::new(h).is_some();
+    let gradients = Gradient::taken(h);
     let mut exposures: Vec<((u32, u16), Exposure)> = clusters
         .par_iter()
         .flat_map_iter(|&id| {
@@ -1464,22 +1464,52 @@ fn exposed_bit(exposure: &[u64], k: usize) -> f64 {
 /// The exposed fraction of `shape` whose gradient nodes' rays reached as the bits of `nodes` say
 /// ([`exposure`]): their share of the patch's area by the rule's weights and Jacobian.
 pub fn node_fraction(shape: &Shape, nodes: u8) -> f64 {
-    let rule = gradient_rule(shape.domain());
-    if nodes == 0 || u32::from(nodes) == (1 << rule.nodes.len()) - 1 {
-        return f64::from(nodes.min(1));
+    match all_or_none(nodes) {
+        true => f64::from(nodes.min(1)),
+        false => NodeAreas::of(shape).fraction(nodes),
     }
-    let (mut reached, mut all) = (0.0, 0.0);
-    for (n, &(uv, w)) in rule.nodes.iter().enumerate() {
-        let da = w * shape.jacobian(uv);
-        all += da;
-        if nodes >> n & 1 == 1 {
-            reached += da;
+}
+
+/// Whether every gradient node's ray reached, or none: the patch is exposed evenly.
+fn all_or_none(nodes: u8) -> bool {
+    nodes == 0 || u32::from(nodes) == (1 << GRADIENT_NODES) - 1
+}
+
+/// A patch's area element at each node of its gradient rule ([`gradient_rule`]): the node's weight
+/// times the Jacobian there, all that [`node_fraction`] and [`Gradient::slope`] read of its shape.
+#[derive(Clone, Copy, Debug)]
+struct NodeAreas {
+    domain: Domain,
+    da: [f64; GRADIENT_NODES],
+}
+
+impl NodeAreas {
+    fn of(shape: &Shape) -> Self {
+        let domain = shape.domain();
+        let mut da = [0.0; GRADIENT_NODES];
+        for (da, &(uv, w)) in da.iter_mut().zip(&gradient_rule(domain).nodes) {
+            *da = w * shape.jacobian(uv);
         }
+        NodeAreas { domain, da }
     }
-    if all > 0.0 {
-        reached / all
-    } else {
-        0.0
+
+    /// [`node_fraction`].
+    fn fraction(&self, nodes: u8) -> f64 {
+        if all_or_none(nodes) {
+            return f64::from(nodes.min(1));
+        }
+        let (mut reached, mut all) = (0.0, 0.0);
+        for (n, &da) in self.da.iter().enumerate() {
+            all += da;
+            if nodes >> n & 1 == 1 {
+                reached += da;
+            }
+        }
+        if all > 0.0 {
+            reached / all
+        } else {
+            0.0
+        }
     }
 }
 
@@ -1488,11 +1518,15 @@ const GRADIENT_DEGREE: usize = 3;
 
 /// The nodes a gradient is taken at: the 2 × 2 Gauss product rule of both domains (collapsed on the
 /// triangle), four nodes, one bit each in an [`Exposure`].
-fn gradient_rule(domain: crate::geometry::Domain) -> &'static crate::geometry::cubature::Rule {
+fn gradient_rule(domain: Domain) -> &'static crate::geometry::cubature::Rule {
     let rule = rule(domain, GRADIENT_DEGREE);
-    debug_assert!(rule.nodes.len() <= crate::visibility::item_buffer::NODE_BITS);
+    debug_assert!(rule.nodes.len() == GRADIENT_NODES);
     rule
 }
+
+/// Nodes of [`gradient_rule`] on both domains, one bit each in an [`Exposure`].
+const GRADIENT_NODES: usize = 4;
+const _: () = assert!(GRADIENT_NODES <= crate::visibility::item_buffer::NODE_BITS);
 
 /// How the light a cluster shares among its exposed patches varies over each patch.
 ///
@@ -1507,41 +1541,87 @@ fn gradient_rule(domain: crate::geometry::Domain) -> &'static crate::geometry::c
 /// so that the power each patch receives is unchanged, and flattened as far as needed to stay
 /// non-negative at every corner.
 /// Needs a basis with linear functions (linear or above) and item buffers.
-struct Gradient<'a> {
-    basis: &'a crate::bases::Basis,
+struct Gradient {
+    square: GradientTable,
+    triangle: GradientTable,
 }
 
-impl<'a> Gradient<'a> {
-    fn new(h: &'a Hierarchy) -> Option<Self> {
-        (h.item_buffers.is_some() && h.basis_size() >= 3).then(|| Gradient { basis: &h.basis })
+/// What [`Gradient::slope`] reads of the basis on one domain: its first three functions at the
+/// gradient rule's nodes and at the domain's corners, and the nodes' weights over the domain's area.
+struct GradientTable {
+    weights: [f64; GRADIENT_NODES],
+    at_nodes: [[f64; 3]; GRADIENT_NODES],
+    at_corners: Vec<[f64; 3]>,
+}
+
+impl GradientTable {
+    fn new(basis: &crate::bases::Basis, domain: Domain) -> Self {
+        let first_three = |uv: DVec2| {
+            let mut phi = [0.0; crate::bases::MAX_BASIS_SIZE];
+            basis.eval(domain, uv, &mut phi);
+            [phi[0], phi[1], phi[2]]
+        };
+        let nodes = &gradient_rule(domain).nodes;
+        GradientTable {
+            weights: std::array::from_fn(|n| nodes[n].1 / domain.area()),
+            at_nodes: std::array::from_fn(|n| first_three(nodes[n].0)),
+            at_corners: domain.corners().iter().map(|&c| first_three(c)).collect(),
+        }
+    }
+}
+
+/// `Σ_α c_α φ_α` of the basis' first three functions, their values `phi` at a point (as
+/// [`crate::bases::Basis::value`] sums them).
+fn linear_value(phi: &[f64; 3], c: &[f64; 3]) -> f64 {
+    phi.iter().zip(c).map(|(p, c)| p * c).sum()
+}
+
+impl Gradient {
+    fn new(h: &Hierarchy) -> Option<Self> {
+        Gradient::taken(h).then(|| Gradient::of(&h.basis))
+    }
+
+    /// Whether `h` takes gradients: item buffers and a basis with linear functions.
+    fn taken(h: &Hierarchy) -> bool {
+        h.item_buffers.is_some() && h.basis_size() >= 3
+    }
+
+    /// The tables of a basis with linear functions (linear or above).
+    fn of(basis: &crate::bases::Basis) -> Self {
+        Gradient {
+            square: GradientTable::new(basis, Domain::Square),
+            triangle: GradientTable::new(basis, Domain::Triangle),
+        }
     }
 
     /// The zero-mean variation, per unit mean, over `shape` of a share whose gradient nodes' rays
     /// reached as the bits of `nodes` say, as coefficients of the first three basis functions;
     /// `None` where every node or none reached, or the pattern has no linear part (the share is
-    /// even).
+    /// even). The basis comes from the tables, the shape only by its [`NodeAreas`]: a sweep asks
+    /// for 2.9M patches' shares on the classroom, and evaluating the basis there each time took a
+    /// fifth of the sharing's time.
     fn slope(&self, shape: &Shape, nodes: u8) -> Option<[f64; 3]> {
-        let domain = shape.domain();
-        let rule = gradient_rule(domain);
-        if nodes == 0 || u32::from(nodes) == (1 << rule.nodes.len()) - 1 {
+        if all_or_none(nodes) {
             return None;
         }
-        let mut phi = [0.0; crate::bases::MAX_BASIS_SIZE];
+        let patch = NodeAreas::of(shape);
+        let table = match patch.domain {
+            Domain::Square => &self.square,
+            Domain::Triangle => &self.triangle,
+        };
         let mut c = [0.0; 3];
-        for (n, &(uv, w)) in rule.nodes.iter().enumerate() {
+        for n in 0..GRADIENT_NODES {
             if nodes >> n & 1 == 1 {
-                self.basis.eval(domain, uv, &mut phi);
-                for (c, &phi) in c.iter_mut().zip(&phi) {
-                    *c += w / domain.area() * phi;
+                for (c, &phi) in c.iter_mut().zip(&table.at_nodes[n]) {
+                    *c += table.weights[n] * phi;
                 }
             }
         }
         // Its mean over the patch, exact by the same rule (the function times the Jacobian has
         // degree 2).
         let (mut integral, mut area) = (0.0, 0.0);
-        for &(uv, w) in &rule.nodes {
-            let da = w * shape.jacobian(uv);
-            integral += da * self.basis.value(domain, uv, &c);
+        for (&da, phi) in patch.da.iter().zip(&table.at_nodes) {
+            integral += da * linear_value(phi, &c);
             area += da;
         }
         if integral <= 0.0 || area <= 0.0 {
@@ -1553,8 +1633,8 @@ impl<'a> Gradient<'a> {
             return None; // no linear part (two diagonal nodes of a quad)
         }
         // The largest t ≤ 1 with 1 + t · slope ≥ 0 at every corner (the function is linear).
-        let t = domain.corners().iter().fold(1.0f64, |t, &corner| {
-            let v = self.basis.value(domain, corner, &slope);
+        let t = table.at_corners.iter().fold(1.0f64, |t, phi| {
+            let v = linear_value(phi, &slope);
             if v < 0.0 {
                 t.min(-1.0 / v)
             } else {
@@ -1880,7 +1960,7 @@ mod tests {
             BasisKind::Cubic,
         ] {
             let basis = Basis::new(kind);
-            let gradient = Gradient { basis: &basis };
+            let gradient = Gradient::of(&basis);
             for shape in shapes() {
                 let domain = shape.domain();
                 let nodes = &gradient_rule(domain).nodes;
