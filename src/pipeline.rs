@@ -16,7 +16,7 @@ use crate::progress::Progress;
 use crate::scene::Scene;
 use crate::solvers::coupling::{CouplingSettings, SourceRule};
 use crate::solvers::error_estimate::EstimateKind;
-use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, Southwell};
+use crate::solvers::gathering::{GatheringSolver, GaussSeidel, Jacobi, OverRelaxed, Southwell};
 use crate::solvers::multigrid::{solve_progressive, MultigridSettings, StepReport};
 use crate::solvers::refine::{OutlineRule, RefineSettings};
 use crate::solvers::stochastic::{solve_stochastic, StochasticSettings};
@@ -61,8 +61,14 @@ pub enum MethodKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SolverKind {
+    /// Every element gathers from the previous iterate, in parallel.
     Jacobi,
+    /// Patches in order, each seeing the updates of those before it.
     GaussSeidel,
+    /// Gauss–Seidel with each patch's step extrapolated by 1.2 (successive over-relaxation): the same
+    /// solution in fewer sweeps.
+    Sor,
+    /// The patch with the largest change first.
     Southwell,
 }
 
@@ -444,6 +450,7 @@ pub fn make_solver(kind: SolverKind) -> Box<dyn GatheringSolver> {
     match kind {
         SolverKind::Jacobi => Box::new(Jacobi),
         SolverKind::GaussSeidel => Box::new(GaussSeidel),
+        SolverKind::Sor => Box::new(OverRelaxed),
         SolverKind::Southwell => Box::new(Southwell::default()),
     }
 }

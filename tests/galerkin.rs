@@ -446,6 +446,7 @@ fn the_white_furnace_is_solved_to_the_accuracy_with_every_solver() {
         (BasisKind::Linear, SolverKind::Jacobi),
         (BasisKind::Quadratic, SolverKind::GaussSeidel),
         (BasisKind::Linear, SolverKind::Southwell),
+        (BasisKind::Quadratic, SolverKind::Sor),
     ] {
         let settings = SimulationSettings {
             oracle: OracleKind::Error,

@@ -48,6 +48,19 @@ fn perpendicular_unit_squares_receive_the_analytic_form_factor() {
     assert!((f - exact).abs() / exact < 0.005, "F = {f}, exact {exact}");
 }
 
+/// A furnace of reflectance `rho` and emission `e` solved with `solver`, refined to the minimum element
+/// size (ε = 1e-7).
+fn solve_furnace(rho: f64, e: f64, solver: SolverKind) -> radiosity::pipeline::Solution {
+    let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, e);
+    let settings = SimulationSettings {
+        eps: 1e-7,
+        min_area: 1e-2,
+        solver,
+        ..Default::default()
+    };
+    simulate(&scene, &settings, &quiet()).expect("solve")
+}
+
 /// With refinement driven down to the minimum element size (tiny ε), every link joins two leaves and the
 /// furnace tests the closure of the link form factors (exact point-to-polygon factors at the receiver
 /// nodes cover the hemisphere exactly), push-pull and both solvers. At practical ε the power oracle leaves
@@ -56,15 +69,8 @@ fn perpendicular_unit_squares_receive_the_analytic_form_factor() {
 #[test]
 fn white_furnace_converges_to_e_over_one_minus_rho_everywhere() {
     let (rho, e) = (0.5, 1.0);
-    let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, e);
-    for solver in [SolverKind::Jacobi, SolverKind::GaussSeidel] {
-        let settings = SimulationSettings {
-            eps: 1e-7,
-            min_area: 1e-2,
-            solver,
-            ..Default::default()
-        };
-        let solution = simulate(&scene, &settings, &quiet()).expect("solve");
+    for solver in [SolverKind::Jacobi, SolverKind::GaussSeidel, SolverKind::Sor] {
+        let solution = solve_furnace(rho, e, solver);
         let h = &solution.hierarchy;
         let expected = e / (1.0 - rho);
         let leaves = h.leaves();
@@ -83,6 +89,52 @@ fn white_furnace_converges_to_e_over_one_minus_rho_everywhere() {
             }
         }
     }
+}
+
+/// A furnace of reflectance 0.9 (measured: 49 and 33 sweeps, both within 1% everywhere), where
+/// Gauss–Seidel's error falls slowly and over-relaxation's factor
+/// 1.2 is past the bound `2 / (1 + ρ) ≈ 1.05` below which its convergence is proven: it reaches the
+/// same solution as Gauss–Seidel in fewer sweeps, and both reach `E / (1 − ρ)` within the ρ = 0.5
+/// furnace's 0.5% times `ρ / (1 − ρ)`, 9 here (a relative error `δ` in what the links gather,
+/// their form factors' closure, becomes `δ ρ / (1 − ρ)` in the geometric series).
+#[test]
+fn over_relaxation_reaches_the_bright_furnace_in_fewer_sweeps() {
+    let (rho, e) = (0.9, 1.0);
+    let expected = e / (1.0 - rho);
+    let allowed = 0.005 * rho / (1.0 - rho);
+    let solutions = [SolverKind::GaussSeidel, SolverKind::Sor].map(|solver| {
+        let solution = solve_furnace(rho, e, solver);
+        assert!(
+            solution.report.diverged_in_pass.is_none(),
+            "{solver:?} diverged"
+        );
+        let h = &solution.hierarchy;
+        let mut worst: f64 = 0.0;
+        for id in h.leaves() {
+            for c in h.average_radiance(id).to_array() {
+                worst = worst.max((c - expected).abs() / expected);
+            }
+        }
+        assert!(
+            worst < allowed,
+            "{solver:?}: a leaf is {worst} off, allowed {allowed}"
+        );
+        solution
+    });
+    let [gs, sor] = &solutions;
+    assert!(
+        sor.report.iterations < gs.report.iterations,
+        "sweeps: Gauss–Seidel {}, SOR {}",
+        gs.report.iterations,
+        sor.report.iterations
+    );
+    // The same fixed point: each stops once a sweep changes the total power by under 1e-5, which
+    // leaves at most about 1e-5 ρ / (1 − ρ) of it to go (consistency, not ground truth).
+    let (a, b) = (gs.report.exitant_power.g, sor.report.exitant_power.g);
+    assert!(
+        (a - b).abs() / a < 1e-5 * rho / (1.0 - rho),
+        "exitant power {a} against {b}"
+    );
 }
 
 #[test]

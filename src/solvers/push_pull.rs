@@ -15,6 +15,20 @@ use crate::color::Rgb;
 use crate::hierarchy::{ElementId, Hierarchy};
 use std::f64::consts::PI;
 
+/// Area average of the function with coefficients `c` on an element whose overlap matrix is
+/// `overlap` ([`crate::bases::Basis::overlap`]): coefficient 0, or on a trapezoid
+/// `Σ_α c_α (1/A) ∫ φ_α dA`.
+fn area_mean(overlap: Option<&crate::bases::Overlap>, c: &[Rgb]) -> Rgb {
+    overlap.map_or(c[0], |overlap| overlap.mean(c))
+}
+
+/// Power leaf `id` sends, `π A` times its radiance's area average: a leaf's term of
+/// [`PatchUpdate::exitant`], from the coefficients the hierarchy holds.
+pub fn leaf_exitant(h: &Hierarchy, id: ElementId) -> Rgb {
+    let e = h.element(id);
+    area_mean(h.basis.overlap(e.shape(), e.area).as_ref(), h.radiance(id)) * (PI * e.area)
+}
+
 /// New radiance of every element of one patch tree.
 #[derive(Clone, Debug, Default)]
 pub struct PatchUpdate {
@@ -106,10 +120,10 @@ impl Walk<'_> {
             // Emission is constant over a patch: the constant function represents it exactly (δ_e = 0).
             radiance[0] += self.emission;
             // Area averages: coefficient 0, or on a trapezoid Σ_α c_α (1/A) ∫ φ_α dA.
-            let (mean_incident, mean_exitant) = match &overlap {
-                Some(overlap) => (overlap.mean(&incident[..n]), overlap.mean(&radiance[..n])),
-                None => (incident[0], radiance[0]),
-            };
+            let (mean_incident, mean_exitant) = (
+                area_mean(overlap.as_ref(), &incident[..n]),
+                area_mean(overlap.as_ref(), &radiance[..n]),
+            );
             self.update.absorbed += (Rgb::WHITE - self.reflectance) * mean_incident * (PI * e.area);
             self.update.exitant += mean_exitant * (PI * e.area);
         } else {
