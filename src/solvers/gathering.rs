@@ -171,16 +171,27 @@ impl GatheringSolver for GaussSeidel {
     }
 
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
-        // Links at clusters gather once per sweep (Jacobi-like); patches see each other's updates.
-        let clusters = ClusterSweep::new(hierarchy);
-        let mut totals = Sweep::default();
-        for p in 0..hierarchy.patches.len() as u32 {
-            let update = relax(hierarchy, &clusters, p);
-            apply(hierarchy, &update, &mut totals);
-        }
-        hierarchy.pull_clusters();
-        totals
+        sweep_in_order(hierarchy, |hierarchy, update, totals| {
+            apply(hierarchy, &update, totals)
+        })
     }
+}
+
+/// A sweep over the patches in order, each patch's step taken by `take` (which applies it and adds
+/// its power to the totals). Links at clusters gather once per sweep (Jacobi-like); patches see each
+/// other's updates.
+fn sweep_in_order(
+    hierarchy: &mut Hierarchy,
+    take: impl Fn(&mut Hierarchy, PatchUpdate, &mut Sweep),
+) -> Sweep {
+    let clusters = ClusterSweep::new(hierarchy);
+    let mut totals = Sweep::default();
+    for p in 0..hierarchy.patches.len() as u32 {
+        let update = relax(hierarchy, &clusters, p);
+        take(hierarchy, update, &mut totals);
+    }
+    hierarchy.pull_clusters();
+    totals
 }
 
 /// Successive over-relaxation: Gauss–Seidel's sweep with each patch's step extrapolated,
@@ -205,31 +216,26 @@ impl GatheringSolver for OverRelaxed {
     }
 
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
-        let clusters = ClusterSweep::new(hierarchy);
-        let size = hierarchy.basis_size();
-        let mut totals = Sweep::default();
-        for p in 0..hierarchy.patches.len() as u32 {
-            let mut update = relax(hierarchy, &clusters, p);
-            for (k, &id) in update.elements.iter().enumerate() {
-                let old = hierarchy.radiance(id);
-                let new = &mut update.radiance[k * size..(k + 1) * size];
-                for (n, &o) in new.iter_mut().zip(old) {
+        sweep_in_order(hierarchy, |hierarchy, mut update, totals| {
+            let size = hierarchy.basis_size();
+            for (&id, step) in update
+                .elements
+                .iter()
+                .zip(update.radiance.chunks_exact_mut(size))
+            {
+                for (n, &o) in step.iter_mut().zip(hierarchy.radiance(id)) {
                     *n = o + (*n - o) * OVER_RELAXATION;
                 }
             }
             update.apply(hierarchy);
             // What the patch's leaves now send (the step's own total is Gauss–Seidel's); the absorbed
             // power is the step's, exact at the fixed point.
-            totals.exitant += update
-                .elements
-                .iter()
+            totals.exitant += (update.elements.iter())
                 .filter(|&&id| hierarchy.element(id).is_leaf())
                 .map(|&id| leaf_exitant(hierarchy, id))
                 .sum::<Rgb>();
             totals.absorbed += update.absorbed;
-        }
-        hierarchy.pull_clusters();
-        totals
+        })
     }
 }
 
