@@ -257,9 +257,9 @@ impl SimulationSettings {
 }
 
 /// The library's default is the classic solver the oracle experiments start from (constant basis,
-/// power oracle, `eps`, visibility at fixed source nodes); the command line's defaults differ (linear
-/// basis, ε = 3e-5, one shadow level, clustering where needed, jittered source nodes, error control to
-/// 30% of the mean radiance: `radiosity render --help`).
+/// power oracle, `eps`, Gauss–Seidel, visibility at fixed source nodes); the command line's defaults
+/// differ (linear basis, ε = 3e-5, one shadow level, clustering where needed, jittered source nodes,
+/// over-relaxed Gauss–Seidel, error control to 30% of the mean radiance: `radiosity render --help`).
 impl Default for SimulationSettings {
     fn default() -> Self {
         SimulationSettings {

@@ -210,8 +210,9 @@ pub struct SolveArgs {
     /// cache and program first, elements and links in the rest (default: half the machine's memory).
     #[arg(long, value_parser = parse_bytes, value_name = "BYTES")]
     pub max_memory: Option<usize>,
-    /// Iterative solver for the linear system.
-    #[arg(long, value_enum, default_value_t = SolverKind::GaussSeidel)]
+    /// Iterative solver for the linear system: over-relaxed Gauss–Seidel by default (the same solution
+    /// as Gauss–Seidel in about a third fewer sweeps).
+    #[arg(long, value_enum, default_value_t = SolverKind::Sor)]
     pub solver: SolverKind,
     /// Visibility: exact ray casting (bvh, alias exact), extinction through clusters, or multires.
     #[arg(long, value_enum, default_value_t = VisibilityKind::Bvh)]
