@@ -91,50 +91,64 @@ fn white_furnace_converges_to_e_over_one_minus_rho_everywhere() {
     }
 }
 
-/// A furnace of reflectance 0.9 (measured: 49 and 33 sweeps, both within 1% everywhere), where
-/// Gauss–Seidel's error falls slowly and over-relaxation's factor
-/// 1.2 is past the bound `2 / (1 + ρ) ≈ 1.05` below which its convergence is proven: it reaches the
-/// same solution as Gauss–Seidel in fewer sweeps, and both reach `E / (1 − ρ)` within the ρ = 0.5
-/// furnace's 0.5% times `ρ / (1 − ρ)`, 9 here (a relative error `δ` in what the links gather,
-/// their form factors' closure, becomes `δ ρ / (1 − ρ)` in the geometric series).
+/// Furnaces of reflectance 0.9 and 0.98 (measured: Gauss–Seidel 49 and 212 sweeps, over-relaxation
+/// 17 and 36, all within 1% and 3.6% everywhere), where Gauss–Seidel's error falls slowly: SOR reaches
+/// the same solution in fewer sweeps, and both reach `E / (1 − ρ)` within the ρ = 0.5 furnace's 0.5%
+/// times `ρ / (1 − ρ)` (a relative error `δ` in what the links gather, their form factors' closure,
+/// becomes `δ ρ / (1 − ρ)` in the geometric series).
+///
+/// How many fewer: in a furnace every row of `F` sums to 1, so the Jacobi matrix's spectral radius is
+/// `μ = ρ`, Gauss–Seidel's error falls by `μ²` a sweep and SOR's at the best `ω` by
+/// `ω − 1 = (1 − √(1 − μ²)) / (1 + √(1 − μ²))`: at ρ = 0.98, 0.960 against 0.668, about ten times
+/// fewer sweeps for the same reduction once the slowest mode dominates. Over-relaxation must learn `ω`
+/// first (sweeps at 1.2 until two steady ratios), so it is held to three times fewer.
 #[test]
-fn over_relaxation_reaches_the_bright_furnace_in_fewer_sweeps() {
-    let (rho, e) = (0.9, 1.0);
-    let expected = e / (1.0 - rho);
-    let allowed = 0.005 * rho / (1.0 - rho);
-    let solutions = [SolverKind::GaussSeidel, SolverKind::Sor].map(|solver| {
-        let solution = solve_furnace(rho, e, solver);
-        assert!(
-            solution.report.diverged_in_pass.is_none(),
-            "{solver:?} diverged"
-        );
-        let h = &solution.hierarchy;
-        let mut worst: f64 = 0.0;
-        for id in h.leaves() {
-            for c in h.average_radiance(id).to_array() {
-                worst = worst.max((c - expected).abs() / expected);
+fn over_relaxation_reaches_bright_furnaces_in_fewer_sweeps() {
+    for rho in [0.9, 0.98] {
+        let e = 1.0;
+        let expected = e / (1.0 - rho);
+        let allowed = 0.005 * rho / (1.0 - rho);
+        let solutions = [SolverKind::GaussSeidel, SolverKind::Sor].map(|solver| {
+            let solution = solve_furnace(rho, e, solver);
+            assert!(
+                solution.report.diverged_in_pass.is_none(),
+                "ρ = {rho}: {solver:?} diverged"
+            );
+            let h = &solution.hierarchy;
+            let mut worst: f64 = 0.0;
+            for id in h.leaves() {
+                for c in h.average_radiance(id).to_array() {
+                    worst = worst.max((c - expected).abs() / expected);
+                }
             }
-        }
+            assert!(
+                worst < allowed,
+                "ρ = {rho}: {solver:?}: a leaf is {worst} off, allowed {allowed}"
+            );
+            solution
+        });
+        let [gs, sor] = &solutions;
+        let (gs_sweeps, sor_sweeps) = (gs.report.iterations, sor.report.iterations);
         assert!(
-            worst < allowed,
-            "{solver:?}: a leaf is {worst} off, allowed {allowed}"
+            sor_sweeps < gs_sweeps,
+            "ρ = {rho}: sweeps: Gauss–Seidel {gs_sweeps}, SOR {sor_sweeps}"
         );
-        solution
-    });
-    let [gs, sor] = &solutions;
-    assert!(
-        sor.report.iterations < gs.report.iterations,
-        "sweeps: Gauss–Seidel {}, SOR {}",
-        gs.report.iterations,
-        sor.report.iterations
-    );
-    // The same fixed point: each stops once a sweep changes the total power by under 1e-5, which
-    // leaves at most about 1e-5 ρ / (1 − ρ) of it to go (consistency, not ground truth).
-    let (a, b) = (gs.report.exitant_power.g, sor.report.exitant_power.g);
-    assert!(
-        (a - b).abs() / a < 1e-5 * rho / (1.0 - rho),
-        "exitant power {a} against {b}"
-    );
+        if rho > 0.95 {
+            assert!(
+                3 * sor_sweeps < gs_sweeps,
+                "ρ = {rho}: sweeps: Gauss–Seidel {gs_sweeps}, SOR {sor_sweeps}"
+            );
+        }
+        // The same fixed point: each stops once a sweep changes the total power by under 1e-5 of it,
+        // which leaves at most about 1e-5 r / (1 − r) to go at a rate `r` a sweep: ρ² for
+        // Gauss–Seidel (consistency, not ground truth).
+        let (a, b) = (gs.report.exitant_power.g, sor.report.exitant_power.g);
+        let left = 1e-5 * rho * rho / (1.0 - rho * rho);
+        assert!(
+            (a - b).abs() / a < 2.0 * left,
+            "ρ = {rho}: exitant power {a} against {b}"
+        );
+    }
 }
 
 #[test]
@@ -195,26 +209,30 @@ fn the_last_pass_sweeps_to_the_tolerance_asked_for() {
 /// A closed box whose walls reflect more than they receive (ρ = 1.2, not physical) has no solution:
 /// the sweeps' change grows by ρ per sweep, and the solve stops after `DIVERGING_SWEEPS` of them
 /// with the verdict, instead of sweeping to the iteration limit pass after pass. The same box at
-/// ρ = 0.9 converges without it.
+/// ρ = 0.9 converges without it. Over-relaxation learns nothing from growing changes (its `ω` stays
+/// at 1.2), so it stops as soon.
 #[test]
 fn a_box_that_reflects_more_than_it_receives_stops_with_diverging_sweeps() {
     use radiosity::solvers::DIVERGING_SWEEPS;
-    for (rho, diverges) in [(1.2, true), (0.9, false)] {
-        let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, 1.0);
-        let settings = SimulationSettings {
-            eps: 1e-3,
-            ..Default::default()
-        };
-        let r = simulate(&scene, &settings, &quiet()).expect("solve").report;
-        if diverges {
-            assert_eq!(r.diverged_in_pass, Some(1), "ρ {rho}");
-            assert_eq!(r.error.stopped_by, "diverging sweeps");
-            assert!(!r.converged);
-            // The first sweep has no change, the second none to compare with.
-            assert_eq!(r.iterations, DIVERGING_SWEEPS + 2);
-        } else {
-            assert_eq!(r.diverged_in_pass, None, "ρ {rho}");
-            assert!(r.converged, "ρ {rho}");
+    for solver in [SolverKind::GaussSeidel, SolverKind::Sor] {
+        for (rho, diverges) in [(1.2, true), (0.9, false)] {
+            let scene = generators::furnace(DVec3::new(1.0, 1.5, 2.0), rho, 1.0);
+            let settings = SimulationSettings {
+                eps: 1e-3,
+                solver,
+                ..Default::default()
+            };
+            let r = simulate(&scene, &settings, &quiet()).expect("solve").report;
+            if diverges {
+                assert_eq!(r.diverged_in_pass, Some(1), "{solver:?} ρ {rho}");
+                assert_eq!(r.error.stopped_by, "diverging sweeps");
+                assert!(!r.converged);
+                // The first sweep has no change, the second none to compare with.
+                assert_eq!(r.iterations, DIVERGING_SWEEPS + 2, "{solver:?}");
+            } else {
+                assert_eq!(r.diverged_in_pass, None, "{solver:?} ρ {rho}");
+                assert!(r.converged, "{solver:?} ρ {rho}");
+            }
         }
     }
 }

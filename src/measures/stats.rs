@@ -58,7 +58,10 @@ pub struct RunStats {
     pub seconds: PhaseSeconds,
     /// Σ π A E (W per channel).
     pub emitted_power: Rgb,
-    /// Σ π A (1 - ρ) H over leaves (W per channel).
+    /// Σ π A (1 - ρ) H over the leaves of surfaces that reflect (W per channel). Black surfaces
+    /// (ρ = 0, a lamp's own face) get no links, so what they absorb is not counted: a closed white box lit
+    /// by a two-sided black lamp 1 mm under its ceiling shows 75% of the emission absorbed at
+    /// ρ = 0.5, 39% at ρ = 0.98 (the lamp's back lights the gap, and the lamp takes what returns).
     pub absorbed_power: Rgb,
     pub threads: usize,
     /// Bytes held by elements, coefficients and links.

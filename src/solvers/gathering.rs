@@ -2,7 +2,7 @@
 //! Bekaert–Willems eq. (2), each followed by push-pull: Jacobi (all elements gather from the previous
 //! iterate, in parallel), Gauss–Seidel (patches in order, each seeing the radiance already updated by the
 //! patches before it; sequential but converging about twice as fast), its over-relaxed form (each
-//! patch's step extrapolated by a fixed factor) and Southwell (the patch with the largest unshot change
+//! patch's step extrapolated by a factor learned from the sweeps' rate) and Southwell (the patch with the largest unshot change
 //! first). Within one patch the elements gather in parallel where the patch is
 //! large enough to pay for it ([`relax`]): what they gather reads only other patches and the sweep's
 //! cluster values, so the order is Gauss–Seidel's whatever the threads.
@@ -195,11 +195,16 @@ fn sweep_in_order(
 }
 
 /// Successive over-relaxation: Gauss–Seidel's sweep with each patch's step extrapolated,
-/// `L ← L + ω (L_GS − L)` on every coefficient of its tree, with [`OVER_RELAXATION`] for `ω`. The same
-/// fixed point as Gauss–Seidel in fewer sweeps where its steps keep one sign from sweep to sweep (the
-/// classroom's solve, 24 sweeps → 16; `BENCHMARKS.md`, "Over-relaxed Gauss–Seidel").
+/// `L ← L + ω (L_GS − L)` on every coefficient of its tree. The same fixed point as Gauss–Seidel in
+/// fewer sweeps where its steps keep one sign from sweep to sweep (the classroom's solve, 24 sweeps →
+/// 16; `BENCHMARKS.md`, "Over-relaxed Gauss–Seidel").
 ///
-/// Why 1.2 is safe: with reciprocal form factors (`A_i F_ij = A_j F_ji`), row `i` of `I − ρF` times
+/// `ω` starts at [`OVER_RELAXATION`] and follows the scene ([`Relaxation::observe`]): the brighter the
+/// room, the slower Gauss–Seidel's error falls and the larger the best `ω` (a closed white box of
+/// reflectance 0.98: 222 Gauss–Seidel sweeps, 160 at ω = 1.2, 47 at 1.8; `BENCHMARKS.md`, "SOR by
+/// default").
+///
+/// Why it converges: with reciprocal form factors (`A_i F_ij = A_j F_ji`), row `i` of `I − ρF` times
 /// `A_i / ρ_i` gives a symmetric matrix, strictly diagonally dominant for `ρ < 1`, so positive definite,
 /// and SOR (pointwise or by blocks, which row scaling does not change) converges for every `0 < ω < 2`
 /// (Ostrowski–Reich). The hierarchy's links are reciprocal only to within their form factors' error,
@@ -209,12 +214,75 @@ fn sweep_in_order(
 /// as for every solver (`solvers::DIVERGING_SWEEPS`). The command line's default solver: at the held-out
 /// scenes' points its RMS error is Gauss–Seidel's within 0.05 points (`BENCHMARKS.md`, "SOR by
 /// default").
-#[derive(Clone, Copy, Debug, Default)]
-pub struct OverRelaxed;
+#[derive(Debug, Default)]
+pub struct OverRelaxed {
+    relaxation: std::sync::Mutex<Relaxation>,
+}
 
-/// `ω` of [`OverRelaxed`]: on the classroom 1.1, 1.15 and 1.2 took 21, 19 and 16 sweeps where
-/// Gauss–Seidel takes 24, and 1.4 overshot (25).
+/// The smallest `ω` of [`OverRelaxed`]: on the classroom 1.1, 1.15 and 1.2 took 21, 19 and 16 sweeps
+/// where Gauss–Seidel takes 24, and 1.4 overshot (25); the estimate of [`Relaxation::observe`] gives
+/// 1.15 there, a little under what was measured best.
 pub const OVER_RELAXATION: f64 = 1.2;
+
+/// The largest `ω` the estimate may set: the best measured for a closed box of reflectance 0.98 (47
+/// sweeps; 1.6: 64), with room below 2, where SOR stops converging.
+pub const MAX_OVER_RELAXATION: f64 = 1.8;
+
+/// What [`OverRelaxed`] has seen of its sweeps: the total exitant power after the last, the change of
+/// the one before, the ratio of the last two changes, and the `ω` in use (0 before the first sweep).
+#[derive(Debug, Default)]
+struct Relaxation {
+    omega: f64,
+    power: Option<f64>,
+    change: Option<f64>,
+    ratio: Option<f64>,
+}
+
+impl Relaxation {
+    fn omega(&self) -> f64 {
+        if self.omega > 0.0 {
+            self.omega
+        } else {
+            OVER_RELAXATION
+        }
+    }
+
+    /// Takes the total exitant power after a sweep and sets the next sweep's `ω` (Young's adaptive
+    /// SOR, as in Hageman and Young 1981, ch. 9): once two successive ratios `λ` of the power's changes
+    /// agree within [`STEADY_RATIO`] (the iteration's slowest mode has taken over, not a refinement's
+    /// transient), the Jacobi spectral radius `μ` follows from SOR's eigenvalue relation
+    /// `(λ + ω − 1)² = λ ω² μ²`, and the best `ω` for it is `2 / (1 + √(1 − μ²))`, kept within
+    /// [`OVER_RELAXATION`] and [`MAX_OVER_RELAXATION`]. At or past the best `ω`, `λ = ω − 1` and the
+    /// relation returns `ω` itself, so the estimate does not creep up. The theory assumes a
+    /// consistently ordered matrix, which a room's is not; it is what fits the measurements (module
+    /// documentation of [`OverRelaxed`]). Every value comes from totals summed in patch order, so `ω`
+    /// does not depend on the thread count.
+    fn observe(&mut self, power: f64) {
+        let omega = self.omega();
+        let change = self.power.map(|last| (power - last).abs());
+        let ratio = match (change, self.change) {
+            (Some(c), Some(last)) if last > 0.0 => Some(c / last),
+            _ => None,
+        };
+        if let (Some(r), Some(last)) = (ratio, self.ratio) {
+            let steady = (r - last).abs() <= STEADY_RATIO * r.max(last);
+            if steady && r > 0.0 && r < 1.0 && last < 1.0 {
+                let lambda = (r * last).sqrt();
+                let mu_squared =
+                    ((lambda + omega - 1.0).powi(2) / (lambda * omega * omega)).min(1.0);
+                let best = 2.0 / (1.0 + (1.0 - mu_squared).sqrt());
+                self.omega = best.clamp(OVER_RELAXATION, MAX_OVER_RELAXATION);
+            }
+        }
+        self.power = Some(power);
+        self.change = change;
+        self.ratio = ratio;
+    }
+}
+
+/// How far apart, relative to the larger, two successive ratios of power changes may be and still be
+/// read as one steady rate ([`Relaxation::observe`]).
+const STEADY_RATIO: f64 = 0.2;
 
 impl GatheringSolver for OverRelaxed {
     fn name(&self) -> &'static str {
@@ -222,7 +290,12 @@ impl GatheringSolver for OverRelaxed {
     }
 
     fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
-        sweep_in_order(hierarchy, |hierarchy, mut update, totals| {
+        let mut relaxation = self
+            .relaxation
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let omega = relaxation.omega();
+        let totals = sweep_in_order(hierarchy, |hierarchy, mut update, totals| {
             let size = hierarchy.basis_size();
             for (&id, step) in update
                 .elements
@@ -230,7 +303,7 @@ impl GatheringSolver for OverRelaxed {
                 .zip(update.radiance.chunks_exact_mut(size))
             {
                 for (n, &o) in step.iter_mut().zip(hierarchy.radiance(id)) {
-                    *n = o + (*n - o) * OVER_RELAXATION;
+                    *n = o + (*n - o) * omega;
                 }
             }
             update.apply(hierarchy);
@@ -241,7 +314,9 @@ impl GatheringSolver for OverRelaxed {
                 .map(|&id| leaf_exitant(hierarchy, id))
                 .sum::<Rgb>();
             totals.absorbed += update.absorbed;
-        })
+        });
+        relaxation.observe(totals.exitant.r + totals.exitant.g + totals.exitant.b);
+        totals
     }
 }
 
@@ -285,5 +360,65 @@ impl GatheringSolver for Southwell {
         }
         hierarchy.pull_clusters();
         totals
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rate `λ` at which SOR with `omega` shrinks the error of a consistently ordered system whose
+    /// Jacobi matrix has spectral radius `mu`, below the best `ω`: the larger root of
+    /// `(λ + ω − 1)² = λ ω² μ²` (Young's relation).
+    fn sor_rate(omega: f64, mu: f64) -> f64 {
+        let b = omega * mu;
+        let root = (b + (b * b - 4.0 * (omega - 1.0)).sqrt()) / 2.0;
+        root * root
+    }
+
+    /// Feeds `relaxation` the total powers of `sweeps` sweeps whose changes shrink by the rate SOR has
+    /// at each sweep's `ω`.
+    fn feed(relaxation: &mut Relaxation, mu: f64, sweeps: usize) {
+        let (mut power, mut change) = (relaxation.power.unwrap_or(0.0), 1.0);
+        for _ in 0..sweeps {
+            power += change;
+            relaxation.observe(power);
+            let omega = relaxation.omega();
+            let best = 2.0 / (1.0 + (1.0 - mu * mu).sqrt());
+            change *= if omega < best {
+                sor_rate(omega, mu)
+            } else {
+                omega - 1.0
+            };
+        }
+    }
+
+    /// From the powers of a system with a known `μ`, the estimate finds the best `ω`,
+    /// `2 / (1 + √(1 − μ²))`, and stays there; below [`OVER_RELAXATION`]'s `ω` it keeps that floor, and
+    /// a bright room's is held to [`MAX_OVER_RELAXATION`].
+    #[test]
+    fn the_relaxation_factor_is_the_best_for_the_rate_the_sweeps_show() {
+        for mu in [0.5, 0.8, 0.95, 0.97, 0.995] {
+            let mut relaxation = Relaxation::default();
+            feed(&mut relaxation, mu, 12);
+            let best = 2.0 / (1.0 + (1.0 - mu * mu).sqrt());
+            let expected = best.clamp(OVER_RELAXATION, MAX_OVER_RELAXATION);
+            assert!(
+                (relaxation.omega() - expected).abs() < 1e-9,
+                "μ = {mu}: ω {} against {expected}",
+                relaxation.omega()
+            );
+        }
+    }
+
+    /// A refinement between passes makes one large change: neither it nor the first ratio after it
+    /// moves `ω`, since two successive ratios must agree first.
+    #[test]
+    fn a_jump_in_power_does_not_move_the_relaxation_factor() {
+        let mut relaxation = Relaxation::default();
+        for power in [1.0, 1.5, 1.75, 10.0, 10.5, 10.6] {
+            relaxation.observe(power);
+        }
+        assert_eq!(relaxation.omega(), OVER_RELAXATION);
     }
 }

@@ -140,6 +140,7 @@ pub struct SolveReport {
     /// Power-carrying lines of Monte Carlo radiosity ([`stochastic`]).
     pub shooting_rays: u64,
     pub emitted_power: Rgb,
+    /// What the reflecting surfaces absorb ([`crate::measures::stats::RunStats::absorbed_power`]).
     pub absorbed_power: Rgb,
     pub exitant_power: Rgb,
     pub refine_seconds: f64,
