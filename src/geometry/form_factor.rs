@@ -36,13 +36,9 @@ pub fn point_to_point(x: DVec3, nx: DVec3, y: DVec3, ny: DVec3) -> f64 {
 /// for non-finite input.
 pub fn point_to_polygon(x: DVec3, nx: DVec3, polygon: &Shape) -> f64 {
     let verts = polygon.vertices();
-    // The source emits from its front side only (the side its vertex order's normal points to: a
-    // multiple of the vector area, with no square root).
-    let facing = match polygon {
-        Shape::Triangle(v) => (v[1] - v[0]).cross(v[2] - v[0]),
-        Shape::Quad(v) => (v[2] - v[0]).cross(v[3] - v[1]),
-    };
-    if facing.dot(x - verts[0]) <= 0.0 {
+    // The source emits from its front side only (the side its vector area points to: no square
+    // root needed).
+    if polygon.vector_area().dot(x - verts[0]) <= 0.0 {
         return 0.0;
     }
     let height = |p: DVec3| nx.dot(p - x);

@@ -98,9 +98,15 @@ impl Shape {
         self.vertices().len()
     }
 
-    /// Vector area (Newell's method): its length is the area and its direction the front normal.
+    /// Vector area: its length is the area and its direction the front normal. Newell's sum over the
+    /// edges ([`vector_area`]) is, for a triangle, half the cross product of two edges and, for a
+    /// quadrilateral (planar or not), half that of its diagonals: one cross product instead of one
+    /// per edge, and of differences, which keeps the digits that corners far from the origin lose.
     pub fn vector_area(&self) -> DVec3 {
-        vector_area(self.vertices())
+        match self {
+            Shape::Triangle([a, b, c]) => 0.5 * (*b - *a).cross(*c - *a),
+            Shape::Quad([a, b, c, d]) => 0.5 * (*c - *a).cross(*d - *b),
+        }
     }
 
     pub fn area(&self) -> f64 {
@@ -117,8 +123,7 @@ impl Shape {
             Shape::Triangle(v) => (v[0] + v[1] + v[2]) / 3.0,
             // Area centroid of the quad as two triangles (their doubled areas: the factor cancels).
             Shape::Quad(v) => {
-                let a1 = (v[1] - v[0]).cross(v[2] - v[0]).length();
-                let a2 = (v[2] - v[0]).cross(v[3] - v[0]).length();
+                let (a1, a2) = diagonal_halves(v);
                 let c1 = (v[0] + v[1] + v[2]) / 3.0;
                 let c2 = (v[0] + v[2] + v[3]) / 3.0;
                 if a1 + a2 > 0.0 {
@@ -221,8 +226,7 @@ impl Shape {
         match self {
             Shape::Triangle(v) => sample_triangle(v[0], v[1], v[2], s),
             Shape::Quad(v) => {
-                let a1 = Shape::Triangle([v[0], v[1], v[2]]).area();
-                let a2 = Shape::Triangle([v[0], v[2], v[3]]).area();
+                let (a1, a2) = diagonal_halves(v);
                 let split = if a1 + a2 > 0.0 { a1 / (a1 + a2) } else { 0.5 };
                 if s.x < split {
                     sample_triangle(v[0], v[1], v[2], DVec2::new(s.x / split, s.y))
@@ -279,6 +283,19 @@ impl Shape {
     }
 
     /// Longest edge length: the element "size" used by minimum-size rules.
+    /// The sphere about the mean of the corners through the farthest corner: it holds the convex
+    /// shape, so `|x − centre| − radius` bounds the distance from `x` to the shape from below, a
+    /// cheap test before an exact one.
+    pub fn corner_sphere(&self) -> (DVec3, f64) {
+        let corners = self.vertices();
+        let centre = corners.iter().sum::<DVec3>() / corners.len() as f64;
+        let radius = corners
+            .iter()
+            .map(|v| v.distance(centre))
+            .fold(0.0, f64::max);
+        (centre, radius)
+    }
+
     pub fn diameter(&self) -> f64 {
         let v = self.vertices();
         let mut d: f64 = 0.0;
@@ -352,6 +369,15 @@ fn barycentric_uv(a: DVec3, b: DVec3, c: DVec3, p: DVec3) -> DVec2 {
         return DVec2::ZERO;
     }
     DVec2::new((d22 * r1 - d12 * r2) / det, (d11 * r2 - d12 * r1) / det)
+}
+
+/// Doubled areas of a quadrilateral's triangles `(v0, v1, v2)` and `(v0, v2, v3)` (callers use
+/// only their ratio).
+fn diagonal_halves(v: &[DVec3; 4]) -> (f64, f64) {
+    (
+        (v[1] - v[0]).cross(v[2] - v[0]).length(),
+        (v[2] - v[0]).cross(v[3] - v[0]).length(),
+    )
 }
 
 fn sample_triangle(a: DVec3, b: DVec3, c: DVec3, s: DVec2) -> DVec3 {

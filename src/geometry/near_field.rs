@@ -80,12 +80,7 @@ pub fn is_near(receiver: &Shape, source: &Shape) -> bool {
     let reach = 0.5 * receiver.diameter();
     // Most links are far: no point of the receiver within reach of a sphere around the source's
     // corners.
-    let corners = source.vertices();
-    let centre = corners.iter().sum::<DVec3>() / corners.len() as f64;
-    let radius = corners
-        .iter()
-        .map(|v| v.distance(centre))
-        .fold(0.0, f64::max);
+    let (centre, radius) = source.corner_sphere();
     let points = || std::iter::once(receiver.centroid()).chain(receiver.vertices().iter().copied());
     if points().all(|x| x.distance(centre) - radius >= reach) {
         return false;

@@ -419,6 +419,8 @@ impl SourceSampler<'_> {
         let mut jittered = Vec::new();
         let cells = (self.y_nodes.len() as f64).sqrt().round() as usize;
         let far = NEAR_SOURCE * self.source.diameter();
+        // Most nodes are far from the source: its corner sphere tells without the exact distance.
+        let (centre, radius) = self.source.corner_sphere();
         for (k, x) in nodes.iter().enumerate() {
             let exact = point_to_polygon(x.point, self.n_r, self.source);
             out.factor_range = (out.factor_range.0.min(exact), out.factor_range.1.max(exact));
@@ -436,7 +438,8 @@ impl SourceSampler<'_> {
                     unit_interval(state)
                 };
                 jittered_nodes(self.source, cells, unit, &mut jittered);
-                let near = distance_to_polygon(x.point, self.source) < far;
+                let near = x.point.distance(centre) - radius < far
+                    && distance_to_polygon(x.point, self.source) < far;
                 self.row(x.point, near.then_some(exact), &jittered, None, row)
             };
             out.rays += rays;
