@@ -13,6 +13,7 @@ use radiosity::hierarchy::{ErrorStorage, Hierarchy, Link, OracleFactor};
 use radiosity::pipeline::{simulate, Accuracy, OracleKind, SimulationSettings, SolverKind};
 use radiosity::progress::Progress;
 use radiosity::scene::{generators, Material, Polygon, Scene};
+use radiosity::solvers::clustering::SweepPlan;
 use radiosity::solvers::coupling::{couple, CouplingSettings};
 use radiosity::solvers::error_estimate::{estimate_errors, EstimateKind};
 use radiosity::solvers::gathering::{GatheringSolver, GaussSeidel};
@@ -69,8 +70,9 @@ fn solve_receiver(scene: &Scene, kind: BasisKind, level: u16, vis: &dyn Visibili
             oracle_factor: OracleFactor::NONE,
         });
     }
+    let plan = SweepPlan::new(&h);
     for _ in 0..3 {
-        GaussSeidel.sweep(&mut h);
+        GaussSeidel.sweep(&mut h, &plan);
     }
     h
 }
@@ -198,8 +200,9 @@ fn the_error_estimate_sums_the_levels_with_their_signs() {
                 });
             }
         }
+        let plan = SweepPlan::new(&h);
         for _ in 0..3 {
-            GaussSeidel.sweep(&mut h);
+            GaussSeidel.sweep(&mut h, &plan);
         }
         assert_estimates_track_the_true_error(&scene, &mut h, kind, EstimateKind::Signed);
     }

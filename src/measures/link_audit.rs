@@ -38,7 +38,7 @@ use crate::geometry::form_factor::point_to_point;
 use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, Link};
 use crate::oracles::{sample_kernel, OracleContext};
-use crate::solvers::clustering::ClusterSweep;
+use crate::solvers::clustering::{ClusterSweep, SweepPlan};
 use crate::solvers::gathering::{GatheringSolver, Jacobi};
 use crate::solvers::link_rng;
 use crate::visibility::Visibility;
@@ -618,7 +618,8 @@ pub fn audit_closure(h: &Hierarchy) -> ClosureAudit {
         .iter()
         .map(|p| pushed.pushed(p.root).g)
         .collect();
-    Jacobi.sweep(&mut furnace);
+    let plan = SweepPlan::new(&furnace);
+    Jacobi.sweep(&mut furnace, &plan);
     let mut rows: Vec<ClosureRow> = furnace
         .leaves()
         .into_iter()

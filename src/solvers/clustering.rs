@@ -835,9 +835,10 @@ impl Contents {
     }
 }
 
-/// What the clusters exchange in one gathering sweep, computed once per sweep so that a cluster link
-/// costs O(1) however many patches its ends hold, plus O(cluster size) per (cluster, direction bucket)
-/// that links carrying light use ([`carries_light`]):
+/// What the clusters exchange in one gathering sweep, computed once per sweep (the part that depends
+/// on the links alone, [`SweepPlan`], once per solve) so that a cluster link costs O(1) however many
+/// patches its ends hold, plus O(cluster size) per (cluster, direction bucket) that links carrying
+/// light use ([`carries_light`]):
 /// * *sent*: with item buffers, the radiance a cluster sends along a bucket, the average of its
 ///   patches' radiances over their visible projected areas along the bucket's centre direction,
 ///   `Σ_k L_k w_k / Σ_k w_k` ([`visible_areas_along`]), so that the coupling (which holds the exact
@@ -862,7 +863,7 @@ impl Contents {
 pub struct ClusterSweep {
     /// (source cluster, direction bucket) in use by links, sorted, with the radiance sent along it;
     /// empty without item buffers.
-    sent: Vec<((ElementId, u16), Sent)>,
+    sent: Vec<(u16, Sent)>,
     /// Where each cluster's entries of `sent` begin, by cluster id less the first cluster's (clusters
     /// are the elements from the first after the patch roots up to the root), and where they end: a
     /// cluster link finds its source's few buckets without a binary search over every key (a cache
@@ -878,10 +879,77 @@ pub struct ClusterSweep {
     contents: Contents,
 }
 
+/// The part of [`ClusterSweep`] that depends on the links alone: the (source cluster, direction
+/// bucket) pairs that links carrying light use, sorted, and where each cluster's pairs begin. Every
+/// sweep over one set of links reads the same plan, so a solve makes it once for all its sweeps
+/// instead of once per sweep (a sort of a million cluster links' keys: 0.23 s of the classroom's
+/// sixteen sweeps, BENCHMARKS.md, "One cross product per vector area"). Valid while the links are
+/// unchanged; made anew after refinement.
+#[derive(Default)]
+pub struct SweepPlan {
+    /// The buckets of each cluster in use, sorted, the clusters one after another (a bucket alone:
+    /// `first` says whose it is, and a plan held through the sweeps then costs office3 2 bytes an
+    /// entry instead of 8).
+    buckets: Vec<u16>,
+    /// Where each cluster's entries of `buckets` begin, by cluster id less the first cluster's, and
+    /// where they end ([`ClusterSweep`]'s `first`).
+    first: Vec<u32>,
+    /// The links the plan was made for (checked in debug builds).
+    links: usize,
+}
+
+impl SweepPlan {
+    /// The plan of the hierarchy's current links (empty without clusters or item buffers, where
+    /// clusters send their average radiance).
+    pub fn new(h: &Hierarchy) -> Self {
+        let links = if cfg!(debug_assertions) {
+            h.link_count()
+        } else {
+            0
+        };
+        let (Some(root), Some(_)) = (h.root_cluster, &h.item_buffers) else {
+            return SweepPlan {
+                links,
+                ..SweepPlan::default()
+            };
+        };
+        let mut keys: Vec<(ElementId, u16)> = (0..h.elements.len() as ElementId)
+            .into_par_iter()
+            .flat_map_iter(|id| {
+                h.element(id)
+                    .links
+                    .iter()
+                    .filter(|l| h.is_cluster(l.source) && carries_light(l))
+                    .map(move |l| (l.source, bucket_toward(h, l.source, h.center_of(id))))
+            })
+            .collect();
+        keys.par_sort_unstable();
+        keys.dedup();
+        let base = h.patches.len();
+        let mut first = vec![0u32; root as usize + 2 - base];
+        for &(cluster, _) in &keys {
+            first[cluster as usize - base + 1] += 1;
+        }
+        for k in 1..first.len() {
+            first[k] += first[k - 1];
+        }
+        SweepPlan {
+            buckets: keys.into_iter().map(|(_, bucket)| bucket).collect(),
+            first,
+            links,
+        }
+    }
+}
+
 impl ClusterSweep {
     /// The exchange for the hierarchy's current radiances and links.
     pub fn new(h: &Hierarchy) -> Self {
-        let mut sweep = Self::sent_only(h);
+        Self::planned(h, &SweepPlan::new(h))
+    }
+
+    /// [`ClusterSweep::new`] with the links' part already made (`plan`, of the current links).
+    pub fn planned(h: &Hierarchy, plan: &SweepPlan) -> Self {
+        let mut sweep = Self::sent_planned(h, plan);
         if h.root_cluster.is_some() {
             let pushed = sweep.push_from_clusters(h, Sharing::Pushed);
             (sweep.pushed, sweep.slopes) = (pushed.means, pushed.slopes);
@@ -895,6 +963,12 @@ impl ClusterSweep {
     /// classroom's estimates (`--accuracy 10% --max-passes 6`, a million cluster links) 2.1 s against
     /// 1.8 s, office3's 0.46 s against 0.40 s.
     pub fn sent_only(h: &Hierarchy) -> Self {
+        Self::sent_planned(h, &SweepPlan::new(h))
+    }
+
+    /// [`ClusterSweep::sent_only`] with the links' part already made.
+    fn sent_planned(h: &Hierarchy, plan: &SweepPlan) -> Self {
+        debug_assert_eq!(plan.links, h.link_count(), "a plan of other links");
         let mut sweep = ClusterSweep {
             sent: Vec::new(),
             first: Vec::new(),
@@ -902,38 +976,19 @@ impl ClusterSweep {
             slopes: Vec::new(),
             contents: Contents::default(),
         };
-        let Some(root) = h.root_cluster else {
-            return sweep;
-        };
-        if let Some(buffers) = &h.item_buffers {
+        if let (Some(_), Some(buffers)) = (h.root_cluster, &h.item_buffers) {
             sweep.contents = Contents::new(h);
-            let mut keys: Vec<(ElementId, u16)> = (0..h.elements.len() as ElementId)
-                .into_par_iter()
-                .flat_map_iter(|id| {
-                    h.element(id)
-                        .links
-                        .iter()
-                        .filter(|l| h.is_cluster(l.source) && carries_light(l))
-                        .map(move |l| (l.source, bucket_toward(h, l.source, h.center_of(id))))
-                })
-                .collect();
-            keys.par_sort_unstable();
-            keys.dedup();
-            let base = h.patches.len();
-            let mut first = vec![0u32; root as usize + 2 - base];
-            for &(cluster, _) in &keys {
-                first[cluster as usize - base + 1] += 1;
-            }
-            for k in 1..first.len() {
-                first[k] += first[k - 1];
-            }
-            sweep.first = first;
+            sweep.first = plan.first.clone();
             let contents = &sweep.contents;
-            sweep.sent = keys
+            let base = h.patches.len() as ElementId;
+            sweep.sent = (0..plan.first.len().saturating_sub(1))
                 .into_par_iter()
-                .map(|(cluster, bucket)| {
-                    let sent = sent_along(h, contents, buffers, cluster, bucket);
-                    ((cluster, bucket), sent)
+                .flat_map_iter(|k| {
+                    let cluster = base + k as ElementId;
+                    let own = plan.first[k] as usize..plan.first[k + 1] as usize;
+                    plan.buckets[own].iter().map(move |&bucket| {
+                        (bucket, sent_along(h, contents, buffers, cluster, bucket))
+                    })
                 })
                 .collect();
         }
@@ -970,7 +1025,7 @@ impl ClusterSweep {
             (Some(&start), Some(&end)) => &self.sent[start as usize..end as usize],
             _ => &[],
         };
-        Some(match own.binary_search_by_key(&bucket, |&((_, b), _)| b) {
+        Some(match own.binary_search_by_key(&bucket, |&(b, _)| b) {
             Ok(k) => own[k].1,
             // Not asked for by any link when the sweep began: computed on the spot, the same value.
             Err(_) => sent_along(h, &self.contents, buffers, source, bucket),

@@ -7,7 +7,7 @@
 //! large enough to pay for it ([`relax`]): what they gather reads only other patches and the sweep's
 //! cluster values, so the order is Gauss–Seidel's whatever the threads.
 
-use super::clustering::{carries_light, ClusterSweep};
+use super::clustering::{carries_light, ClusterSweep, SweepPlan};
 use super::push_pull::{leaf_exitant, push_pull, PatchUpdate};
 use crate::bases::MAX_BASIS_SIZE;
 use crate::color::Rgb;
@@ -27,8 +27,9 @@ pub struct Sweep {
 /// One iterative method for the coefficient system `L_i = E_i + ρ_i Σ_j K_ij L_j` on the current links.
 pub trait GatheringSolver: Sync + Send {
     fn name(&self) -> &'static str;
-    /// Performs one sweep, updating the radiance coefficients of every element.
-    fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep;
+    /// Performs one sweep, updating the radiance coefficients of every element; `plan` is the
+    /// current links' [`SweepPlan`], made once for all the sweeps between two refinements.
+    fn sweep(&self, hierarchy: &mut Hierarchy, plan: &SweepPlan) -> Sweep;
 }
 
 /// Adds the irradiance coefficients gathered over the links stored at `id` to `out`:
@@ -134,10 +135,10 @@ impl GatheringSolver for Jacobi {
         "jacobi"
     }
 
-    fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
+    fn sweep(&self, hierarchy: &mut Hierarchy, plan: &SweepPlan) -> Sweep {
         let h = &*hierarchy;
         let size = h.basis_size();
-        let clusters = ClusterSweep::new(h);
+        let clusters = ClusterSweep::planned(h, plan);
         let mut gathered = vec![Rgb::BLACK; h.elements.len() * size];
         gathered
             .par_chunks_mut(size)
@@ -170,8 +171,8 @@ impl GatheringSolver for GaussSeidel {
         "gauss-seidel"
     }
 
-    fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
-        sweep_in_order(hierarchy, |hierarchy, update, totals| {
+    fn sweep(&self, hierarchy: &mut Hierarchy, plan: &SweepPlan) -> Sweep {
+        sweep_in_order(hierarchy, plan, |hierarchy, update, totals| {
             apply(hierarchy, &update, totals)
         })
     }
@@ -182,9 +183,10 @@ impl GatheringSolver for GaussSeidel {
 /// other's updates.
 fn sweep_in_order(
     hierarchy: &mut Hierarchy,
+    plan: &SweepPlan,
     take: impl Fn(&mut Hierarchy, PatchUpdate, &mut Sweep),
 ) -> Sweep {
-    let clusters = ClusterSweep::new(hierarchy);
+    let clusters = ClusterSweep::planned(hierarchy, plan);
     let mut totals = Sweep::default();
     for p in 0..hierarchy.patches.len() as u32 {
         let update = relax(hierarchy, &clusters, p);
@@ -290,13 +292,13 @@ impl GatheringSolver for OverRelaxed {
         "sor"
     }
 
-    fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
+    fn sweep(&self, hierarchy: &mut Hierarchy, plan: &SweepPlan) -> Sweep {
         let mut relaxation = self
             .relaxation
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         let omega = relaxation.omega();
-        let totals = sweep_in_order(hierarchy, |hierarchy, mut update, totals| {
+        let totals = sweep_in_order(hierarchy, plan, |hierarchy, mut update, totals| {
             let size = hierarchy.basis_size();
             for (&id, step) in update
                 .elements
@@ -335,7 +337,7 @@ impl GatheringSolver for Southwell {
         "southwell"
     }
 
-    fn sweep(&self, hierarchy: &mut Hierarchy) -> Sweep {
+    fn sweep(&self, hierarchy: &mut Hierarchy, plan: &SweepPlan) -> Sweep {
         let patches = hierarchy.patches.len();
         let mut residuals = self
             .residuals
@@ -344,7 +346,7 @@ impl GatheringSolver for Southwell {
         residuals.resize(patches, f64::INFINITY);
         let mut order: Vec<usize> = (0..patches).collect();
         order.sort_by(|&a, &b| residuals[b].total_cmp(&residuals[a]).then(a.cmp(&b)));
-        let clusters = ClusterSweep::new(hierarchy);
+        let clusters = ClusterSweep::planned(hierarchy, plan);
         let mut totals = Sweep::default();
         for p in order {
             let update = relax(hierarchy, &clusters, p as u32);

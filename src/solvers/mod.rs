@@ -522,8 +522,10 @@ fn sweep_to_tolerance(
     // ratio, its relative change tending to a constant) and how many sweeps in a row it grew.
     let (mut last_step, mut growing) = (f64::NAN, 0);
     let runaway = RUNAWAY_FACTOR * runaway_power(hierarchy, report.emitted_power);
+    // The links stay as they are until the next refinement.
+    let plan = clustering::SweepPlan::new(hierarchy);
     for _ in 0..settings.max_iterations {
-        let sweep = solver.sweep(hierarchy);
+        let sweep = solver.sweep(hierarchy, &plan);
         report.iterations += 1;
         report.absorbed_power = sweep.absorbed;
         report.exitant_power = sweep.exitant;
