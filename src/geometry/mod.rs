@@ -282,7 +282,6 @@ impl Shape {
         b
     }
 
-    /// Longest edge length: the element "size" used by minimum-size rules.
     /// The sphere about the mean of the corners through the farthest corner: it holds the convex
     /// shape, so `|x − centre| − radius` bounds the distance from `x` to the shape from below, a
     /// cheap test before an exact one.
@@ -296,6 +295,8 @@ impl Shape {
         (centre, radius)
     }
 
+    /// Largest distance between two corners (a quad's diagonals included): the element "size" used by
+    /// minimum-size rules.
     pub fn diameter(&self) -> f64 {
         let v = self.vertices();
         let mut d: f64 = 0.0;
