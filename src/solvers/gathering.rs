@@ -232,8 +232,8 @@ pub const OVER_RELAXATION: f64 = 1.2;
 pub const MAX_OVER_RELAXATION: f64 = 1.8;
 
 /// What [`OverRelaxed`] has seen of its sweeps: the total exitant power after the last, the change of
-/// the one before, the ratio of the last two changes, and the `ω` in use (0 before the first sweep).
-#[derive(Debug, Default)]
+/// the one before, the ratio of the last two changes, and the `ω` in use.
+#[derive(Debug)]
 struct Relaxation {
     omega: f64,
     power: Option<f64>,
@@ -241,13 +241,20 @@ struct Relaxation {
     ratio: Option<f64>,
 }
 
+impl Default for Relaxation {
+    fn default() -> Self {
+        Relaxation {
+            omega: OVER_RELAXATION,
+            power: None,
+            change: None,
+            ratio: None,
+        }
+    }
+}
+
 impl Relaxation {
     fn omega(&self) -> f64 {
-        if self.omega > 0.0 {
-            self.omega
-        } else {
-            OVER_RELAXATION
-        }
+        self.omega
     }
 
     /// Takes the total exitant power after a sweep and sets the next sweep's `ω` (Young's adaptive
