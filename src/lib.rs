@@ -20,6 +20,7 @@ pub mod measures;
 pub mod memory;
 pub mod oracles;
 pub mod output;
+pub mod parallel;
 pub mod pipeline;
 pub mod progress;
 pub mod random;

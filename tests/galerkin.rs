@@ -13,10 +13,9 @@ use radiosity::hierarchy::{ErrorStorage, Hierarchy, Link, OracleFactor};
 use radiosity::pipeline::{simulate, Accuracy, OracleKind, SimulationSettings, SolverKind};
 use radiosity::progress::Progress;
 use radiosity::scene::{generators, Material, Polygon, Scene};
-use radiosity::solvers::clustering::SweepPlan;
 use radiosity::solvers::coupling::{couple, CouplingSettings};
 use radiosity::solvers::error_estimate::{estimate_errors, EstimateKind};
-use radiosity::solvers::gathering::{GatheringSolver, GaussSeidel};
+use radiosity::solvers::gathering::{GatheringSolver, GaussSeidel, SweepPlan};
 use radiosity::visibility::brute_force::BruteForce;
 use radiosity::visibility::Visibility;
 

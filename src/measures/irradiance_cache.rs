@@ -44,6 +44,7 @@ use super::illuminance::IrradianceGather;
 use crate::color::Rgb;
 use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
 use crate::hierarchy::ElementId;
+use crate::parallel::Uneven;
 use crate::random::{splitmix64, unit_interval};
 use crate::visibility::Visibility;
 use rayon::prelude::*;
@@ -206,10 +207,13 @@ impl IrradianceCache {
     /// Gathers at the records offered since the last call, in parallel (each on its own, so the result
     /// does not depend on the thread count).
     pub fn gather(&mut self, gather: &IrradianceGather) {
-        self.records[self.gathered..].par_iter_mut().for_each(|r| {
-            r.gathered = gather.radiance_at(r.patch, r.point);
-            r.correction += r.gathered;
-        });
+        self.records[self.gathered..]
+            .par_iter_mut()
+            .one_per_task()
+            .for_each(|r| {
+                r.gathered = gather.radiance_at(r.patch, r.point);
+                r.correction += r.gathered;
+            });
         self.gathered = self.records.len();
     }
 

@@ -14,6 +14,7 @@ use crate::hierarchy::{ElementId, Hierarchy};
 use crate::measures::fbem::Mask;
 use crate::measures::illuminance::{GatherSettings, IrradianceGather};
 use crate::measures::irradiance_cache::{CacheSettings, Candidate, IrradianceCache, Placement};
+use crate::parallel::Uneven;
 use crate::visibility::Visibility;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -307,6 +308,7 @@ fn draw(tracer: &Tracer) -> Image {
         image
             .pixels
             .par_chunks_mut(width)
+            .one_per_task()
             .enumerate()
             .for_each(|(y, row)| {
                 let mut memo = LeafCorrections::default();
@@ -335,6 +337,7 @@ fn draw(tracer: &Tracer) -> Image {
         };
         corners[first_new * (width + 1)..(height + 1) * (width + 1)]
             .par_chunks_mut(width + 1)
+            .one_per_task()
             .enumerate()
             .for_each(|(dy, row)| {
                 let y = y0 + first_new + dy;
@@ -345,6 +348,7 @@ fn draw(tracer: &Tracer) -> Image {
             });
         let corners = &corners;
         rows.par_chunks_mut(width)
+            .one_per_task()
             .enumerate()
             .for_each(|(dy, row)| {
                 let mut memo = LeafCorrections::default();

@@ -89,6 +89,7 @@ use crate::geometry::{DVec2, DVec3};
 use crate::geometry::{Domain, Shape};
 use crate::hierarchy::clusters::{ClusteringKind, Orientation, VisibleAreas};
 use crate::hierarchy::{ElementId, ElementKind, Hierarchy, LinkCoupling};
+use crate::parallel::Uneven;
 use crate::visibility::item_buffer::{
     bucket_direction, direction_bucket, exposed, exposed_nodes, pack_exposure, visible_fractions,
     Exposure, ItemBuffers,
@@ -836,7 +837,7 @@ impl Contents {
 }
 
 /// What the clusters exchange in one gathering sweep, computed once per sweep (the part that depends
-/// on the links alone, [`SweepPlan`], once per solve) so that a cluster link costs O(1) however many
+/// on the links alone, [`ClusterPlan`], once per solve) so that a cluster link costs O(1) however many
 /// patches its ends hold, plus O(cluster size) per (cluster, direction bucket) that links carrying
 /// light use ([`carries_light`]):
 /// * *sent*: with item buffers, the radiance a cluster sends along a bucket, the average of its
@@ -882,11 +883,11 @@ pub struct ClusterSweep {
 /// The part of [`ClusterSweep`] that depends on the links alone: the (source cluster, direction
 /// bucket) pairs that links carrying light use, sorted, and where each cluster's pairs begin. Every
 /// sweep over one set of links reads the same plan, so a solve makes it once for all its sweeps
-/// instead of once per sweep (a sort of a million cluster links' keys: 0.23 s of the classroom's
+/// (with the rest of their [`super::gathering::SweepPlan`]) instead of once per sweep (a sort of a million cluster links' keys: 0.23 s of the classroom's
 /// sixteen sweeps, BENCHMARKS.md, "One cross product per vector area"). Valid while the links are
 /// unchanged; made anew after refinement.
 #[derive(Default)]
-pub struct SweepPlan {
+pub struct ClusterPlan {
     /// The buckets of each cluster in use, sorted, the clusters one after another (a bucket alone:
     /// `first` says whose it is, and a plan held through the sweeps then costs office3 2 bytes an
     /// entry instead of 8).
@@ -898,7 +899,7 @@ pub struct SweepPlan {
     links: usize,
 }
 
-impl SweepPlan {
+impl ClusterPlan {
     /// The plan of the hierarchy's current links (empty without clusters or item buffers, where
     /// clusters send their average radiance).
     pub fn new(h: &Hierarchy) -> Self {
@@ -908,9 +909,9 @@ impl SweepPlan {
             0
         };
         let (Some(root), Some(_)) = (h.root_cluster, &h.item_buffers) else {
-            return SweepPlan {
+            return ClusterPlan {
                 links,
-                ..SweepPlan::default()
+                ..ClusterPlan::default()
             };
         };
         let mut keys: Vec<(ElementId, u16)> = (0..h.elements.len() as ElementId)
@@ -933,7 +934,7 @@ impl SweepPlan {
         for k in 1..first.len() {
             first[k] += first[k - 1];
         }
-        SweepPlan {
+        ClusterPlan {
             buckets: keys.into_iter().map(|(_, bucket)| bucket).collect(),
             first,
             links,
@@ -944,11 +945,11 @@ impl SweepPlan {
 impl ClusterSweep {
     /// The exchange for the hierarchy's current radiances and links.
     pub fn new(h: &Hierarchy) -> Self {
-        Self::planned(h, &SweepPlan::new(h))
+        Self::planned(h, &ClusterPlan::new(h))
     }
 
     /// [`ClusterSweep::new`] with the links' part already made (`plan`, of the current links).
-    pub fn planned(h: &Hierarchy, plan: &SweepPlan) -> Self {
+    pub fn planned(h: &Hierarchy, plan: &ClusterPlan) -> Self {
         let mut sweep = Self::sent_planned(h, plan);
         if h.root_cluster.is_some() {
             let pushed = sweep.push_from_clusters(h, Sharing::Pushed);
@@ -963,11 +964,11 @@ impl ClusterSweep {
     /// classroom's estimates (`--accuracy 10% --max-passes 6`, a million cluster links) 2.1 s against
     /// 1.8 s, office3's 0.46 s against 0.40 s.
     pub fn sent_only(h: &Hierarchy) -> Self {
-        Self::sent_planned(h, &SweepPlan::new(h))
+        Self::sent_planned(h, &ClusterPlan::new(h))
     }
 
     /// [`ClusterSweep::sent_only`] with the links' part already made.
-    fn sent_planned(h: &Hierarchy, plan: &SweepPlan) -> Self {
+    fn sent_planned(h: &Hierarchy, plan: &ClusterPlan) -> Self {
         debug_assert_eq!(plan.links, h.link_count(), "a plan of other links");
         let mut sweep = ClusterSweep {
             sent: Vec::new(),
@@ -983,6 +984,7 @@ impl ClusterSweep {
             let base = h.patches.len() as ElementId;
             sweep.sent = (0..plan.first.len().saturating_sub(1))
                 .into_par_iter()
+                .uneven()
                 .flat_map_iter(|k| {
                     let cluster = base + k as ElementId;
                     let own = plan.first[k] as usize..plan.first[k + 1] as usize;
@@ -1237,7 +1239,7 @@ impl ClusterSweep {
                 })
                 .count();
             let (now, later) = rest.split_at(run);
-            let shares: Vec<_> = now.par_iter().map(|&id| share_of(id)).collect();
+            let shares: Vec<_> = now.par_iter().uneven().map(|&id| share_of(id)).collect();
             for (&id, (share, slopes)) in now.iter().zip(shares) {
                 let contents = h.contents(h.cluster(id).expect("cluster"));
                 for (&p, s) in contents.iter().zip(share) {
@@ -1374,6 +1376,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     let gradients = Gradient::taken(h);
     let mut exposures: Vec<((u32, u16), Exposure)> = clusters
         .par_iter()
+        .uneven()
         .flat_map_iter(|&id| {
             let centre = h.center_of(id);
             // The nearest light-carrying source of each bucket (ties by element id).
@@ -1431,6 +1434,7 @@ pub fn expose(h: &Hierarchy, visibility: &dyn Visibility) {
     toward.dedup_by_key(|t| t.0);
     let sending: Vec<((u32, u16), Exposure)> = toward
         .into_par_iter()
+        .uneven()
         .filter(|&((id, key), _, _)| !buffers.has_exposure(id, key))
         .map(|((id, key), distance_squared, receiver)| {
             let bits = exposure(h, visibility, buffers, id, key & !SENDING, receiver, false);

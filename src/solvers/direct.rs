@@ -18,6 +18,7 @@ use super::refine::RefineSettings;
 use crate::color::Rgb;
 use crate::geometry::cubature::{nodes_on, rule, Node};
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::parallel::Uneven;
 use crate::visibility::Visibility;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -58,6 +59,7 @@ pub fn refine_and_gather(
             .collect();
         let results: Vec<(Vec<Rgb>, f64, u64)> = fresh
             .par_iter()
+            .uneven()
             .map(|&id| leaf_direct(h, visibility, id, degree))
             .collect();
         hierarchy

@@ -42,6 +42,7 @@ use crate::color::Rgb;
 use crate::geometry::cubature::{rule, MAX_POINTS};
 use crate::geometry::{DVec2, Domain};
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::parallel::Uneven;
 use crate::solvers::clustering::{moved_by_exposure, moved_by_sending, ClusterSweep};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -116,6 +117,7 @@ fn estimate(h: &Hierarchy, propagated: Option<&[f64]>, signed: bool, moved: &Mov
     h.patches
         .par_iter()
         .zip(&above)
+        .uneven()
         .for_each(|(patch, &above)| {
             let walk = TreeWalk {
                 h,

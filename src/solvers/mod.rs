@@ -523,7 +523,7 @@ fn sweep_to_tolerance(
     let (mut last_step, mut growing) = (f64::NAN, 0);
     let runaway = RUNAWAY_FACTOR * runaway_power(hierarchy, report.emitted_power);
     // The links stay as they are until the next refinement.
-    let plan = clustering::SweepPlan::new(hierarchy);
+    let plan = gathering::SweepPlan::new(hierarchy);
     for _ in 0..settings.max_iterations {
         let sweep = solver.sweep(hierarchy, &plan);
         report.iterations += 1;

@@ -17,6 +17,7 @@ use crate::geometry::{DVec3, Ray, Shape};
 use crate::hierarchy::clusters::ClusteringKind;
 use crate::hierarchy::{ElementId, Hierarchy, Link, LinkCoupling, OracleFactor};
 use crate::oracles::{reflected_source_radiance, Decision, OracleContext, RefinementOracle};
+use crate::parallel::Uneven;
 use crate::random::splitmix64;
 use crate::visibility::shaft::{ShaftPrior, ShaftTest, ShaftVerdict, MAX_PARTIAL_OCCLUDERS};
 use crate::visibility::Visibility;
@@ -627,6 +628,7 @@ pub fn refine_scheduled(
             let tests = &pass.partial_tests;
             candidates
                 .par_iter()
+                .uneven()
                 .map(|c| decide(&context, oracle, settings, c.judging(), tests))
                 .collect()
         };
@@ -751,6 +753,7 @@ fn judge_and_settle_stored(
         hierarchy.elements[range.clone()]
             .par_iter()
             .zip(range.clone())
+            .uneven()
             .map(|(e, id)| {
                 e.links
                     .iter()
@@ -1015,6 +1018,7 @@ fn couple_chunk(
     let h = &*hierarchy;
     let computed: Vec<(Option<(ElementId, Link)>, Coupled)> = chunk
         .into_par_iter()
+        .uneven()
         .map(|c| match c.coupling {
             Some(coupling) => (
                 Some((
