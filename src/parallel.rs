@@ -4,9 +4,10 @@
 //! so the last task of a loop may hold a quarter of its items while the other threads have nothing left
 //! to take. Where items cost from microseconds to milliseconds (a coupling with or without a
 //! near-field integral or an item buffer to draw, a patch tree of one element or of thousands, a final
-//! gather) that tail is most of a thread's idle time: on the classroom's goal command 3.6 of its 52
-//! CPU-seconds were idle, most at the ends of such loops (BENCHMARKS.md, "Uneven loops"). Bounding a
-//! task's items makes the tail at most that many items long. The split changes only which thread
+//! gather) that tail is most of a thread's idle time: 3.6–4.5 of the classroom's 52 CPU-seconds
+//! (goal command, two threads), 1.7–2.0 with tasks bounded and Gauss–Seidel's patches relaxed in runs
+//! (`solvers::gathering::PatchRuns`; BENCHMARKS.md, "Uneven loops"). Bounding a task's items makes the
+//! tail at most that many items long. The split changes only which thread
 //! computes an item, never what it computes or the order results are collected in, so answers do not
 //! depend on it.
 

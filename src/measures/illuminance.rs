@@ -65,6 +65,7 @@ use crate::geometry::cubature::{nodes_of, rule};
 use crate::geometry::form_factor::{point_to_point, point_to_polygon};
 use crate::geometry::{Aabb, DVec2, DVec3, Ray, Shape};
 use crate::hierarchy::{ElementId, Hierarchy};
+use crate::parallel::Uneven;
 use crate::random::{splitmix64, unit_interval};
 use crate::reference::PhotometricEstimate;
 use crate::visibility::{Visibility, SEGMENT_EPSILON};
@@ -376,7 +377,9 @@ impl<'a> IrradianceGather<'a> {
     /// The irradiance at every `(point, normal)`, in parallel; each point is gathered on its own, so the
     /// result does not depend on the thread count.
     pub fn at_all(&self, points: &[(DVec3, DVec3)]) -> Vec<PointIrradiance> {
-        points.par_iter().map(|&(x, n)| self.at(x, n)).collect()
+        (points.par_iter().one_per_task())
+            .map(|&(x, n)| self.at(x, n))
+            .collect()
     }
 
     /// A piece whose whole unoccluded contribution `U` is within [`RANDOM_STRATA`] piece budgets, from
@@ -1013,6 +1016,7 @@ pub fn illuminance_grid(
     );
     let references: Vec<Option<PhotometricEstimate>> = points
         .par_iter()
+        .one_per_task()
         .enumerate()
         .map(|(index, &(x, n))| {
             reference.map(|r| {

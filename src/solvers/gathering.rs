@@ -241,6 +241,7 @@ impl GatheringSolver for Jacobi {
             .for_each(|(id, out)| gather(h, &clusters, id as ElementId, out));
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
+            .uneven()
             .map(|p| {
                 push_pull(h, p, &|id, out| {
                     let g = &gathered[id as usize * size..(id as usize + 1) * size];

@@ -36,6 +36,7 @@ use crate::color::Rgb;
 use crate::geometry::{cosine_direction, DVec2, DVec3, Ray};
 use crate::hierarchy::{ElementId, Hierarchy};
 use crate::oracles::{Decision, OracleContext, RefinementOracle};
+use crate::parallel::Uneven;
 use crate::progress::Progress;
 use crate::random::splitmix64;
 use crate::visibility::Visibility;
@@ -265,6 +266,7 @@ fn deposit(
             };
             pending
                 .par_iter()
+                .uneven()
                 .map(|&(r, s)| {
                     let mut rng = link_rng(oracle_seed, r, s, ORACLE_STREAM);
                     let estimate = oracle.estimate(&context, r, s, &mut rng);
@@ -344,6 +346,7 @@ pub fn solve_stochastic(
         let h = &*hierarchy;
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
+            .uneven()
             .map(|p| push_pull(h, p, &|_, _| {}))
             .collect();
         for update in &updates {
@@ -421,6 +424,7 @@ pub fn solve_stochastic(
             .collect();
         let updates: Vec<PatchUpdate> = (0..h.patches.len() as u32)
             .into_par_iter()
+            .uneven()
             .map(|p| push_pull(h, p, &|id, out| out[0] += incident[id as usize]))
             .collect();
         unshot.resize(hierarchy.elements.len(), Rgb::BLACK);
