@@ -3,6 +3,7 @@
 
 use super::{Visibility, SEGMENT_EPSILON};
 use crate::geometry::{DVec2, DVec3, Ray, Shape};
+use crate::parallel::Uneven;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
@@ -90,7 +91,8 @@ pub fn closest_hit_rate(
 
 /// Runs `query` over `segments` on a fresh pool of `threads` threads and counts its `true` answers. The
 /// pool is built before the clock starts; chunks of 1024 segments keep scheduling overhead negligible,
-/// and each chunk only returns a count, so threads share no written memory.
+/// each a task of its own so that no thread waits on another's long run of chunks at the end
+/// ([`crate::parallel`]), and each chunk only returns a count, so threads share no written memory.
 fn rate(
     segments: &[(DVec3, DVec3)],
     threads: usize,
@@ -103,6 +105,7 @@ fn rate(
     let blocked = pool.install(|| {
         segments
             .par_chunks(1024)
+            .one_per_task()
             .map(|chunk| chunk.iter().filter(|(a, b)| query(*a, *b)).count())
             .sum()
     });
