@@ -7,15 +7,14 @@
 //! gather) that tail is most of a thread's idle time: 3.6–4.5 of the classroom's 52 CPU-seconds
 //! (goal command, two threads), 1.7–2.0 with tasks bounded and Gauss–Seidel's patches relaxed in runs
 //! (`solvers::gathering::PatchRuns`; BENCHMARKS.md, "Uneven loops"). Bounding a task's items makes the
-//! tail at most that many items long. The split changes only which thread
-//! computes an item, never what it computes or the order results are collected in, so answers do not
-//! depend on it.
+//! tail at most that many items long. The split changes only which thread computes an item, never what
+//! it computes or the order results are collected in, so answers do not depend on it.
 
 use rayon::iter::IndexedParallelIterator;
 
-/// Most items one task of an uneven loop takes. The overhead of a task (a deque push and pop, about a
-/// tenth of a microsecond) stays far below the cheapest items' cost at 16; 4 and 64 measured the same
-/// as 16 on the classroom's refinement, whose tails had held thousands of items.
+/// Most items one task of an uneven loop takes: enough that a task's own cost (a deque push and pop)
+/// is small beside its items' (microseconds each at the least); 4 and 64 measured the same as 16 on the
+/// classroom's couplings, whose tails had held thousands of items.
 pub const UNEVEN_TASK_ITEMS: usize = 16;
 
 /// Rayon's indexed loops, cut into tasks of at most [`UNEVEN_TASK_ITEMS`] items.

@@ -882,10 +882,10 @@ pub struct ClusterSweep {
 
 /// The part of [`ClusterSweep`] that depends on the links alone: the (source cluster, direction
 /// bucket) pairs that links carrying light use, sorted, and where each cluster's pairs begin. Every
-/// sweep over one set of links reads the same plan, so a solve makes it once for all its sweeps
-/// (with the rest of their [`super::gathering::SweepPlan`]) instead of once per sweep (a sort of a million cluster links' keys: 0.23 s of the classroom's
-/// sixteen sweeps, BENCHMARKS.md, "One cross product per vector area"). Valid while the links are
-/// unchanged; made anew after refinement.
+/// sweep over one set of links reads the same plan, so a solve makes it once for all its sweeps (with
+/// the rest of their [`super::gathering::SweepPlan`]) instead of once per sweep (a sort of a million
+/// cluster links' keys: 0.23 s of the classroom's sixteen sweeps, BENCHMARKS.md, "One cross product
+/// per vector area"). Valid while the links are unchanged; made anew after refinement.
 #[derive(Default)]
 pub struct ClusterPlan {
     /// The buckets of each cluster in use, sorted, the clusters one after another (a bucket alone:

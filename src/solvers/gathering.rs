@@ -89,7 +89,6 @@ fn reads_source_radiance(hierarchy: &Hierarchy, link: &Link) -> bool {
 /// What every sweep between two refinements reads of the links alone, made once for them all
 /// (`solvers::sweep_to_tolerance`): what the clusters send ([`ClusterPlan`]) and the runs of patches
 /// that relax together ([`PatchRuns`]). Valid while the links are unchanged.
-#[derive(Default)]
 pub struct SweepPlan {
     pub clusters: ClusterPlan,
     runs: PatchRuns,
@@ -110,9 +109,8 @@ impl SweepPlan {
 /// after another, as Gauss–Seidel orders them, or all at once. A run's patches therefore relax in
 /// parallel and their updates are applied in patch order: Gauss–Seidel's sweep, bit for bit, whatever
 /// the threads. Most patches of a furnished room gather from clusters and from a few surfaces nearby:
-/// the classroom's 12,462 patches make about 1,900 runs, and its sweeps, which left one of two
-/// threads idle half the time, took 2.35 s instead of 1.95 s (BENCHMARKS.md, "Uneven loops").
-#[derive(Default)]
+/// the classroom's 12,462 patches make about 1,900 runs, and its sweeps, which had left one of two
+/// threads idle half the time, take 1.92–1.95 s instead of 2.35 s (BENCHMARKS.md, "Uneven loops").
 struct PatchRuns {
     /// The first patch of each run, then the number of patches.
     starts: Vec<u32>,
