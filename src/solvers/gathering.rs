@@ -283,15 +283,17 @@ fn sweep_in_order(
     let clusters = ClusterSweep::planned(hierarchy, &plan.clusters);
     let mut totals = Sweep::default();
     for run in plan.runs.runs() {
+        if run.len() == 1 {
+            let update = relax(hierarchy, &clusters, run.start);
+            take(hierarchy, update, &mut totals);
+            continue;
+        }
         let h = &*hierarchy;
-        let updates: Vec<PatchUpdate> = if run.len() == 1 {
-            vec![relax(h, &clusters, run.start)]
-        } else {
-            run.into_par_iter()
-                .uneven()
-                .map(|p| relax(h, &clusters, p))
-                .collect()
-        };
+        let updates: Vec<PatchUpdate> = run
+            .into_par_iter()
+            .uneven()
+            .map(|p| relax(h, &clusters, p))
+            .collect();
         for update in updates {
             take(hierarchy, update, &mut totals);
         }
