@@ -453,6 +453,33 @@ impl Aabb {
         let e = self.extent();
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
     }
+
+    /// The box grown by `pad` on every side.
+    pub fn padded(&self, pad: f64) -> Aabb {
+        Aabb {
+            min: self.min - DVec3::splat(pad),
+            max: self.max + DVec3::splat(pad),
+        }
+    }
+
+    /// The parameter interval of the segment `from + t d`, `t ∈ [0, 1]`, inside the box
+    /// (`inverse = 1/d` per axis), `None` where it misses or only touches it. A segment parallel to a
+    /// slab and on one of its planes counts as inside that slab.
+    pub fn segment_range(&self, from: DVec3, inverse: DVec3) -> Option<(f64, f64)> {
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for axis in 0..3 {
+            let (lo, hi) = (
+                (self.min[axis] - from[axis]) * inverse[axis],
+                (self.max[axis] - from[axis]) * inverse[axis],
+            );
+            if lo.is_nan() || hi.is_nan() {
+                continue;
+            }
+            t0 = t0.max(lo.min(hi));
+            t1 = t1.min(lo.max(hi));
+        }
+        (t1 > t0).then_some((t0, t1))
+    }
 }
 
 #[cfg(test)]

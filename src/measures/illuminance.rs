@@ -531,6 +531,15 @@ impl<'a> IrradianceGather<'a> {
         // Division by one or four: exact, so the same weight as dividing each sample's.
         let solid_angle_per_ray = cone.solid_angle / (strata * strata);
         let (b, c) = cone.axis.any_orthonormal_pair();
+        // Only the cluster's own surfaces count, and they lie in its box: a direction that misses the
+        // box (padded against the rounding of hit points) adds nothing, without a ray, and one that
+        // meets it needs the closest hit only up to where it leaves the box (the same hit, as
+        // anything farther is not the cluster's).
+        let reach = Aabb {
+            min: walked.center - walked.half,
+            max: walked.center + walked.half,
+        }
+        .padded(BOX_PAD * (walked.radius + walked.center.abs().max_element()));
         for cell in jittered_cells(strata, self.uniforms(x, cone.axis)) {
             let cos_theta = 1.0 - cell.x * (1.0 - cone.cos_half_angle);
             let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
@@ -540,9 +549,12 @@ impl<'a> IrradianceGather<'a> {
             if cos_x <= 0.0 {
                 continue;
             }
-            out.rays += 1;
             let ray = Ray::new(x, direction * cone.far);
-            let Some(hit) = self.visibility.intersect(&ray, SEGMENT_EPSILON, 1.0) else {
+            let Some((_, exit)) = reach.segment_range(x, ray.direction.recip()) else {
+                continue;
+            };
+            out.rays += 1;
+            let Some(hit) = self.visibility.intersect(&ray, SEGMENT_EPSILON, exit) else {
                 continue;
             };
             let Some(patch) = h.patch_for_side(hit.polygon, hit.front) else {
@@ -657,6 +669,11 @@ impl<'a> IrradianceGather<'a> {
 /// ([`IrradianceGather::random_piece`], [`IrradianceGather::dim_cluster`]): two, four rays, while that
 /// is cheaper than a piece's four nodes and four corners.
 const RANDOM_STRATA: f64 = 2.0;
+
+/// How far a dim cluster's box is grown, relative to its radius plus its centre's largest coordinate,
+/// before directions are clipped to it ([`IrradianceGather::dim_cluster`]): far above the rounding of
+/// a hit point (`2^-52` of the coordinates), far below any size that matters.
+const BOX_PAD: f64 = 1e-9;
 
 /// The largest `cos θ` between a unit normal and the directions of a cone whose axis makes cosine
 /// `cos_axis` with it, of half angle `α` (given as `cos α`, `sin α`): 1 when the normal lies inside

@@ -180,28 +180,10 @@ impl Segment {
         })
     }
 
-    /// The parameter interval of the segment inside `b`.
+    /// The parameter interval of the segment inside `b` ([`Aabb::segment_range`]).
     pub fn clip(&self, b: &Aabb) -> Option<(f64, f64)> {
-        clip(b, self.from, self.inverse)
+        b.segment_range(self.from, self.inverse)
     }
-}
-
-/// The parameter interval of the segment `from + t d`, `t ∈ [0, 1]`, inside `b` (`inverse = 1/d`).
-fn clip(b: &Aabb, from: DVec3, inverse: DVec3) -> Option<(f64, f64)> {
-    let (mut t0, mut t1) = (0.0f64, 1.0f64);
-    for axis in 0..3 {
-        let (lo, hi) = (
-            (b.min[axis] - from[axis]) * inverse[axis],
-            (b.max[axis] - from[axis]) * inverse[axis],
-        );
-        if lo.is_nan() || hi.is_nan() {
-            // Parallel to this slab and on its boundary plane: treat as inside.
-            continue;
-        }
-        t0 = t0.max(lo.min(hi));
-        t1 = t1.min(lo.max(hi));
-    }
-    (t1 > t0).then_some((t0, t1))
 }
 
 impl Visibility for Extinction {
