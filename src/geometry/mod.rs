@@ -486,6 +486,55 @@ impl Aabb {
 mod tests {
     use super::*;
 
+    /// Entry and exit parameters of segments through the unit cube, against the planes they cross; a
+    /// miss, a touch and a flat box (which only padding gives an inside).
+    #[test]
+    fn segment_ranges_are_where_segments_cross_the_box() {
+        let cube = Aabb {
+            min: DVec3::ZERO,
+            max: DVec3::ONE,
+        };
+        let range = |b: &Aabb, from: DVec3, to: DVec3| b.segment_range(from, (to - from).recip());
+        // Along x through the middle, from x = −1 to x = 3: inside for x ∈ [0, 1].
+        let (from, to) = (DVec3::new(-1.0, 0.5, 0.5), DVec3::new(3.0, 0.5, 0.5));
+        assert_eq!(range(&cube, from, to), Some((0.25, 0.5)));
+        // Diagonally, from outside one corner to beyond the opposite one.
+        let (t0, t1) = range(&cube, DVec3::splat(-1.0), DVec3::splat(2.0)).unwrap();
+        assert!((t0 - 1.0 / 3.0).abs() < 1e-15 && (t1 - 2.0 / 3.0).abs() < 1e-15);
+        // Ending before the box, passing beside it, and starting inside.
+        assert_eq!(range(&cube, from, DVec3::new(-0.5, 0.5, 0.5)), None);
+        assert_eq!(
+            range(&cube, DVec3::new(-1.0, 2.0, 0.5), DVec3::new(3.0, 2.0, 0.5)),
+            None
+        );
+        assert_eq!(
+            range(&cube, DVec3::splat(0.5), DVec3::new(0.5, 0.5, 2.5)),
+            Some((0.0, 0.25))
+        );
+        // Parallel to a slab on its plane counts as inside it; a segment touching an edge does not.
+        assert_eq!(
+            range(&cube, DVec3::new(-1.0, 0.0, 0.5), DVec3::new(3.0, 0.0, 0.5)),
+            Some((0.25, 0.5))
+        );
+        assert_eq!(
+            range(
+                &cube,
+                DVec3::new(-1.0, 1.0, 0.0),
+                DVec3::new(1.0, -1.0, 0.0)
+            ),
+            None
+        );
+        // A flat box (a single plane's contents) is crossed only once padded.
+        let flat = Aabb {
+            min: DVec3::new(0.0, 0.0, 0.5),
+            max: DVec3::new(1.0, 1.0, 0.5),
+        };
+        let (down, up) = (DVec3::new(0.5, 0.5, 1.0), DVec3::new(0.5, 0.5, 0.0));
+        assert_eq!(range(&flat, down, up), None);
+        let (t0, t1) = range(&flat.padded(1e-6), down, up).unwrap();
+        assert!(t0 < 0.5 && t1 > 0.5 && t1 - t0 < 1e-5);
+    }
+
     #[test]
     fn cosine_directions_have_the_lambertian_moments() {
         use rand::{Rng, SeedableRng};
