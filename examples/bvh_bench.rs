@@ -4,14 +4,12 @@
 //! `cargo run --release --example bvh_bench [-- small|large|both|SCENE_FILE] [rays] [rounds]`: `small`
 //! is a room of ~12k quads (walls tessellated, random boxes inside), `large` ~2.6M triangles (a
 //! tessellated room with many small tessellated boxes); any other argument is a scene file (.mgf /
-//! .obj). Occlusion ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, back ends
-//! interleaved per run, all of it `rounds` times over (default 1).
+//! .obj). Occlusion ("occluded") and closest-hit ("closest") rates on 1 and 2 threads, the back ends
+//! casting the segments in turns (`rates_in_turns`), all of it `rounds` times over (default 1).
 
 use radiosity::geometry::{DVec3, Shape};
 use radiosity::scene::{self, LoadOptions};
-use radiosity::visibility::bench::{
-    closest_hit_rate, occlusion_rate, random_segments, timed, BenchResult,
-};
+use radiosity::visibility::bench::{random_segments, rates_in_turns, timed, Query};
 use radiosity::visibility::bvh::Bvh;
 use radiosity::visibility::Visibility;
 use rand::{Rng, SeedableRng};
@@ -93,27 +91,30 @@ fn report(name: &str, shapes: &[Shape], rays: usize, rounds: usize) {
     );
     let mut backends: Vec<Box<dyn Visibility>> = vec![Box::new(bvh)];
     backends.extend(embree(shapes));
-    // Back ends back to back for each measurement, so that load from other processes hits both alike.
-    type Rate = fn(
-        &dyn Visibility,
-        &[(DVec3, DVec3)],
-        usize,
-    ) -> Result<BenchResult, rayon::ThreadPoolBuildError>;
-    let modes: [(&str, Rate); 2] = [("occluded", occlusion_rate), ("closest", closest_hit_rate)];
-    for (mode, rate) in (0..rounds).flat_map(|_| modes) {
+    let views: Vec<&dyn Visibility> = backends.iter().map(|b| b.as_ref()).collect();
+    // The back ends in turns within each measurement, so that load from other processes and changes
+    // of the machine's speed hit them alike.
+    let modes = [
+        ("occluded", Query::Occlusion),
+        ("closest", Query::ClosestHit),
+    ];
+    for (mode, query) in (0..rounds).flat_map(|_| modes) {
         for threads in [1, 2] {
-            for vis in &backends {
-                match rate(vis.as_ref(), &segments, threads) {
-                    Ok(r) => println!(
-                        "{:>8} {mode:>8} {} thread(s): {:.3} M rays/s, {} of {} blocked/hit",
-                        vis.name(),
-                        r.threads,
-                        r.rays_per_second / 1e6,
-                        r.blocked,
-                        r.rays
-                    ),
-                    Err(e) => println!("thread pool: {e}"),
+            match rates_in_turns(&views, &segments, threads, query) {
+                Ok(rates) => {
+                    for (vis, r) in views.iter().zip(&rates) {
+                        println!(
+                            "{:>8} {mode:>8} {} thread(s): {:.3} M rays/s ({:.1}% of the first), {} of {} blocked/hit",
+                            vis.name(),
+                            r.threads,
+                            r.rays_per_second / 1e6,
+                            100.0 * r.rays_per_second / rates[0].rays_per_second,
+                            r.blocked,
+                            r.rays
+                        );
+                    }
                 }
+                Err(e) => println!("thread pool: {e}"),
             }
         }
     }

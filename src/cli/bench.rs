@@ -8,7 +8,7 @@ use crate::output::render::{render, RenderOptions, Shading};
 use crate::pipeline::{build_visibility, simulate, VisibilityKind};
 use crate::progress::Progress;
 use crate::scene::{self, LoadOptions};
-use crate::visibility::bench::{agreeing_segments, occlusion_rate, random_segments, timed};
+use crate::visibility::bench::{agreeing_segments, random_segments, rates_in_turns, timed, Query};
 use crate::visibility::Visibility;
 use anyhow::Result;
 use clap::{Args, Subcommand};
@@ -39,8 +39,9 @@ pub struct RaysBench {
     /// Back ends to measure (repeatable).
     #[arg(long = "backend", value_enum, default_values_t = [VisibilityKind::Bvh])]
     pub backends: Vec<VisibilityKind>,
-    /// Measurement rounds; each round runs every back end back to back, so that load from other
-    /// processes hits them alike and the ratio to the first back end is taken within the round.
+    /// Measurement rounds; within a round the back ends cast the segments in turns, a block of 32,768
+    /// at a time each, so that load from other processes and changes of the machine's speed hit them
+    /// alike and the ratio to the first back end holds (`visibility::bench::rates_in_turns`).
     #[arg(long, default_value_t = 1, value_parser = super::args::count(1, 100))]
     pub repeat: usize,
     /// Time the back ends only on the segments where they all give the same answer (how many do not
@@ -83,8 +84,8 @@ impl RaysBench {
             let (visibility, build_seconds) = timed(|| build_visibility(&scene, kind));
             backends.push((visibility?, build_seconds));
         }
+        let views: Vec<&dyn Visibility> = backends.iter().map(|(v, _)| v.as_ref()).collect();
         if self.agreeing {
-            let views: Vec<&dyn Visibility> = backends.iter().map(|(v, _)| v.as_ref()).collect();
             let before = segments.len();
             segments = agreeing_segments(&views, segments);
             outln!(
@@ -101,10 +102,9 @@ impl RaysBench {
         let thread_counts = if all > 1 { vec![1, all] } else { vec![1] };
         for round in 1..=self.repeat {
             for &threads in &thread_counts {
-                let mut first_rate = None;
-                for (visibility, build_seconds) in &backends {
-                    let r = occlusion_rate(visibility.as_ref(), &segments, threads)?;
-                    let first = *first_rate.get_or_insert(r.rays_per_second);
+                let rates = rates_in_turns(&views, &segments, threads, Query::Occlusion)?;
+                let first = rates[0].rays_per_second;
+                for ((visibility, build_seconds), r) in backends.iter().zip(&rates) {
                     let memory = visibility
                         .memory_bytes()
                         .map_or("–".to_string(), |b| format!("{:.1}", b as f64 / 1e6));

@@ -66,57 +66,81 @@ pub fn agreeing_segments(
         .collect()
 }
 
-/// Occlusion throughput of `vis` over `segments` (via [`Visibility::segment_occluded`]) on a rayon pool
-/// of `threads` threads (0: rayon's default). `blocked` counts the blocked segments.
-pub fn occlusion_rate(
-    vis: &dyn Visibility,
-    segments: &[(DVec3, DVec3)],
-    threads: usize,
-) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
-    rate(segments, threads, |a, b| vis.segment_occluded(a, b))
+/// What a rate measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Query {
+    /// [`Visibility::segment_occluded`] of each segment (`blocked` counts the blocked ones).
+    Occlusion,
+    /// The closest hit of the ray from a segment's start through its end, `t` in
+    /// `(SEGMENT_EPSILON, inf)` (the query of rendering and of hit-point lookups; `blocked` counts the
+    /// rays that hit).
+    ClosestHit,
 }
 
-/// Closest-hit throughput of `vis` (the query of rendering and of hit-point lookups): per segment the ray
-/// from its start through its end, `t` in `(SEGMENT_EPSILON, inf)`. `blocked` counts the rays that hit.
-pub fn closest_hit_rate(
-    vis: &dyn Visibility,
-    segments: &[(DVec3, DVec3)],
-    threads: usize,
-) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
-    rate(segments, threads, |a, b| {
-        vis.intersect(&Ray::new(a, b - a), SEGMENT_EPSILON, f64::INFINITY)
-            .is_some()
-    })
+impl Query {
+    fn answer(self, vis: &dyn Visibility, a: DVec3, b: DVec3) -> bool {
+        match self {
+            Query::Occlusion => vis.segment_occluded(a, b),
+            Query::ClosestHit => vis
+                .intersect(&Ray::new(a, b - a), SEGMENT_EPSILON, f64::INFINITY)
+                .is_some(),
+        }
+    }
 }
 
-/// Runs `query` over `segments` on a fresh pool of `threads` threads and counts its `true` answers. The
-/// pool is built before the clock starts; chunks of 1024 segments keep scheduling overhead negligible,
-/// each a task of its own so that no thread waits on another's long run of chunks at the end
-/// ([`crate::parallel`]), and each chunk only returns a count, so threads share no written memory.
-fn rate(
+/// Segments per turn of [`rates_in_turns`]: tens of milliseconds of work, far above the cost of
+/// handing a block to the threads, far below the time over which the machine's speed drifts.
+pub const TURN_SEGMENTS: usize = 32_768;
+
+/// The throughput of `query` for each of `backends` over `segments` on one rayon pool of `threads`
+/// threads (0: rayon's default), measured in turns: the segments are cut into blocks of
+/// [`TURN_SEGMENTS`], every back end casts each block in turn (the one to go first rotating from
+/// block to block), and each back end's rate is all the segments over its summed time. A drift of the
+/// machine's speed (other load, clock changes: the same binary's rate over a whole set of segments
+/// moved by a third between runs a second apart on 2026-12-03's machine) then slows every back end
+/// alike, and the ratios between them hold. Within a block, chunks of 1024 segments are each a task of
+/// their own, so that no thread waits on another's long run of chunks at the end
+/// ([`crate::parallel`]), and return only a count, so threads share no written memory. The pool is
+/// built before any clock starts.
+pub fn rates_in_turns(
+    backends: &[&dyn Visibility],
     segments: &[(DVec3, DVec3)],
     threads: usize,
-    query: impl Fn(DVec3, DVec3) -> bool + Sync,
-) -> Result<BenchResult, rayon::ThreadPoolBuildError> {
+    query: Query,
+) -> Result<Vec<BenchResult>, rayon::ThreadPoolBuildError> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
-    let start = Instant::now();
-    let blocked = pool.install(|| {
-        segments
-            .par_chunks(1024)
-            .one_per_task()
-            .map(|chunk| chunk.iter().filter(|(a, b)| query(*a, *b)).count())
-            .sum()
-    });
-    let seconds = start.elapsed().as_secs_f64();
-    Ok(BenchResult {
-        rays: segments.len(),
-        threads: pool.current_num_threads(),
-        seconds,
-        rays_per_second: segments.len() as f64 / seconds.max(1e-12),
-        blocked,
-    })
+    let n = backends.len();
+    let (mut seconds, mut blocked) = (vec![0.0; n], vec![0; n]);
+    for (turn, block) in segments.chunks(TURN_SEGMENTS).enumerate() {
+        for k in (0..n).map(|k| (turn + k) % n) {
+            let vis = backends[k];
+            let start = Instant::now();
+            blocked[k] += pool.install(|| {
+                block
+                    .par_chunks(1024)
+                    .one_per_task()
+                    .map(|chunk| {
+                        chunk
+                            .iter()
+                            .filter(|(a, b)| query.answer(vis, *a, *b))
+                            .count()
+                    })
+                    .sum::<usize>()
+            });
+            seconds[k] += start.elapsed().as_secs_f64();
+        }
+    }
+    Ok((0..n)
+        .map(|k| BenchResult {
+            rays: segments.len(),
+            threads: pool.current_num_threads(),
+            seconds: seconds[k],
+            rays_per_second: segments.len() as f64 / seconds[k].max(1e-12),
+            blocked: blocked[k],
+        })
+        .collect())
 }
 
 /// Runs `build` and returns its result with the wall-clock seconds it took.
@@ -124,4 +148,42 @@ pub fn timed<T>(build: impl FnOnce() -> T) -> (T, f64) {
     let start = Instant::now();
     let value = build();
     (value, start.elapsed().as_secs_f64())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::visibility::brute_force::BruteForce;
+    use crate::visibility::bvh::Bvh;
+
+    /// Measured in turns, every back end still casts every segment once: the BVH's counts equal the
+    /// exhaustive reference's, for both queries, on one thread and on two, with blocks left over.
+    #[test]
+    fn back_ends_in_turns_answer_every_segment() {
+        let shapes: Vec<Shape> = crate::scene::cornell::cornell_box()
+            .polygons
+            .iter()
+            .map(|p| p.shape)
+            .collect();
+        let segments = random_segments(&shapes, 2 * TURN_SEGMENTS + 1000, 3);
+        let (bvh, exhaustive) = (Bvh::new(&shapes), BruteForce::new(shapes.clone()));
+        let backends: [&dyn Visibility; 2] = [&bvh, &exhaustive];
+        for query in [Query::Occlusion, Query::ClosestHit] {
+            let expected = segments
+                .iter()
+                .filter(|(a, b)| query.answer(&exhaustive, *a, *b))
+                .count();
+            assert!(expected > 0 && expected < segments.len());
+            for threads in [1, 2] {
+                let rates = rates_in_turns(&backends, &segments, threads, query).unwrap();
+                for r in rates {
+                    assert_eq!(
+                        (r.rays, r.threads, r.blocked),
+                        (segments.len(), threads, expected)
+                    );
+                    assert!(r.seconds > 0.0 && r.rays_per_second > 0.0);
+                }
+            }
+        }
+    }
 }
