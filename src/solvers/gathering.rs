@@ -88,10 +88,11 @@ fn reads_source_radiance(hierarchy: &Hierarchy, link: &Link) -> bool {
 
 /// What every sweep between two refinements reads of the links alone, made once for them all
 /// (`solvers::sweep_to_tolerance`): what the clusters send ([`ClusterPlan`]) and the runs of patches
-/// that relax together ([`PatchRuns`]). Valid while the links are unchanged.
+/// that relax together ([`PatchRuns`], found at the first sweep that orders its patches: Jacobi and
+/// Southwell never ask). Valid while the links are unchanged.
 pub struct SweepPlan {
     pub clusters: ClusterPlan,
-    runs: PatchRuns,
+    runs: std::sync::OnceLock<PatchRuns>,
 }
 
 impl SweepPlan {
@@ -99,8 +100,13 @@ impl SweepPlan {
     pub fn new(hierarchy: &Hierarchy) -> Self {
         SweepPlan {
             clusters: ClusterPlan::new(hierarchy),
-            runs: PatchRuns::new(hierarchy),
+            runs: std::sync::OnceLock::new(),
         }
+    }
+
+    /// The runs of patches of `hierarchy`'s links (the links the plan was made for).
+    fn runs(&self, hierarchy: &Hierarchy) -> &PatchRuns {
+        self.runs.get_or_init(|| PatchRuns::new(hierarchy))
     }
 }
 
@@ -282,7 +288,7 @@ fn sweep_in_order(
 ) -> Sweep {
     let clusters = ClusterSweep::planned(hierarchy, &plan.clusters);
     let mut totals = Sweep::default();
-    for run in plan.runs.runs() {
+    for run in plan.runs(hierarchy).runs() {
         if run.len() == 1 {
             let update = relax(hierarchy, &clusters, run.start);
             take(hierarchy, update, &mut totals);
@@ -501,7 +507,7 @@ mod tests {
         let h = &solved.hierarchy;
         assert!(h.root_cluster.is_some(), "the hall was not clustered");
         let plan = SweepPlan::new(h);
-        for run in plan.runs.runs() {
+        for run in plan.runs(h).runs() {
             for p in run.clone() {
                 let (latest, _) = latest_earlier_source(h, h.patches[p as usize].root, p);
                 assert!(
@@ -510,13 +516,14 @@ mod tests {
                 );
             }
         }
-        let longest = plan.runs.runs().map(|r| r.len()).max().unwrap_or(0);
+        let longest = plan.runs(h).runs().map(|r| r.len()).max().unwrap_or(0);
         assert!(longest > 1, "no run holds more than one patch");
         let one_by_one = SweepPlan {
             clusters: ClusterPlan::new(h),
             runs: PatchRuns {
                 starts: (0..=h.patches.len() as u32).collect(),
-            },
+            }
+            .into(),
         };
         let swept = |plan: &SweepPlan, solver: &dyn GatheringSolver| {
             let mut h = h.clone();
