@@ -19,8 +19,9 @@
 //! [`Shape::subdivide`]: crate::geometry::Shape::subdivide
 
 use crate::color::Rgb;
-use crate::geometry::cubature::rule;
+use crate::geometry::cubature::{rule, MAX_POINTS};
 use crate::geometry::{DVec2, Domain, Shape};
+use std::sync::OnceLock;
 
 /// The spanning monomials `u^p v^q` as `(p, q)`, in Bekaert–Willems' order {1, u, v, uv, u², v², u³, u²v,
 /// uv², v³}. Every prefix used by a [`BasisKind`] is closed under lowering an exponent, so its span is
@@ -205,6 +206,9 @@ pub struct Basis {
     /// Per domain, `φ_α` at each corner of [`Domain::corners`] (`corners × size` row-major): an
     /// expansion's value at an element's corner without evaluating the basis there.
     corner_values: [Vec<f64>; 2],
+    /// Per domain and rule of [`rule`] (by points per direction, less one), `φ_α` at the rule's nodes,
+    /// filled at first use ([`Basis::rule_values`]).
+    rule_values: [[OnceLock<Vec<f64>>; MAX_POINTS]; 2],
 }
 
 impl Basis {
@@ -222,6 +226,7 @@ impl Basis {
             push: Default::default(),
             square_moments: Default::default(),
             corner_values: Default::default(),
+            rule_values: Default::default(),
         };
         for domain in [Domain::Square, Domain::Triangle] {
             for child in 0..4 {
@@ -242,6 +247,21 @@ impl Basis {
     /// `φ_α` at corner `k` of `domain` ([`Domain::corners`]).
     pub fn corner_values(&self, domain: Domain, k: usize) -> &[f64] {
         &self.corner_values[domain_index(domain)][k * self.size..(k + 1) * self.size]
+    }
+
+    /// `φ_α` at the nodes of [`rule`]`(domain, degree)`, row-major (node, α): the same on every element,
+    /// since the basis lives on the master domain. A coupling evaluates the basis at its receiver's
+    /// and its source's nodes; the table spares it those evaluations (6% of a cubic solve's instructions).
+    pub fn rule_values(&self, domain: Domain, degree: usize) -> &[f64] {
+        let rule = rule(domain, degree);
+        let points = rule.degree.div_ceil(2);
+        self.rule_values[domain_index(domain)][points - 1].get_or_init(|| {
+            let mut values = vec![0.0; rule.nodes.len() * self.size];
+            for (&(uv, _), phi) in rule.nodes.iter().zip(values.chunks_exact_mut(self.size)) {
+                self.eval(domain, uv, phi);
+            }
+            values
+        })
     }
 
     /// `∫ u φ_α φ_α'` and `∫ v φ_α φ_α'` on the unit square, by a rule exact for their degree 2 d + 1.
@@ -276,8 +296,12 @@ impl Basis {
         let mut mono = [0.0; 10];
         monomials(centred(domain, uv), &mut mono[..n]);
         let c = &self.coefficients[domain_index(domain)];
-        for (a, o) in out[..n].iter_mut().enumerate() {
-            *o = (0..=a).map(|m| c[a * n + m] * mono[m]).sum();
+        match self.kind {
+            BasisKind::Constant => lower_triangular_product::<1>(c, &mono, out),
+            BasisKind::Linear => lower_triangular_product::<3>(c, &mono, out),
+            BasisKind::Bilinear => lower_triangular_product::<4>(c, &mono, out),
+            BasisKind::Quadratic => lower_triangular_product::<6>(c, &mono, out),
+            BasisKind::Cubic => lower_triangular_product::<10>(c, &mono, out),
         }
     }
 
@@ -397,6 +421,21 @@ fn monomials(uv: DVec2, out: &mut [f64]) {
     out.copy_from_slice(&all[..n]);
 }
 
+/// `out = c x` for the lower triangular `N × N` row-major `c`, each row summed in order from −0.0 (as
+/// `Iterator::sum`). The basis is evaluated over a million times in a cubic solve and once per image
+/// sample: with `N` known the loops unroll and lose their bounds checks.
+#[inline(always)]
+fn lower_triangular_product<const N: usize>(c: &[f64], x: &[f64], out: &mut [f64]) {
+    let (c, x, out) = (&c[..N * N], &x[..N], &mut out[..N]);
+    for a in 0..N {
+        let mut sum = -0.0;
+        for m in 0..a + 1 {
+            sum += c[a * N + m] * x[m];
+        }
+        out[a] = sum;
+    }
+}
+
 /// Centred, scaled coordinates `x = 2 (u - c)`, `y = 2 (v - c)` about the domain's centroid (c = ½ on
 /// the square, ⅓ on the triangle). Every prefix of [`MONOMIALS`] is closed under lowering exponents, so
 /// `{x^p y^q}` and `{u^p v^q}` prefixes span the same nested spaces and Gram–Schmidt yields the same
@@ -476,6 +515,27 @@ pub struct Overlap {
     factor: [f64; MAX_BASIS_SIZE * MAX_BASIS_SIZE],
 }
 
+/// `x ← (L Lᵀ)⁻¹ x` for the lower triangular `N × N` row-major `l` by forward and back substitution, the
+/// sums in order from −0.0 (as `Iterator::sum`); `N` known, so that the loops unroll.
+#[inline(always)]
+fn cholesky_solve<const N: usize>(l: &[f64], x: &mut [f64]) {
+    let (l, x) = (&l[..N * N], &mut x[..N]);
+    for a in 0..N {
+        let mut s = -0.0;
+        for b in 0..a {
+            s += l[a * N + b] * x[b];
+        }
+        x[a] = (x[a] - s) / l[a * N + a];
+    }
+    for a in (0..N).rev() {
+        let mut s = -0.0;
+        for b in a + 1..N {
+            s += l[b * N + a] * x[b];
+        }
+        x[a] = (x[a] - s) / l[a * N + a];
+    }
+}
+
 /// Relative departure of a quad from a parallelogram, `|a + c − b − d| / (|a − c| + |b − d|)`, below
 /// which its Jacobian is constant to rounding and its overlap matrix the identity.
 const AFFINE_TOLERANCE: f64 = 1e-9;
@@ -483,14 +543,12 @@ const AFFINE_TOLERANCE: f64 = 1e-9;
 impl Overlap {
     /// `G⁻¹ x` in place: the coefficients of the function whose area moments are `x`.
     pub fn solve(&self, x: &mut [f64]) {
-        let (n, l) = (self.size, &self.factor);
-        for a in 0..n {
-            let s: f64 = (0..a).map(|b| l[a * n + b] * x[b]).sum();
-            x[a] = (x[a] - s) / l[a * n + a];
-        }
-        for a in (0..n).rev() {
-            let s: f64 = (a + 1..n).map(|b| l[b * n + a] * x[b]).sum();
-            x[a] = (x[a] - s) / l[a * n + a];
+        match self.size {
+            3 => cholesky_solve::<3>(&self.factor, x),
+            4 => cholesky_solve::<4>(&self.factor, x),
+            6 => cholesky_solve::<6>(&self.factor, x),
+            10 => cholesky_solve::<10>(&self.factor, x),
+            size => unreachable!("no basis of {size} functions has an overlap matrix"),
         }
     }
 
@@ -684,6 +742,26 @@ mod tests {
             // The highest monomial's total degree.
             let (p, q) = MONOMIALS[k.size() - 1];
             assert_eq!((p + q) as usize, k.polynomial_degree());
+        }
+    }
+
+    #[test]
+    fn rule_tables_hold_the_basis_at_every_rules_nodes() {
+        for kind in BasisKind::ALL {
+            let basis = Basis::new(kind);
+            let n = basis.size();
+            for domain in DOMAINS {
+                for degree in 0..=crate::geometry::cubature::MAX_DEGREE + 2 {
+                    let nodes = &rule(domain, degree).nodes;
+                    let table = basis.rule_values(domain, degree);
+                    assert_eq!(table.len(), nodes.len() * n);
+                    let mut phi = [0.0; MAX_BASIS_SIZE];
+                    for (&(uv, _), row) in nodes.iter().zip(table.chunks_exact(n)) {
+                        basis.eval(domain, uv, &mut phi);
+                        assert_eq!(row, &phi[..n], "{kind:?} {domain:?} degree {degree}");
+                    }
+                }
+            }
         }
     }
 

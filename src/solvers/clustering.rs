@@ -80,7 +80,7 @@
 //! the patch's cosine toward the source's centre) and the point kernel there; a row of plates under a
 //! lamp (tests/clustering.rs) is covered at 93% of its plates, none without it.
 
-use super::coupling::{basis_values, visible_fraction, Coupling, CouplingSettings};
+use super::coupling::{visible_fraction, Coupling, CouplingSettings};
 use super::link_rng;
 use crate::color::Rgb;
 use crate::geometry::cubature::{nodes_on, rule};
@@ -534,7 +534,14 @@ pub fn couple_cluster(
                         &mut rng,
                     );
             }
-            let (transfer, errors) = project_onto_receiver(h, shape, &nodes, &inner, &mut block);
+            let (transfer, errors) = project_onto_receiver(
+                h,
+                shape,
+                &nodes,
+                settings.cubature_degree,
+                &inner,
+                &mut block,
+            );
             (
                 errors,
                 inner.iter().map(|&f| f as f32).collect(),
@@ -547,20 +554,22 @@ pub fn couple_cluster(
 }
 
 /// A surface receiver's coupling block from the point factors `inner` (the constant source's
-/// `K_{j,1}(x_k)`, visibility included) at its cubature `nodes` (Bekaert–Willems Algorithm 4.1 steps
-/// 3–4): the moments `Σ_k w_k φ_α(x_k) K(x_k) / A_i` into the block's first column, solved for
-/// coefficients on a quad that is not a parallelogram; returns the receiver-averaged transfer (the
-/// constant moment) and `δ_{j,1}(x_k)`, the projection's value at each node minus the point factor.
+/// `K_{j,1}(x_k)`, visibility included) at its cubature `nodes`, those of the rule of `degree`
+/// (Bekaert–Willems Algorithm 4.1 steps 3–4): the moments `Σ_k w_k φ_α(x_k) K(x_k) / A_i` into the
+/// block's first column, solved for coefficients on a quad that is not a parallelogram; returns the
+/// receiver-averaged transfer (the constant moment) and `δ_{j,1}(x_k)`, the projection's value at
+/// each node minus the point factor.
 fn project_onto_receiver(
     h: &Hierarchy,
     shape: &Shape,
     nodes: &[crate::geometry::cubature::Node],
+    degree: usize,
     inner: &[f64],
     block: &mut [f64],
 ) -> (f64, Vec<f32>) {
     let size = h.basis_size();
     let area = shape.area();
-    let phi = basis_values(&h.basis, shape, nodes);
+    let phi = h.basis.rule_values(shape.domain(), degree);
     for (k, (x, value)) in nodes.iter().zip(inner).enumerate() {
         let w = x.weight / area;
         for alpha in 0..size {
@@ -723,7 +732,14 @@ fn near_coupling(
         })
         .collect();
     let mut block = vec![0.0; size * size];
-    let (transfer, errors) = project_onto_receiver(h, shape, &nodes, &inner, &mut block);
+    let (transfer, errors) = project_onto_receiver(
+        h,
+        shape,
+        &nodes,
+        settings.cubature_degree,
+        &inner,
+        &mut block,
+    );
     let node_factors: Vec<f32> = inner.iter().map(|&f| f as f32).collect();
     sampled_coupling(&block, &errors, &node_factors, transfer, unoccluded, rays)
 }

@@ -217,25 +217,17 @@ fn couple_in_full(
     let CouplingBuffers {
         x_nodes,
         y_nodes,
-        phi_x,
-        phi_y,
         inner: inner_buffer,
         block,
         errors,
         node_factors,
     } = &mut buffers;
+    let source_degree = crate::bases::source_cubature_degree(degree);
     nodes_on_into(r_shape, rule(r_shape.domain(), degree), x_nodes);
-    nodes_on_into(
-        s_shape,
-        rule(
-            s_shape.domain(),
-            crate::bases::source_cubature_degree(degree),
-        ),
-        y_nodes,
-    );
-    basis_values_into(basis, r_shape, x_nodes, phi_x);
-    basis_values_into(basis, s_shape, y_nodes, phi_y);
-    let (x_nodes, phi_x) = (&*x_nodes, &*phi_x);
+    nodes_on_into(s_shape, rule(s_shape.domain(), source_degree), y_nodes);
+    let phi_x = basis.rule_values(r_shape.domain(), degree);
+    let phi_y = basis.rule_values(s_shape.domain(), source_degree);
+    let x_nodes = &*x_nodes;
 
     let n = x_nodes.len();
     let sampler = SourceSampler {
@@ -283,19 +275,22 @@ fn couple_in_full(
     });
     let (block_nodes, phi_block, block_rows) = match &composite {
         Some((nodes, phi, rows)) => (nodes.as_slice(), phi.as_slice(), rows),
-        None => (x_nodes.as_slice(), phi_x.as_slice(), &regular),
+        None => (x_nodes.as_slice(), phi_x, &regular),
     };
     let inner = &regular.inner;
     let unoccluded = block_rows.unoccluded;
     // Step 3: the block, divided by A_i (step 4a with O = A_i I).
     block.clear();
     block.resize(size * size, 0.0);
-    for (k, x) in block_nodes.iter().enumerate() {
+    let node_rows = phi_block
+        .chunks_exact(size)
+        .zip(block_rows.inner.chunks_exact(size));
+    for (x, (phi, inner)) in block_nodes.iter().zip(node_rows) {
         let w = x.weight / r.area;
-        for alpha in 0..size {
-            let wa = w * phi_block[k * size + alpha];
-            for beta in 0..size {
-                block[alpha * size + beta] += wa * block_rows.inner[k * size + beta];
+        for (block_row, &p) in block.chunks_exact_mut(size).zip(phi) {
+            let wa = w * p;
+            for (b, &k) in block_row.iter_mut().zip(inner) {
+                *b += wa * k;
             }
         }
     }
@@ -304,15 +299,17 @@ fn couple_in_full(
         overlap.solve_columns(block, size);
     }
     // Step 4b: δ_{j,β}(x_k) = Σ_α R_{α,β} φ_α(x_k) − K_{j,β}(x_k).
+    // Summed over α in order for every β at once (from −0.0, as `Iterator::sum` does).
     errors.clear();
-    errors.resize(n * size, 0.0);
-    for k in 0..n {
-        for beta in 0..size {
-            let projected: f64 = (0..size)
-                .map(|alpha| block[alpha * size + beta] * phi_x[k * size + alpha])
-                .sum();
-            errors[k * size + beta] = (projected - inner[k * size + beta]) as f32;
+    for (phi, inner) in phi_x.chunks_exact(size).zip(inner.chunks_exact(size)) {
+        let mut projected = [-0.0; crate::bases::MAX_BASIS_SIZE];
+        let projected = &mut projected[..size];
+        for (block_row, &p) in block.chunks_exact(size).zip(phi) {
+            for (sum, &b) in projected.iter_mut().zip(block_row) {
+                *sum += b * p;
+            }
         }
+        errors.extend(projected.iter().zip(inner).map(|(p, k)| (p - k) as f32));
     }
     node_factors.clear();
     node_factors.extend((0..n).map(|k| inner[k * size] as f32));
@@ -604,30 +601,19 @@ pub fn visibility_error(unoccluded: f64, visibility: f64, source_nodes: usize) -
     (unoccluded * (v * (1.0 - v) / source_nodes.max(1) as f64).sqrt()) as f32
 }
 
-/// `φ_α` at each node, row-major (node, α).
+/// `φ_α` at each node, row-major (node, α): for nodes not of a [`rule`], whose values
+/// [`crate::bases::Basis::rule_values`] holds.
 pub fn basis_values(
     basis: &crate::bases::Basis,
     shape: &crate::geometry::Shape,
     nodes: &[Node],
 ) -> Vec<f64> {
-    let mut out = Vec::new();
-    basis_values_into(basis, shape, nodes, &mut out);
-    out
-}
-
-/// [`basis_values`] into `out` (resized), for callers that reuse one vector.
-fn basis_values_into(
-    basis: &crate::bases::Basis,
-    shape: &crate::geometry::Shape,
-    nodes: &[Node],
-    out: &mut Vec<f64>,
-) {
     let size = basis.size();
-    out.clear();
-    out.resize(nodes.len() * size, 0.0);
+    let mut out = vec![0.0; nodes.len() * size];
     for (node, values) in nodes.iter().zip(out.chunks_exact_mut(size)) {
         basis.eval(shape.domain(), node.uv, values);
     }
+    out
 }
 
 /// The vectors of a surface coupling, kept per thread from one coupling to the next
@@ -636,8 +622,6 @@ fn basis_values_into(
 struct CouplingBuffers {
     x_nodes: Vec<Node>,
     y_nodes: Vec<Node>,
-    phi_x: Vec<f64>,
-    phi_y: Vec<f64>,
     inner: Vec<f64>,
     block: Vec<f64>,
     errors: Vec<f32>,
