@@ -570,6 +570,7 @@ fn project_onto_receiver(
     let size = h.basis_size();
     let area = shape.area();
     let phi = h.basis.rule_values(shape.domain(), degree);
+    debug_assert_eq!(phi.len(), nodes.len() * size, "nodes of another rule");
     for (k, (x, value)) in nodes.iter().zip(inner).enumerate() {
         let w = x.weight / area;
         for alpha in 0..size {
